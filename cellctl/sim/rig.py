@@ -1,0 +1,33 @@
+"""The simulated stereo rig: the "true" cameras behind every simulated image.
+
+Two 1280x1024 cameras 60 mm apart looking down at the table from about 550 mm, with a focal length chosen
+so that a 300 mm sole covers about 60 % of the image width (300 mm * 1400 px / 550 mm = 764 px), and the
+small imperfections a real rig has: slightly different intrinsics, a tilt of under a degree between the
+cameras and mild barrel distortion. Calibrating simulated checkerboard pairs must recover these values.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from cellctl.calibration import Calibration
+
+IMAGE_SIZE: tuple[int, int] = (1280, 1024)  # (width, height) px
+BASELINE_MM: float = 60.0
+WORKING_DISTANCE_MM: float = 550.0  # camera to table
+
+
+def default_rig() -> Calibration:
+    """The true calibration of the simulated rig (what a perfect calibration would find)."""
+    K1 = np.array([[1402.0, 0.0, 645.0], [0.0, 1399.0, 508.0], [0.0, 0.0, 1.0]])
+    K2 = np.array([[1396.0, 0.0, 633.0], [0.0, 1395.0, 517.0], [0.0, 0.0, 1.0]])
+    # k1, k2, p1, p2, k3: mild barrel distortion of a typical 8 mm machine-vision lens.
+    D1 = np.array([[-0.085, 0.060, 0.0004, -0.0003, 0.0]])
+    D2 = np.array([[-0.080, 0.052, -0.0002, 0.0005, 0.0]])
+    # The right camera is turned by under a degree about each axis w.r.t. the left one...
+    R = cv2.Rodrigues(np.array([0.004, -0.012, 0.003]))[0]
+    # ...and sits BASELINE_MM to its right; T is the left-to-right transform's translation (x_r = R x_l + T).
+    right_centre_in_left = np.array([BASELINE_MM, -0.4, 0.6]) * BASELINE_MM / np.linalg.norm([BASELINE_MM, -0.4, 0.6])
+    T = -R @ right_centre_in_left.reshape(3, 1)
+    return Calibration.from_extrinsics(IMAGE_SIZE, K1, D1, K2, D2, R, T)
