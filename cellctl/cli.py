@@ -1,0 +1,42 @@
+"""The `cellctl` command line.
+
+Each sub-command lives in its own module under `cellctl.commands` and exposes
+`register(subparsers)`; this file only wires them together, so adding a command
+never touches another command's code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# Modules under cellctl.commands, in the order they appear in --help.
+COMMAND_MODULES: tuple[str, ...] = (
+    "bench",
+    "demo",
+)
+
+
+class UserError(Exception):
+    """A problem with the user's input: printed as one clear line, exit status 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="cellctl", description="Sole-gluing stereo cell controller")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"cellctl.commands.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (UserError, ValueError, FileNotFoundError) as exc:
+        print(f"cellctl {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130

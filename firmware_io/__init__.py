@@ -1,0 +1,1 @@
+"""Field side of the cell: Modbus register map, TCP/RTU servers, PLC handshake and simulator."""
