@@ -1,0 +1,104 @@
+/* Semi-global aggregation (the paper's Eq. 15 and 16).
+ *
+ * The aggregated volume S is the only full-size buffer: 2 bytes per cell.
+ * Costs are recomputed in each pass instead of being stored, which keeps the
+ * memory at that bound.  Pass 1 runs the paths that come from above (S is
+ * written), pass 2 the paths from below (S is added to), and pass 3 the two
+ * horizontal paths per row, which completes S for the row while it is still in
+ * cache and hands it to the disparity selection.  Passes 1 and 2 split each
+ * row between the threads and wait for each other at the end of the row;
+ * pass 3 splits rows.  Every cell is computed by the same integer code
+ * whatever the thread count, so the result does not depend on it. */
+#include <string.h>
+
+#include "internal.h"
+
+#if CC_HAVE_X86
+#include <immintrin.h>
+#endif
+
+int cc_p2_for_step(const cc_params *p, int intensity, int prev_intensity)
+{
+    if (p->p2_gamma == 0)
+        return p->p2;
+    int step = intensity > prev_intensity ? intensity - prev_intensity : prev_intensity - intensity;
+    int p2 = p->p2 * p->p2_gamma / (p->p2_gamma + step);
+    return p2 > p->p1 ? p2 : p->p1;
+}
+
+/* One step along a path: L(p, d) = C(p, d) + min(L(p-r, d), L(p-r, d+-1) + P1,
+ * min L(p-r) + P2) - min L(p-r); a path starts with L = C.  Writes L to out and
+ * acc_out = (acc_in or 0) + L; returns min L.  prev and out have guard lanes
+ * holding CC_PATH_INF at index -1 and from D on. */
+static uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+                                 uint16_t prev_min, int p2, uint16_t *out,
+                                 const uint16_t *acc_in, uint16_t *acc_out)
+{
+    int D = s->D, p1 = s->p.p1;
+    unsigned best = CC_PATH_INF;
+    for (int d = 0; d < D; d++) {
+        unsigned l = cost[d];
+        if (prev) {
+            unsigned m = prev[d];
+            if (d > 0 && prev[d - 1] + (unsigned)p1 < m)
+                m = prev[d - 1] + p1;
+            if (d + 1 < D && prev[d + 1] + (unsigned)p1 < m)
+                m = prev[d + 1] + p1;
+            if (prev_min + (unsigned)p2 < m)
+                m = prev_min + p2;
+            l += m - prev_min;
+        }
+        out[d] = (uint16_t)l;
+        acc_out[d] = (uint16_t)((acc_in ? acc_in[d] : 0) + l);
+        best = l < best ? l : best;
+    }
+    for (int d = D; d < s->Dp; d++)
+        out[d] = CC_PATH_INF;
+    return (uint16_t)best;
+}
+
+#if CC_HAVE_X86
+#define AVX2 __attribute__((target("avx2")))
+
+AVX2 static uint16_t path_step_avx2(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+                                    uint16_t prev_min, int p2, uint16_t *out,
+                                    const uint16_t *acc_in, uint16_t *acc_out)
+{
+    int D = s->D, Dp = s->Dp;
+    const __m256i vp1 = _mm256_set1_epi16((short)s->p.p1);
+    const __m256i vpm = _mm256_set1_epi16((short)prev_min);
+    const __m256i vlim = _mm256_set1_epi16((short)(prev_min + p2));
+    const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    __m256i best = _mm256_set1_epi16((short)CC_PATH_INF);
+    for (int k = 0; k < Dp; k += CC_LANES) {
+        __m256i l = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i *)(cost + k)));
+        if (prev) {
+            __m256i m = _mm256_load_si256((const __m256i *)(prev + k));
+            __m256i lo = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k - 1)), vp1);
+            __m256i hi = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k + 1)), vp1);
+            m = _mm256_min_epu16(_mm256_min_epu16(m, lo), _mm256_min_epu16(hi, vlim));
+            l = _mm256_add_epi16(l, _mm256_sub_epi16(m, vpm));
+        }
+        if (k + CC_LANES > D) /* lanes past the last disparity never win */
+            l = _mm256_or_si256(l, _mm256_cmpgt_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((short)k)),
+                                                      _mm256_set1_epi16((short)(D - 1))));
+        _mm256_store_si256((__m256i *)(out + k), l);
+        __m256i a = acc_in ? _mm256_add_epi16(_mm256_load_si256((const __m256i *)(acc_in + k)), l) : l;
+        _mm256_store_si256((__m256i *)(acc_out + k), a);
+        best = _mm256_min_epu16(best, l);
+    }
+    __m128i b = _mm_min_epu16(_mm256_castsi256_si128(best), _mm256_extracti128_si256(best, 1));
+    return (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(b));
+}
+#endif
+
+uint16_t cc_path_step(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+                      uint16_t prev_min, int p2, uint16_t *out,
+                      const uint16_t *acc_in, uint16_t *acc_out)
+{
+#if CC_HAVE_X86
+    if (s->use_avx2)
+        return path_step_avx2(s, cost, prev, prev_min, p2, out, acc_in, acc_out);
+#endif
+    return path_step_scalar(s, cost, prev, prev_min, p2, out, acc_in, acc_out);
+}

@@ -1,0 +1,50 @@
+"""cffi build script of the matching core (API mode).
+
+setup.py names this file in `cffi_modules`, so `pip install .` compiles csrc/*.c
+into the extension module `cellctl._core`.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+from cffi import FFI
+
+HERE = Path(__file__).resolve().parent
+
+
+def _cdef_from_header(text: str) -> str:
+    """The public header minus what cffi's parser does not take (guards, includes)."""
+    lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
+    text = "\n".join(lines)
+    text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+    defines = """
+        #define CC_DISP_SHIFT ...
+        #define CC_DISP_SCALE ...
+        #define CC_INVALID ...
+        #define CC_MAX_P2 ...
+        #define CC_MAX_DISPARITIES ...
+        #define CC_MAX_DIM ...
+        #define CC_BT_CAP ...
+    """
+    return defines + text
+
+
+ffibuilder = FFI()
+ffibuilder.cdef(_cdef_from_header((HERE / "cellctl_core.h").read_text()))
+
+_sources = sorted(str(p.relative_to(HERE.parent)) for p in HERE.glob("*.c"))
+_extra = os.environ.get("CELLCTL_CFLAGS", "").split()
+ffibuilder.set_source(
+    "cellctl._core",
+    '#include "cellctl_core.h"',
+    sources=_sources,
+    include_dirs=[str(HERE.relative_to(HERE.parent))],
+    extra_compile_args=["-std=c11", "-O3", "-fopenmp", "-Wall", "-Wextra", "-Wno-unused-parameter", *_extra],
+    extra_link_args=["-fopenmp", *_extra],
+)
+
+if __name__ == "__main__":
+    ffibuilder.compile(verbose=True)

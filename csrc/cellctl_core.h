@@ -1,0 +1,104 @@
+/*
+ * cellctl matching core: Census + Birchfield-Tomasi cost, semi-global
+ * aggregation, winner-takes-all, left-right check, fill and median.
+ *
+ * Conventions follow OpenCV's StereoSGBM: left(x, y) matches right(x - d, y);
+ * disparities are int16 fixed point with 4 fractional bits (value = d * 16);
+ * CC_INVALID marks pixels without a disparity.  Every entry point checks its
+ * arguments and returns a CC_* status instead of touching memory it was not
+ * given.  Images are 8-bit grey, row-major, with an explicit row stride.
+ */
+#ifndef CELLCTL_CORE_H
+#define CELLCTL_CORE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define CC_DISP_SHIFT 4
+#define CC_DISP_SCALE 16
+#define CC_INVALID (-32768)
+
+enum cc_status {
+    CC_OK = 0,
+    CC_ERR_NULL = 1,        /* a required pointer is NULL */
+    CC_ERR_SIZE = 2,        /* image size or stride out of range */
+    CC_ERR_PARAM = 3,       /* a parameter out of range; see cc_param_error */
+    CC_ERR_NOMEM = 4,       /* a buffer could not be allocated */
+    CC_ERR_RANGE = 5        /* the disparity range does not fit the image */
+};
+
+enum cc_cost_mode { CC_COST_CENSUS_BT = 0, CC_COST_CENSUS = 1, CC_COST_BT = 2 };
+enum cc_fill_mode { CC_FILL_NONE = 0, CC_FILL_BACKGROUND = 1 };
+enum cc_simd_mode { CC_SIMD_AUTO = 0, CC_SIMD_SCALAR = 1 };
+
+typedef struct cc_params {
+    int min_disparity;      /* may be negative */
+    int num_disparities;    /* any count >= 1 */
+    int census_width;       /* odd, 1..9 */
+    int census_height;      /* odd, 1..7 */
+    int cost_mode;          /* enum cc_cost_mode */
+    float lambda_census;    /* rho scale of the Hamming distance (bits), > 0 */
+    float lambda_bt;        /* rho scale of the BT cost (grey levels), > 0 */
+    int cost_scale;         /* each rho term is quantised to 0..cost_scale (1..127) */
+    int p1;                 /* penalty for a disparity step of 1 */
+    int p2;                 /* penalty for larger steps, p1 < p2 <= CC_MAX_P2 */
+    int p2_gamma;           /* 0: constant P2; >0: P2 * g / (g + |dI|), never below p1 */
+    int paths;              /* 4 or 8 */
+    int subpixel;           /* parabola refinement of the left disparity */
+    int lr_max_diff;        /* left-right tolerance in 1/16 px; < 0 disables the check */
+    int fill_mode;          /* enum cc_fill_mode */
+    int median;             /* 0 (off), 3 or 5 */
+    int threads;            /* 0: all available */
+    int simd;               /* enum cc_simd_mode */
+} cc_params;
+
+#define CC_MAX_P2 2000
+#define CC_MAX_DISPARITIES 2048
+#define CC_MAX_DIM 16384
+#define CC_BT_CAP 63        /* BT costs are truncated here before the rho table */
+
+/* Fills *p with the defaults (tuned on Middlebury v2, see docs/benchmarks.md). */
+void cc_params_default(cc_params *p);
+/* CC_OK or CC_ERR_PARAM; on error a static message is stored in *message. */
+int cc_params_check(const cc_params *p, const char **message);
+
+typedef struct cc_matcher cc_matcher;
+
+/* A matcher owns its buffers and reuses them across calls of the same size. */
+int cc_matcher_create(const cc_params *p, cc_matcher **out);
+void cc_matcher_destroy(cc_matcher *m);
+/* Bytes currently held by the matcher's buffers (the cost volume and rows). */
+size_t cc_matcher_bytes(const cc_matcher *m);
+/* 1 when the AVX2 kernels are in use, 0 for the portable ones. */
+int cc_matcher_simd(const cc_matcher *m);
+
+/*
+ * Full pipeline.  `disp` receives the final map (width*height int16).  The
+ * optional stage outputs (NULL to skip) are: raw_left (WTA + sub-pixel),
+ * raw_right (WTA of the right view, integer), checked (raw_left after the
+ * left-right check) and filled (after the fill, before the median).
+ */
+int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
+                       int width, int height, int stride_left, int stride_right,
+                       int16_t *disp, int16_t *raw_left, int16_t *raw_right,
+                       int16_t *checked, int16_t *filled);
+
+/* ---- Stage entry points: the same code the pipeline runs, for tests and tools. ---- */
+
+/* Census bit string per pixel (bit i = centre >= i-th neighbour in raster order). */
+int cc_census(const uint8_t *img, int width, int height, int stride,
+              int census_width, int census_height, uint64_t *out);
+/* Fused matching cost volume, layout [y][x][d], num_disparities per pixel. */
+int cc_cost_volume(const cc_params *p, const uint8_t *left, const uint8_t *right,
+                   int width, int height, int stride_left, int stride_right, uint8_t *out);
+/* Aggregated cost S (sum over paths), layout [y][x][d]. */
+int cc_aggregate(cc_matcher *m, const uint8_t *left, const uint8_t *right,
+                 int width, int height, int stride_left, int stride_right, uint16_t *out);
+/* WTA of an aggregated volume: left (sub-pixel) and right (integer) maps. */
+int cc_select(const cc_params *p, const uint16_t *volume, int width, int height,
+              int16_t *raw_left, int16_t *raw_right);
+/* Left-right check, fill and median on raw maps, as the pipeline does. */
+int cc_postprocess(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
+                   int width, int height, int16_t *checked, int16_t *filled, int16_t *disp);
+
+#endif

@@ -1,0 +1,112 @@
+/* Fused matching cost of one left pixel against all disparities:
+ * C = rho(Hamming(census), lambda_c) + rho(BT, lambda_b), both looked up in
+ * quantised tables.  Right pixels outside the image get the largest cost. */
+#include "internal.h"
+
+#if CC_HAVE_X86
+#include <immintrin.h>
+#endif
+
+static inline int bt_cost(int il, int ilmin, int ilmax, int ir, int irmin, int irmax)
+{
+    int a = il - irmax, b = irmin - il, c = ir - ilmax, d = ilmin - ir;
+    int lr = a > b ? a : b, rl = c > d ? c : d;
+    lr = lr > 0 ? lr : 0;
+    rl = rl > 0 ? rl : 0;
+    int bt = lr < rl ? lr : rl;
+    return bt < CC_LUT - 1 ? bt : CC_LUT - 1;
+}
+
+static void cost_pixel_scalar(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out)
+{
+    int w = f->width, h = f->height, nb = f->nbytes;
+    size_t lo = (size_t)y * w + x;
+    size_t ro = (size_t)y * f->rstride + f->pad + (w - 1 - x) + s->p.min_disparity;
+    size_t lplane = (size_t)w * h, rplane = (size_t)f->rstride * h;
+    int il = f->lint[lo], ilmin = f->lmin[lo], ilmax = f->lmax[lo];
+    for (int k = 0; k < s->D; k++) {
+        size_t r = ro + k;
+        int ham = 0;
+        for (int b = 0; b < nb; b++)
+            ham += __builtin_popcount((unsigned)(f->lcen[b * lplane + lo] ^ f->rcen[b * rplane + r]));
+        int bt = bt_cost(il, ilmin, ilmax, f->rint[r], f->rmin[r], f->rmax[r]);
+        out[k] = (uint8_t)(s->lut_census[ham] + s->lut_bt[bt]);
+    }
+}
+
+#if CC_HAVE_X86
+#define AVX2 __attribute__((target("avx2")))
+
+/* 64-entry byte table lookup for indices 0..63: pshufb on each 16-entry quarter. */
+AVX2 static inline __m256i lut64(__m256i idx, const __m256i t[4])
+{
+    __m256i r = _mm256_shuffle_epi8(t[0], idx);
+    r = _mm256_blendv_epi8(r, _mm256_shuffle_epi8(t[1], idx), _mm256_cmpgt_epi8(idx, _mm256_set1_epi8(15)));
+    r = _mm256_blendv_epi8(r, _mm256_shuffle_epi8(t[2], idx), _mm256_cmpgt_epi8(idx, _mm256_set1_epi8(31)));
+    r = _mm256_blendv_epi8(r, _mm256_shuffle_epi8(t[3], idx), _mm256_cmpgt_epi8(idx, _mm256_set1_epi8(47)));
+    return r;
+}
+
+AVX2 static inline void load_lut(const uint8_t *table, __m256i t[4])
+{
+    for (int i = 0; i < 4; i++)
+        t[i] = _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(table + 16 * i)));
+}
+
+AVX2 static void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out)
+{
+    int w = f->width, h = f->height, nb = f->nbytes;
+    size_t lo = (size_t)y * w + x;
+    size_t ro = (size_t)y * f->rstride + f->pad + (w - 1 - x) + s->p.min_disparity;
+    size_t lplane = (size_t)w * h, rplane = (size_t)f->rstride * h;
+    __m256i tc[4], tb[4];
+    load_lut(s->lut_census, tc);
+    load_lut(s->lut_bt, tb);
+    const __m256i nibble = _mm256_set1_epi8(0x0f);
+    const __m256i popcnt = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4,
+                                            0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+    __m256i lcen[8];
+    for (int b = 0; b < nb; b++)
+        lcen[b] = _mm256_set1_epi8((char)f->lcen[b * lplane + lo]);
+    const __m256i il = _mm256_set1_epi8((char)f->lint[lo]);
+    const __m256i ilmin = _mm256_set1_epi8((char)f->lmin[lo]);
+    const __m256i ilmax = _mm256_set1_epi8((char)f->lmax[lo]);
+    const __m256i cap = _mm256_set1_epi8(CC_LUT - 1);
+    for (int k = 0; k < s->Dp; k += 32) {
+        size_t r = ro + k;
+        __m256i ham = _mm256_setzero_si256();
+        for (int b = 0; b < nb; b++) {
+            __m256i v = _mm256_xor_si256(lcen[b], _mm256_loadu_si256((const __m256i *)(f->rcen + b * rplane + r)));
+            __m256i lo4 = _mm256_and_si256(v, nibble);
+            __m256i hi4 = _mm256_and_si256(_mm256_srli_epi16(v, 4), nibble);
+            ham = _mm256_add_epi8(ham, _mm256_add_epi8(_mm256_shuffle_epi8(popcnt, lo4),
+                                                       _mm256_shuffle_epi8(popcnt, hi4)));
+        }
+        __m256i ir = _mm256_loadu_si256((const __m256i *)(f->rint + r));
+        __m256i irmin = _mm256_loadu_si256((const __m256i *)(f->rmin + r));
+        __m256i irmax = _mm256_loadu_si256((const __m256i *)(f->rmax + r));
+        __m256i lr = _mm256_max_epu8(_mm256_subs_epu8(il, irmax), _mm256_subs_epu8(irmin, il));
+        __m256i rl = _mm256_max_epu8(_mm256_subs_epu8(ir, ilmax), _mm256_subs_epu8(ilmin, ir));
+        __m256i bt = _mm256_min_epu8(_mm256_min_epu8(lr, rl), cap);
+        __m256i c = _mm256_add_epi8(lut64(ham, tc), lut64(bt, tb));
+        _mm256_storeu_si256((__m256i *)(out + k), c);
+    }
+}
+#endif
+
+void cc_cost_pixel(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out)
+{
+#if CC_HAVE_X86
+    if (s->use_avx2)
+        cost_pixel_avx2(s, f, x, y, out);
+    else
+#endif
+        cost_pixel_scalar(s, f, x, y, out);
+    /* Disparities whose right pixel x - d falls outside the image. */
+    int w = f->width, dmin = s->p.min_disparity;
+    int k_lo = x - dmin - (w - 1), k_hi = x - dmin;
+    for (int k = 0; k < k_lo && k < s->D; k++)
+        out[k] = (uint8_t)s->cmax;
+    for (int k = k_hi + 1 < 0 ? 0 : k_hi + 1; k < s->D; k++)
+        out[k] = (uint8_t)s->cmax;
+}

@@ -1,0 +1,106 @@
+/* Internal declarations shared by the core's translation units. */
+#ifndef CELLCTL_INTERNAL_H
+#define CELLCTL_INTERNAL_H
+
+#include "cellctl_core.h"
+
+#define CC_LANES 16          /* uint16 lanes of one AVX2 vector; Dp is a multiple */
+#define CC_GUARD 16          /* guard lanes before and after each stored path vector */
+#define CC_LUT 64            /* rho tables cover indices 0..63 */
+#define CC_PATH_INF 0xFFFFu  /* path cost of a disparity that does not exist */
+
+#if defined(__x86_64__) || defined(__i386__)
+#define CC_HAVE_X86 1
+#else
+#define CC_HAVE_X86 0
+#endif
+
+/* The two images prepared for the cost: census bytes and BT bounds.  The right
+ * image is stored mirrored and padded per row so that, for a left pixel x, the
+ * right pixels x - d of consecutive d are consecutive in memory. */
+typedef struct cc_frame {
+    int width, height;
+    int nbytes;              /* census bytes per pixel */
+    int pad, rstride;        /* mirrored right rows: index pad + (width-1-x) */
+    uint8_t *lcen;           /* [nbytes][height][width] */
+    uint8_t *lint, *lmin, *lmax;            /* [height][width] */
+    uint8_t *rcen;           /* [nbytes][height][rstride] */
+    uint8_t *rint, *rmin, *rmax;            /* [height][rstride] */
+} cc_frame;
+
+/* Everything the kernels need, derived once from the parameters. */
+typedef struct cc_setup {
+    cc_params p;
+    int D, Dp;               /* disparity count and its padded count */
+    int cmax;                /* largest fused cost */
+    int use_avx2;
+    uint8_t lut_census[CC_LUT];
+    uint8_t lut_bt[CC_LUT];
+} cc_setup;
+
+int cc_setup_init(cc_setup *s, const cc_params *p);
+int cc_check_images(const uint8_t *left, const uint8_t *right, int width, int height,
+                    int stride_left, int stride_right, const cc_params *p);
+int cc_cpu_has_avx2(void);
+
+/* frame.c */
+size_t cc_frame_bytes(const cc_setup *s, int width, int height);
+int cc_frame_alloc(cc_frame *f, const cc_setup *s, int width, int height);
+void cc_frame_free(cc_frame *f);
+size_t cc_frame_scratch_bytes(int width);
+void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int stride_left,
+                      const uint8_t *right, int stride_right, int threads, uint8_t *scratch);
+void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw, int ch,
+                   int y, uint64_t *out);
+
+/* cost.c: fused cost of pixel (x, y) for all disparities into out[0..Dp) (+32 slack). */
+void cc_cost_pixel(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out);
+
+/* aggregate.c */
+uint16_t cc_path_step(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+                      uint16_t prev_min, int p2, uint16_t *out,
+                      const uint16_t *acc_in, uint16_t *acc_out);
+int cc_p2_for_step(const cc_params *p, int intensity, int prev_intensity);
+
+/* Buffers of one matcher for one image size; see cc_workspace_* in matcher.c. */
+typedef struct cc_workspace {
+    int width, height, threads;
+    uint16_t *volume;        /* aggregated cost S, [height][width][Dp] */
+    uint16_t *vpath;         /* vertical/diagonal paths: [paths][2 rows][width][vstride] */
+    uint16_t *vmin;          /* their minima: [paths][2 rows][width] */
+    size_t vstride;          /* Dp + 2 guards */
+    uint8_t *scratch;        /* per thread: see cc_thread_scratch */
+    size_t scratch_stride;
+} cc_workspace;
+
+/* Per-thread scratch of pass 3 and the selection. */
+typedef struct cc_thread_scratch {
+    uint8_t *cost_row;       /* [width][Dp] + slack */
+    uint16_t *sum_row;       /* [width][Dp] */
+    uint16_t *hpath[2];      /* two pixels' path vectors with guards */
+    uint16_t *select_tmp;    /* [width] */
+} cc_thread_scratch;
+
+size_t cc_thread_scratch_bytes(const cc_setup *s, int width);
+cc_thread_scratch cc_thread_scratch_at(const cc_setup *s, const cc_workspace *ws, int thread);
+
+/* passes.c */
+void cc_pass_vertical(const cc_setup *s, const cc_frame *f, cc_workspace *ws, int downward);
+void cc_pass_rows(const cc_setup *s, const cc_frame *f, cc_workspace *ws, int16_t *raw_left,
+                  int16_t *raw_right, uint16_t *volume_out);
+
+/* select.c */
+void cc_select_row(const cc_setup *s, const uint16_t *row, int stride, int width,
+                   int16_t *left_out, int16_t *right_out, uint16_t *tmp);
+
+/* postprocess.c */
+void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
+                         int width, int height, int16_t *checked, int16_t *filled,
+                         int16_t *disp, int threads);
+
+/* memory helpers (matcher.c) */
+void *cc_alloc(size_t bytes);
+void cc_free(void *ptr);
+int cc_thread_count(const cc_params *p);
+
+#endif
