@@ -79,12 +79,11 @@ def opencv_sgbm(mode: int) -> DisparityMethod:
 
 
 def stereo_matcher(**options: Any) -> DisparityMethod:
-    """Our matcher (`cellctl.stereo.StereoMatcher`) with the given options, on grey images."""
+    """Our matcher (`cellctl.stereo.StereoMatcher`, which converts BGR to grey) with the given options."""
     def compute(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
         from cellctl.stereo import StereoMatcher  # the C core is only needed when this runs
 
-        matcher = StereoMatcher(min_disparity, num_disparities, **options)
-        return np.asarray(matcher.compute(_grey(left), _grey(right)), dtype=np.float32)
+        return StereoMatcher(min_disparity, num_disparities, **options).compute(left, right)
     return compute
 
 

@@ -90,7 +90,7 @@ def _cellctl(argv: list[str]) -> int:
 
 def test_command_writes_tables_json_and_pictures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     status = _cellctl(["eval", "middlebury", "--methods", "sad-bm", "opencv-3way", "--scenes", "tsukuba",
-                       "--json", "--out", str(tmp_path)])
+                       "--repeat", "1", "--json", "--out", str(tmp_path)])
     assert status == 0
     captured = capsys.readouterr()
     document = json.loads(captured.out)
@@ -117,3 +117,5 @@ def test_command_rejects_an_unknown_method(capsys: pytest.CaptureFixture[str]) -
     with pytest.raises(SystemExit):
         _cellctl(["eval", "middlebury", "--methods", "fast-sgm"])
     assert "invalid choice: 'fast-sgm'" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="--repeat must be at least 1"):
+        _cellctl(["eval", "middlebury", "--repeat", "0"])

@@ -110,6 +110,26 @@ def test_average_is_the_mean_of_all_region_rates() -> None:
     assert middlebury.average_percent([result(1, 2, 3), result(4, 5, 21)]) == pytest.approx(6.0)
 
 
+def test_run_method_keeps_the_fastest_time_and_scores_the_first_map(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    _write_scene(tmp_path / "tsukuba", np.full((2, 3), 255, np.uint8))
+    scene = middlebury.load_scene("tsukuba", tmp_path)
+    calls = []
+
+    def method(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
+        calls.append((left.shape, min_disparity, num_disparities))
+        return np.nan_to_num(scene.ground_truth) + (0.0 if len(calls) == 1 else 5.0)
+
+    clock = iter([0.0, 5.0, 5.0, 7.0, 7.0, 10.0])  # runs of 5, 2 and 3 s
+    monkeypatch.setattr(middlebury.time, "perf_counter", lambda: next(clock))
+    result = middlebury.run_method("fake", method, scene, repeat=3)
+    assert calls == [((2, 3, 3), 0, 16)] * 3
+    assert result.seconds == 2.0
+    assert result.score.bad_percent == {r: 0.0 for r in REGIONS}
+    with pytest.raises(ValueError, match="repeat"):
+        middlebury.run_method("fake", method, scene, repeat=0)
+
+
 # ---- the real data ----------------------------------------------------------------------------
 
 # From the data folder's README.txt: width x height, gt range in px, evaluated pixels per region.
@@ -193,9 +213,35 @@ def test_method_selection_names_unknown_and_unavailable_methods(monkeypatch: pyt
         disparity_methods.select_methods(["needs-core"])
 
 
-def test_our_methods_point_at_stereo_matcher() -> None:
-    assert disparity_methods.METHODS["proposed"].requires == "cellctl.stereo"
-    assert disparity_methods.METHODS["census-8path"].requires == "cellctl.stereo"
+@pytest.mark.parametrize("name, options", [("proposed", {}), ("census-8path", {"cost": "census", "paths": 8})])
+def test_our_methods_build_stereo_matcher_with_their_options(monkeypatch: pytest.MonkeyPatch, name: str,
+                                                             options: dict[str, object]) -> None:
+    import cellctl.stereo
+
+    made = []
+
+    class Recorder:
+        def __init__(self, min_disparity: int, num_disparities: int, **kwargs: object) -> None:
+            made.append((min_disparity, num_disparities, kwargs))
+
+        def compute(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            return np.zeros(left.shape[:2], np.float32)
+
+    monkeypatch.setattr(cellctl.stereo, "StereoMatcher", Recorder)
+    image = np.zeros((4, 6, 3), np.uint8)
+    disparity = disparity_methods.METHODS[name].compute(image, image, 2, 20)
+    assert made == [(2, 20, options)] and disparity.shape == (4, 6)
+    assert disparity_methods.METHODS[name].requires == "cellctl.stereo"
+
+
+def test_proposed_method_runs_on_tsukuba(scenes: dict[str, middlebury.Scene]) -> None:
+    scene = scenes["tsukuba"]
+    result = middlebury.run_method("proposed", disparity_methods.METHODS["proposed"].compute, scene)
+    assert result.disparity.dtype == np.float32 and result.disparity.shape == scene.ground_truth.shape
+    valid = result.disparity[np.isfinite(result.disparity)]
+    assert valid.min() >= -0.5 and valid.max() <= 15.5
+    # Accuracy is the lead's regression test; this only guards the wiring (scale, orientation).
+    assert result.score.bad_percent["nonocc"] < 25.0
 
 
 # ---- the paper's table ---------------------------------------------------------------------------

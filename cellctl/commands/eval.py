@@ -27,6 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                    help=f"methods to run (default: all): {', '.join(METHODS)}")
     middlebury_parser.add_argument("--scenes", nargs="+", choices=list(middlebury.SCENES), metavar="SCENE",
                                    help=f"scenes to run (default: all): {', '.join(middlebury.SCENES)}")
+    middlebury_parser.add_argument("--repeat", type=int, default=3,
+                                   help="runs per method and scene; the fastest time is reported (default: 3)")
     middlebury_parser.add_argument("--json", action="store_true", help="print JSON instead of markdown tables")
     middlebury_parser.add_argument("--out", type=Path, default=None,
                                    help="folder for middlebury.md, .csv, .json and one PNG grid per scene")
@@ -34,22 +36,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.repeat < 1:
+        raise ValueError(f"--repeat must be at least 1, got {args.repeat}")
     data_dir = middlebury.resolve_data_dir(args.data)
     methods = select_methods(args.methods)
     scenes = middlebury.load_scenes(args.scenes, data_dir)
     progress = ProgressBar(len(methods) * len(scenes))
-    results = middlebury.evaluate({m.name: m.compute for m in methods}, scenes,
+    results = middlebury.evaluate({m.name: m.compute for m in methods}, scenes, args.repeat,
                                   on_run=lambda method, scene: progress.advance(f"{method} on {scene.name}"))
     progress.finish()
     rows = middlebury_report.build_rows(results)
-    document = middlebury_report.json_document(rows, data_dir)
+    document = middlebury_report.json_document(rows, data_dir, args.repeat)
     if args.json:
         print(json.dumps(document, indent=2))
     else:
-        print(middlebury_report.markdown(rows), end="")
+        print(middlebury_report.markdown(rows, args.repeat), end="")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "middlebury.md").write_text(middlebury_report.markdown(rows))
+        (args.out / "middlebury.md").write_text(middlebury_report.markdown(rows, args.repeat))
         (args.out / "middlebury.csv").write_text(middlebury_report.csv_text(rows))
         (args.out / "middlebury.json").write_text(json.dumps(document, indent=2) + "\n")
         pictures = middlebury_pictures.write_scene_grids(scenes, results, args.out)
