@@ -1,0 +1,236 @@
+"""The trigger/result handshake with the PLC, on an in-memory image of the register map.
+
+This module does no I/O: the Modbus server (firmware_io.server) calls the `plc_*` methods from its
+event-loop thread for every PLC request, the controller calls the others from its own thread. One
+lock guards the image, so every PLC request sees the map either wholly before or wholly after a
+controller update: a result is never readable half-written.
+
+Handshake (docs/modbus.md has the timing diagram):
+
+1. Idle: BUSY=0, READY=1 when cameras and calibration are ok.
+2. The PLC writes cycle number N (non-zero, different from the previous cycle) to TRIGGER. Before the
+   write is acknowledged: BUSY=1, READY=0, RESULT_VALID=0, ERROR=0, RESULT_CYCLE=0, ERROR_CODE=0 and
+   the measurement registers are cleared, so the PLC can never pair a stale result with cycle N.
+3. The controller measures and publishes: data registers first, then ERROR_CODE, RESULT_CYCLE=N and
+   the status bits (RESULT_VALID or ERROR, BUSY=0), all in one locked update.
+4. The PLC polls RESULT_CYCLE until it equals N, then reads status, error code and data.
+
+Writes to TRIGGER that start nothing: 0 (the PLC resetting its trigger), the number of the previous
+or running cycle (a repeated or retried write). A *different* number while a cycle runs is refused
+with Modbus exception 0x06 SERVER DEVICE BUSY and counted in REFUSED_TRIGGERS; the running cycle
+goes on undisturbed.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from numpy.typing import ArrayLike
+from pymodbus.constants import ExcCodes
+
+from firmware_io.registers import (
+    MAP_SIZE,
+    MAP_VERSION,
+    MAX_GLUE_POINTS,
+    REGISTERS_PER_POINT,
+    ErrorCode,
+    Register,
+    RegisterMap,
+    StatusBit,
+)
+
+_NAN = math.nan
+_MEASUREMENT_REGISTERS = Register.GLUE_POINT_COUNT - Register.HEEL_HEIGHT_MM  # 10..17: four float32
+
+
+@dataclass(frozen=True)
+class Trigger:
+    """A cycle the PLC started."""
+
+    cycle: int  #: the number the PLC wrote, 1..65535
+    received_at: float  #: time.monotonic() when the trigger write arrived; cycle time counts from here
+
+
+class PlcHandshake:
+    """Register image plus handshake state, shared by the Modbus server thread and the controller."""
+
+    def __init__(self, register_map: RegisterMap) -> None:
+        self._map = register_map
+        self._changed = threading.Condition()  # its lock guards everything below
+        self._image = [0] * MAP_SIZE
+        self._image[Register.MAP_VERSION] = MAP_VERSION
+        self._flags = StatusBit(0)  # RESULT_VALID, ERROR, CAMERAS_OK, CALIBRATION_OK; the rest is derived
+        self._running: int | None = None
+        self._last_accepted = 0
+        self._pending: Trigger | None = None
+        self._closed = False
+        self._controller_seen_at = time.monotonic()
+        self._clear_result()
+        self._update_status()
+
+    # ---- PLC side: called by the Modbus server for each request -------------------------------
+
+    def plc_read(self, address: int, count: int) -> list[int]:
+        """Registers [address, address + count) as the PLC sees them now."""
+        with self._changed:
+            return self._image[address : address + count]
+
+    def plc_write(self, address: int, values: Sequence[int]) -> ExcCodes | None:
+        """Apply a PLC write; returns the Modbus exception to answer with, or None to acknowledge."""
+        if address != Register.TRIGGER or len(values) != 1:
+            # The server refuses these before they get here (read-only registers); kept as a guard.
+            return ExcCodes.ILLEGAL_ADDRESS
+        cycle = int(values[0])
+        with self._changed:
+            if cycle == 0 or cycle == self._last_accepted:
+                self._image[Register.TRIGGER] = cycle
+                return None
+            if self._running is not None:
+                refused = self._image[Register.REFUSED_TRIGGERS]
+                self._image[Register.REFUSED_TRIGGERS] = (refused + 1) & 0xFFFF
+                return ExcCodes.DEVICE_BUSY
+            self._accept(cycle)
+            return None
+
+    def beat(self, liveness_timeout_s: float | None) -> bool:
+        """Advance the heartbeat if the controller was seen recently enough; True if it advanced."""
+        with self._changed:
+            silent_for = time.monotonic() - self._controller_seen_at
+            if liveness_timeout_s is not None and silent_for > liveness_timeout_s:
+                return False
+            self._image[Register.HEARTBEAT] = (self._image[Register.HEARTBEAT] + 1) & 0xFFFF
+            return True
+
+    # ---- controller side -----------------------------------------------------------------------
+
+    @property
+    def status(self) -> StatusBit:
+        """The status register as the PLC reads it now."""
+        with self._changed:
+            return StatusBit(self._image[Register.STATUS])
+
+    def wait_trigger(self, timeout_s: float | None, liveness_slice_s: float) -> Trigger | None:
+        """The next accepted trigger, or None after timeout_s (or once closed).
+
+        Waits in slices so a controller blocked here still counts as alive for the heartbeat.
+        """
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        with self._changed:
+            while True:
+                self._controller_seen_at = time.monotonic()
+                if self._pending is not None or self._closed:
+                    trigger, self._pending = self._pending, None
+                    return trigger
+                wait = liveness_slice_s
+                if deadline is not None:
+                    wait = min(wait, deadline - time.monotonic())
+                    if wait <= 0:
+                        return None
+                self._changed.wait(wait)
+
+    def set_health(self, *, cameras_ok: bool, calibration_ok: bool) -> None:
+        """Report camera and calibration state (status bits 4, 5 and hence READY)."""
+        with self._changed:
+            self._controller_seen_at = time.monotonic()
+            self._set_flag(StatusBit.CAMERAS_OK, cameras_ok)
+            self._set_flag(StatusBit.CALIBRATION_OK, calibration_ok)
+            self._update_status()
+
+    def publish_result(
+        self,
+        cycle: int,
+        *,
+        heel_height_mm: float,
+        toe_height_mm: float,
+        length_mm: float,
+        cycle_time_ms: float,
+        glue_points: ArrayLike,
+    ) -> None:
+        """Hand the PLC the measurement of `cycle`; refuses values that are not finite."""
+        values = {
+            "heel_height_mm": heel_height_mm,
+            "toe_height_mm": toe_height_mm,
+            "length_mm": length_mm,
+            "cycle_time_ms": cycle_time_ms,
+        }
+        for name, value in values.items():
+            if not math.isfinite(float(value)):
+                raise ValueError(
+                    f"{name} is {value}: publish_error(cycle, ErrorCode.MEASUREMENT_INVALID) instead"
+                )
+        # Encode before taking the lock: a refused value leaves the map untouched.
+        measurement = self._map.encode_floats(list(values.values()), what="measurement")
+        points = self._map.encode_points(glue_points)
+        with self._changed:
+            self._finish(cycle, measurement, points, ErrorCode.NONE)
+
+    def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> None:
+        """Tell the PLC that `cycle` ended with `code`; measurements read NaN and no glue points."""
+        code = ErrorCode(code)
+        if code is ErrorCode.NONE:
+            raise ValueError("publish_error needs an error code other than ErrorCode.NONE")
+        measurement = self._map.encode_floats([_NAN, _NAN, _NAN, cycle_time_ms], what="measurement")
+        with self._changed:
+            self._finish(cycle, measurement, [], code)
+
+    def close(self) -> None:
+        """Wake any wait_trigger() so the controller can stop."""
+        with self._changed:
+            self._closed = True
+            self._changed.notify_all()
+
+    # ---- internals (lock held) -----------------------------------------------------------------
+
+    def _accept(self, cycle: int) -> None:
+        self._image[Register.TRIGGER] = cycle
+        self._running = self._last_accepted = cycle
+        self._clear_result()
+        self._update_status()
+        self._pending = Trigger(cycle, time.monotonic())
+        self._changed.notify_all()
+
+    def _finish(self, cycle: int, measurement: list[int], points: list[int], code: ErrorCode) -> None:
+        self._controller_seen_at = time.monotonic()
+        if cycle != self._running:
+            raise RuntimeError(
+                f"cannot publish cycle {cycle}: the running cycle is {self._running} "
+                "(publish exactly once per trigger, with the trigger's cycle number)"
+            )
+        image = self._image
+        image[Register.HEEL_HEIGHT_MM : Register.GLUE_POINT_COUNT] = measurement
+        image[Register.GLUE_POINT_COUNT] = len(points) // REGISTERS_PER_POINT
+        image[Register.GLUE_POINTS : Register.GLUE_POINTS + len(points)] = points
+        image[Register.ERROR_CODE] = code
+        # Last: the cycle number and the flags that tell the PLC the result is complete.
+        image[Register.RESULT_CYCLE] = cycle
+        self._set_flag(StatusBit.RESULT_VALID, code is ErrorCode.NONE)
+        self._set_flag(StatusBit.ERROR, code is not ErrorCode.NONE)
+        self._running = None
+        self._update_status()
+
+    def _clear_result(self) -> None:
+        image = self._image
+        image[Register.RESULT_CYCLE] = 0
+        image[Register.ERROR_CODE] = ErrorCode.NONE
+        self._flags &= ~(StatusBit.RESULT_VALID | StatusBit.ERROR)
+        nan4 = self._map.encode_floats([_NAN] * 4)
+        assert len(nan4) == _MEASUREMENT_REGISTERS
+        image[Register.HEEL_HEIGHT_MM : Register.GLUE_POINT_COUNT] = nan4
+        image[Register.GLUE_POINT_COUNT] = 0
+        image[Register.GLUE_POINTS :] = [0] * (REGISTERS_PER_POINT * MAX_GLUE_POINTS)
+
+    def _set_flag(self, bit: StatusBit, on: bool) -> None:
+        self._flags = (self._flags | bit) if on else (self._flags & ~bit)
+
+    def _update_status(self) -> None:
+        status = self._flags
+        healthy = StatusBit.CAMERAS_OK | StatusBit.CALIBRATION_OK
+        if self._running is not None:
+            status |= StatusBit.BUSY
+        elif status & healthy == healthy:
+            status |= StatusBit.READY
+        self._image[Register.STATUS] = int(status)
