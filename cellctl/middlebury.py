@@ -93,7 +93,8 @@ def resolve_data_dir(data_dir: str | Path | None = None) -> Path:
     path = Path(data_dir) if data_dir is not None else DEFAULT_DATA_DIR
     if not path.is_dir():
         hint = "pass --data DIR" if data_dir is None else "check the path"
-        raise FileNotFoundError(f"Middlebury data folder not found: {path} ({hint}; it must hold tsukuba/, venus/, teddy/, cones/)")
+        raise FileNotFoundError(f"Middlebury data folder not found: {path} "
+                                f"({hint}; it must hold tsukuba/, venus/, teddy/, cones/)")
     missing = [name for name in SCENES if not (path / name).is_dir()]
     if missing:
         raise FileNotFoundError(f"Middlebury data folder {path} lacks scene folder(s): {', '.join(missing)}")
@@ -124,7 +125,8 @@ def load_scene(name: str, data_dir: str | Path | None = None) -> Scene:
     regions = {region: region_mask(_read(folder / f"{region}.png", colour=False)) for region in REGIONS}
     for path, image in [("right.png", right), ("gt.png", gt)] + [(f"{r}.png", m) for r, m in regions.items()]:
         if image.shape[:2] != left.shape[:2]:
-            raise ValueError(f"{folder / path} is {image.shape[1]}x{image.shape[0]}, but left.png is {left.shape[1]}x{left.shape[0]}")
+            raise ValueError(f"{folder / path} is {image.shape[1]}x{image.shape[0]}, "
+                             f"but left.png is {left.shape[1]}x{left.shape[0]}")
     return Scene(info, left, right, ground_truth_disparity(gt, info.scale), regions)
 
 

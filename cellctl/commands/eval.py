@@ -38,6 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.repeat < 1:
         raise ValueError(f"--repeat must be at least 1, got {args.repeat}")
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise ValueError(f"--out {args.out} is a file; give a folder for the tables and pictures")
     data_dir = middlebury.resolve_data_dir(args.data)
     methods = select_methods(args.methods)
     scenes = middlebury.load_scenes(args.scenes, data_dir)
