@@ -21,6 +21,32 @@ static void lr_check_row(const cc_params *p, const int16_t *left, const int16_t 
     }
 }
 
+/* Occlusion by the image border: a pixel whose surface, judged by the nearest
+ * kept disparity on its inner side, would be seen outside the other image
+ * cannot have a real match; whatever it matched consistently is wrong.  Only
+ * runs when the left-right check does (it works on its output). */
+static void border_occlusion_row(int16_t *row, int width)
+{
+    int ref = CC_INVALID;
+    for (int x = width - 1; x >= 0; x--) { /* left border: x - d < 0 */
+        if (row[x] == CC_INVALID)
+            continue;
+        if (ref != CC_INVALID && x - floor_div16(ref + CC_DISP_SCALE / 2) < 0)
+            row[x] = CC_INVALID;
+        else
+            ref = row[x];
+    }
+    ref = CC_INVALID;
+    for (int x = 0; x < width; x++) { /* right border: x - d >= width */
+        if (row[x] == CC_INVALID)
+            continue;
+        if (ref != CC_INVALID && x - floor_div16(ref + CC_DISP_SCALE / 2) >= width)
+            row[x] = CC_INVALID;
+        else
+            ref = row[x];
+    }
+}
+
 /* Invalid pixels are mostly occlusions, which belong to the farther surface:
  * take the smaller of the nearest valid disparities to the left and right. */
 static void fill_row(const int16_t *in, int width, int16_t *out)
@@ -82,6 +108,8 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
         for (int y = 0; y < height; y++) {
             size_t o = (size_t)y * width;
             lr_check_row(p, raw_left + o, raw_right + o, width, checked + o);
+            if (p->lr_max_diff >= 0)
+                border_occlusion_row(checked + o, width);
             if (p->fill_mode == CC_FILL_BACKGROUND)
                 fill_row(checked + o, width, filled + o);
             else

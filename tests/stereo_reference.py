@@ -147,6 +147,20 @@ def select(S, p):
     return left, right
 
 
+def _border_occlusion(row, w):
+    """Invalidate pixels whose match, judged by the kept disparity on their inner side, is outside."""
+    for xs, outside in ((range(w - 1, -1, -1), lambda x, d: x - (d + 8) // 16 < 0),
+                        (range(w), lambda x, d: x - (d + 8) // 16 >= w)):
+        ref = None
+        for x in xs:
+            if row[x] == INVALID:
+                continue
+            if ref is not None and outside(x, ref):
+                row[x] = INVALID
+            else:
+                ref = int(row[x])
+
+
 def postprocess(raw_left, raw_right, p):
     h, w = raw_left.shape
     checked = raw_left.copy()
@@ -158,6 +172,8 @@ def postprocess(raw_left, raw_right, p):
                 xr = x - ((d + 8) // 16)
                 ok = 0 <= xr < w and raw_right[y, xr] != INVALID and abs(int(raw_right[y, xr]) - d) <= tol
                 checked[y, x] = d if ok else INVALID
+        for y in range(h):
+            _border_occlusion(checked[y], w)
     filled = checked.copy()
     if p["fill"] == "background":
         for y in range(h):
