@@ -80,10 +80,13 @@ class PlcHandshake:
             return self._image[address : address + count]
 
     def plc_write(self, address: int, values: Sequence[int]) -> ExcCodes | None:
-        """Apply a PLC write; returns the Modbus exception to answer with, or None to acknowledge."""
+        """Apply a PLC write to the trigger; returns the Modbus exception to answer with, or None.
+
+        Writes to read-only registers never get here: the server refuses them first (pymodbus'
+        read-only flag, exception 0x02), so anything else is a bug in the server wiring.
+        """
         if address != Register.TRIGGER or len(values) != 1:
-            # The server refuses these before they get here (read-only registers); kept as a guard.
-            return ExcCodes.ILLEGAL_ADDRESS
+            raise ValueError(f"only the trigger register is writable, got {len(values)} values at {address}")
         cycle = int(values[0])
         with self._changed:
             if cycle == 0 or cycle == self._last_accepted:

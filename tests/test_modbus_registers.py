@@ -184,6 +184,14 @@ def test_a_different_trigger_while_busy_is_refused_and_counted() -> None:
     assert handshake.wait_trigger(0, 0.1) is None
 
 
+def test_writes_other_than_the_trigger_never_reach_the_handshake() -> None:
+    # The server refuses them with 0x02 first; reaching here would be a wiring bug (answered 0x04).
+    with pytest.raises(ValueError, match="only the trigger register is writable"):
+        healthy_handshake().plc_write(Register.RESULT_CYCLE, [1])
+    with pytest.raises(ValueError, match="only the trigger register is writable"):
+        healthy_handshake().plc_write(Register.TRIGGER, [1, 2])
+
+
 def test_publish_refuses_the_wrong_cycle_and_non_finite_values_without_touching_the_map() -> None:
     handshake = healthy_handshake()
     with pytest.raises(RuntimeError, match="running cycle is None"):
