@@ -49,7 +49,7 @@ class SerialEndpoint:
             raise ValueError(f"serial byte size {self.bytesize} must be 7 or 8")
 
     def __str__(self) -> str:
-        return f"rtu://{self.port}@{self.baudrate}{self.bytesize}{self.parity}{self.stopbits}"
+        return f"rtu:{self.port} {self.baudrate} {self.bytesize}{self.parity}{self.stopbits}"
 
 
 Endpoint = TcpEndpoint | SerialEndpoint

@@ -40,6 +40,9 @@ log = logging.getLogger(__name__)
 #: the map is holding registers only and a second view of the same memory would be a second way in.
 HOLDING_REGISTER_FUNCTIONS = frozenset({3, 6, 16, 23})
 
+#: How often a lost serial port is retried.
+SERIAL_REOPEN_PERIOD_S = 1.0
+
 
 class PlcLink:
     """The controller's side of the PLC handshake, served over Modbus TCP or RTU.
@@ -91,6 +94,7 @@ class PlcLink:
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_requested: asyncio.Event | None = None
+        self._line_lost: asyncio.Event | None = None
         self._started = threading.Event()
         self._start_error: BaseException | None = None
         self._bound: Endpoint = endpoint
@@ -192,9 +196,9 @@ class PlcLink:
     async def _serve(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop_requested = asyncio.Event()
+        self._line_lost = asyncio.Event()
         try:
-            server = self._make_server()
-            await server.serve_forever(background=True)
+            server = await self._open_server()
         except Exception as exc:
             self._start_error = exc
             return
@@ -202,14 +206,58 @@ class PlcLink:
         heartbeat = asyncio.create_task(self._heartbeat(), name="plc heartbeat")
         self._started.set()
         try:
-            await self._stop_requested.wait()
+            while server is not None and await self._line_lost_or_stop():
+                await server.shutdown()
+                server = await self._reopen_serial_line()
         finally:
             heartbeat.cancel()
-            await server.shutdown()
+            if server is not None:
+                await server.shutdown()
             # Let the transports' close callbacks run so sockets and the tty are released before
             # the loop is torn down.
             await asyncio.sleep(0)
             await asyncio.sleep(0)
+
+    async def _open_server(self) -> ModbusBaseServer:
+        server = self._make_server()
+        await server.serve_forever(background=True)  # RuntimeError if the port cannot be opened
+        return server
+
+    async def _line_lost_or_stop(self) -> bool:
+        """Wait; True when the serial line was lost, False when stop() was called."""
+        stop = asyncio.create_task(self._stop_requested.wait())
+        lost = asyncio.create_task(self._line_lost.wait())
+        await asyncio.wait({stop, lost}, return_when=asyncio.FIRST_COMPLETED)
+        stop.cancel()
+        lost.cancel()
+        return not self._stop_requested.is_set()
+
+    async def _reopen_serial_line(self) -> ModbusBaseServer | None:
+        """Reopen a serial port that went away (USB adapter unplugged) until it is back or stop()."""
+        # pymodbus' serial server does not reopen its port after an I/O error; we do, so replugging
+        # the adapter (same /dev/serial/by-id name) brings the link back without a service restart.
+        log.warning("Modbus RTU line %s lost; reopening every %.0f s", self._endpoint, SERIAL_REOPEN_PERIOD_S)
+        while not self._stop_requested.is_set():
+            try:
+                await asyncio.wait_for(self._stop_requested.wait(), SERIAL_REOPEN_PERIOD_S)
+                return None
+            except asyncio.TimeoutError:
+                pass
+            self._line_lost.clear()
+            try:
+                server = await self._open_server()
+            except RuntimeError:
+                continue
+            log.info("Modbus RTU line %s open again", self._endpoint)
+            return server
+        return None
+
+    def _on_connection(self, connected: bool) -> None:
+        """pymodbus trace_connect hook: a TCP client came or went, or the serial line opened or failed."""
+        log.debug("Modbus %s: connection %s", self._endpoint, "opened" if connected else "closed")
+        stopping = self._stop_requested is not None and self._stop_requested.is_set()
+        if not connected and isinstance(self._endpoint, SerialEndpoint) and not stopping:
+            self._line_lost.set()
 
     async def _heartbeat(self) -> None:
         while True:
@@ -229,9 +277,12 @@ class PlcLink:
                 stopbits=ep.stopbits,
                 bytesize=ep.bytesize,
                 ignore_missing_devices=True,
+                trace_connect=self._on_connection,
             )
         else:
-            server = ModbusTcpServer(device, address=(self._endpoint.host, self._endpoint.port))
+            server = ModbusTcpServer(
+                device, address=(self._endpoint.host, self._endpoint.port), trace_connect=self._on_connection
+            )
         if self._unit_id != 0:
             server.context = _SingleUnit(server.context, self._unit_id)
         return server

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import selectors
+import select
 import socket
 import struct
 import threading
@@ -407,49 +407,89 @@ def test_cli_rejects_bad_options() -> None:
 # ---- Modbus RTU through a pseudo-terminal pair ------------------------------------------------------
 
 
-@pytest.fixture
-def null_modem() -> Iterator[tuple[str, str]]:
-    """Two pty devices joined back to back by a copying thread: a null-modem cable without socat.
+class PtyNullModem:
+    """A serial cable between two pseudo-terminals, without socat, that can be unplugged and replugged.
 
-    A single os.openpty() pair cannot be used directly: its master side has no device name for the
-    pymodbus serial client to open, so each end gets its own pty and the masters are bridged.
+    One os.openpty() pair cannot serve both ends: its master side has no device name for pyserial
+    to open. So each end gets its own pty and a thread copies bytes between the two masters. The
+    controller end is reached through a symlink, like the /dev/serial/by-id/... names udev gives
+    USB adapters, so a replugged "adapter" (a new pty) appears under the same name.
     """
-    ends = [os.openpty() for _ in range(2)]
-    for _master, slave in ends:
+
+    def __init__(self, directory: Path) -> None:
+        self.controller_port = str(directory / "ttyCELL")
+        self._lock = threading.Lock()
+        self._plc = self._open_pty()
+        self.plc_port = os.ttyname(self._plc[1])
+        self._cell: tuple[int, int] | None = None
+        self.replug()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._copy, name="pty null modem", daemon=True)
+        self._thread.start()
+
+    @staticmethod
+    def _open_pty() -> tuple[int, int]:
+        master, slave = os.openpty()
         tty.setraw(slave)  # no echo or line editing before pyserial configures the port
-    (master_a, slave_a), (master_b, slave_b) = ends
-    stop_read, stop_write = os.pipe()
-    peer = {master_a: master_b, master_b: master_a}
+        return master, slave
 
-    def copy() -> None:
-        with selectors.DefaultSelector() as selector:
-            for fd in (master_a, master_b, stop_read):
-                selector.register(fd, selectors.EVENT_READ)
-            while True:
-                for key, _ in selector.select():
-                    if key.fd == stop_read:
-                        return
-                    try:
-                        os.write(peer[key.fd], os.read(key.fd, 4096))
-                    except OSError:  # an end was closed while no program had it open
-                        pass
+    def unplug(self) -> None:
+        with self._lock:
+            if self._cell is not None:
+                for fd in self._cell:
+                    os.close(fd)
+                self._cell = None
 
-    bridge = threading.Thread(target=copy, name="pty null modem", daemon=True)
-    bridge.start()
-    try:
-        yield os.ttyname(slave_a), os.ttyname(slave_b)
-    finally:
-        os.write(stop_write, b"x")
-        bridge.join(2.0)
-        for fd in (master_a, slave_a, master_b, slave_b, stop_read, stop_write):
+    def replug(self) -> None:
+        self.unplug()
+        with self._lock:
+            self._cell = self._open_pty()
+            link = self.controller_port + ".new"
+            os.symlink(os.ttyname(self._cell[1]), link)
+            os.replace(link, self.controller_port)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.unplug()
+        for fd in self._plc:
             os.close(fd)
 
+    def _copy(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                if self._cell is None:
+                    masters = [self._plc[0]]
+                else:
+                    masters = [self._plc[0], self._cell[0]]
+                readable, _, _ = select.select(masters, [], [], 0.02)
+                for fd in readable:
+                    data = os.read(fd, 4096)
+                    if fd == self._plc[0] and self._cell is not None:
+                        os.write(self._cell[0], data)
+                    elif fd != self._plc[0]:
+                        os.write(self._plc[0], data)
 
-def test_rtu_slave_over_a_serial_line(null_modem: tuple[str, str]) -> None:
-    controller_port, plc_port = null_modem
-    # parity "N": Linux ptys refuse PARENB (EINVAL); the line default 8E1 is for real RS-485 adapters.
-    controller_side = SerialEndpoint(controller_port, baudrate=115200, parity="N")
-    plc_side = SerialEndpoint(plc_port, baudrate=115200, parity="N")
+
+@pytest.fixture
+def null_modem(tmp_path: Path) -> Iterator[PtyNullModem]:
+    cable = PtyNullModem(tmp_path)
+    try:
+        yield cable
+    finally:
+        cable.close()
+
+
+def rtu_endpoints(cable: PtyNullModem) -> tuple[SerialEndpoint, SerialEndpoint]:
+    # parity "N": Linux ptys refuse PARENB (EINVAL); the 8E1 default is for real RS-485 adapters.
+    return (
+        SerialEndpoint(cable.controller_port, baudrate=115200, parity="N"),
+        SerialEndpoint(cable.plc_port, baudrate=115200, parity="N"),
+    )
+
+
+def test_rtu_slave_over_a_serial_line(null_modem: PtyNullModem) -> None:
+    controller_side, plc_side = rtu_endpoints(null_modem)
     threads_before = threading.active_count()
     with PlcLink(controller_side, unit_id=3) as link, FakeController(link):
         with PlcSimulator(plc_side, unit_id=3, response_timeout_s=1.0) as plc:
@@ -470,8 +510,27 @@ def test_rtu_slave_over_a_serial_line(null_modem: tuple[str, str]) -> None:
     assert threading.active_count() == threads_before
 
 
+def test_rtu_line_comes_back_after_the_adapter_is_replugged(null_modem: PtyNullModem) -> None:
+    controller_side, plc_side = rtu_endpoints(null_modem)
+    with PlcLink(controller_side) as link, FakeController(link):
+        with PlcSimulator(plc_side, response_timeout_s=0.5) as plc:
+            assert_matches_truth(plc.run_cycle(timeout_s=3.0))
+            null_modem.unplug()
+            with pytest.raises(PlcSimError, match="no answer"):
+                plc.read_header()
+            null_modem.replug()
+            deadline = time.monotonic() + 5.0
+            while True:  # the link retries the port every second
+                try:
+                    plc.read_header()
+                    break
+                except PlcSimError:
+                    assert time.monotonic() < deadline, "the RTU line did not come back after replugging"
+            assert_matches_truth(plc.run_cycle(timeout_s=3.0))
+
+
 def test_rtu_start_fails_clearly_without_the_serial_port(tmp_path: Path) -> None:
     link = PlcLink(SerialEndpoint(str(tmp_path / "ttyUSB9")))
-    with pytest.raises(RuntimeError, match="cannot serve Modbus on rtu://.*ttyUSB9.*does the serial port exist"):
+    with pytest.raises(RuntimeError, match="cannot serve Modbus on rtu:.*ttyUSB9 19200 8E1.*does the serial port exist"):
         link.start()
     link.stop()
