@@ -53,15 +53,26 @@ AVX2 static inline void load_lut(const uint8_t *table, __m256i t[4])
         t[i] = _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(table + 16 * i)));
 }
 
-AVX2 static void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out)
+AVX2 static inline void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out,
+                                        const __m256i tc[4], const __m256i tb[4]);
+
+AVX2 static void cost_segment_avx2(const cc_setup *s, const cc_frame *f, int x0, int x1, int y,
+                                   uint8_t *out, size_t stride)
+{
+    __m256i tc[4], tb[4];
+    load_lut(s->lut_census, tc);
+    load_lut(s->lut_bt, tb);
+    for (int x = x0; x < x1; x++, out += stride)
+        cost_pixel_avx2(s, f, x, y, out, tc, tb);
+}
+
+AVX2 static inline void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out,
+                                        const __m256i tc[4], const __m256i tb[4])
 {
     int w = f->width, h = f->height, nb = f->nbytes;
     size_t lo = (size_t)y * w + x;
     size_t ro = (size_t)y * f->rstride + f->pad + (w - 1 - x) + s->p.min_disparity;
     size_t lplane = (size_t)w * h, rplane = (size_t)f->rstride * h;
-    __m256i tc[4], tb[4];
-    load_lut(s->lut_census, tc);
-    load_lut(s->lut_bt, tb);
     const __m256i nibble = _mm256_set1_epi8(0x0f);
     const __m256i popcnt = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4,
                                             0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
@@ -94,19 +105,29 @@ AVX2 static void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x, in
 }
 #endif
 
-void cc_cost_pixel(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out)
+/* Disparities whose right pixel x - d falls outside the image get the largest cost. */
+static void outside_costs(const cc_setup *s, int width, int x, uint8_t *out)
 {
-#if CC_HAVE_X86
-    if (s->use_avx2)
-        cost_pixel_avx2(s, f, x, y, out);
-    else
-#endif
-        cost_pixel_scalar(s, f, x, y, out);
-    /* Disparities whose right pixel x - d falls outside the image. */
-    int w = f->width, dmin = s->p.min_disparity;
-    int k_lo = x - dmin - (w - 1), k_hi = x - dmin;
+    int dmin = s->p.min_disparity;
+    int k_lo = x - dmin - (width - 1), k_hi = x - dmin;
     for (int k = 0; k < k_lo && k < s->D; k++)
         out[k] = (uint8_t)s->cmax;
     for (int k = k_hi + 1 < 0 ? 0 : k_hi + 1; k < s->D; k++)
         out[k] = (uint8_t)s->cmax;
+}
+
+void cc_cost_segment(const cc_setup *s, const cc_frame *f, int x0, int x1, int y, uint8_t *out, size_t stride)
+{
+#if CC_HAVE_X86
+    if (s->use_avx2)
+        cost_segment_avx2(s, f, x0, x1, y, out, stride);
+    else
+#endif
+        for (int x = x0; x < x1; x++)
+            cost_pixel_scalar(s, f, x, y, out + (size_t)(x - x0) * stride);
+    int w = f->width, dmin = s->p.min_disparity;
+    /* only pixels near the borders have disparities pointing outside */
+    for (int x = x0; x < x1; x++)
+        if (x - dmin - (s->D - 1) < 0 || x - dmin > w - 1)
+            outside_costs(s, w, x, out + (size_t)(x - x0) * stride);
 }

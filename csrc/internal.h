@@ -53,8 +53,9 @@ void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int s
 void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw, int ch,
                    int y, uint64_t *out);
 
-/* cost.c: fused cost of pixel (x, y) for all disparities into out[0..Dp) (+32 slack). */
-void cc_cost_pixel(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out);
+/* cost.c: fused costs of pixels x0..x1-1 of row y, pixel x at out + (x - x0) * stride,
+ * all disparities (Dp values, writing up to 32 bytes of slack past the last). */
+void cc_cost_segment(const cc_setup *s, const cc_frame *f, int x0, int x1, int y, uint8_t *out, size_t stride);
 
 /* aggregate.c */
 uint16_t cc_path_step(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,

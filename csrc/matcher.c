@@ -265,17 +265,17 @@ int cc_cost_volume(const cc_params *p, const uint8_t *left, const uint8_t *right
     cc_frame f;
     int threads = cc_thread_count(p);
     uint8_t *scratch = cc_alloc(cc_frame_scratch_bytes(width) * threads);
-    uint8_t *cost = cc_alloc((size_t)s.Dp + 64);
+    uint8_t *cost = cc_alloc((size_t)width * s.Dp + 64);
     rc = cc_frame_alloc(&f, &s, width, height);
     if (rc == CC_OK && (!scratch || !cost))
         rc = CC_ERR_NOMEM;
     if (rc == CC_OK) {
         cc_frame_prepare(&f, &s, left, stride_left, right, stride_right, threads, scratch);
-        for (int y = 0; y < height; y++)
-            for (int x = 0; x < width; x++) {
-                cc_cost_pixel(&s, &f, x, y, cost);
-                memcpy(out + ((size_t)y * width + x) * s.D, cost, s.D);
-            }
+        for (int y = 0; y < height; y++) {
+            cc_cost_segment(&s, &f, 0, width, y, cost, s.Dp);
+            for (int x = 0; x < width; x++)
+                memcpy(out + ((size_t)y * width + x) * s.D, cost + (size_t)x * s.Dp, s.D);
+        }
         cc_frame_free(&f);
     }
     cc_free(scratch);
