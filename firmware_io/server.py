@@ -12,7 +12,10 @@ on every request, and we use it to (a) refuse function codes other than holding-
 register image just before pymodbus answers a read. The image (firmware_io.handshake) is the single
 source of truth and is updated under one lock, which is what makes results atomic for the PLC.
 Writes to read-only registers are refused by pymodbus itself (SimData readonly=True), with
-exception 0x02 ILLEGAL DATA ADDRESS.
+exception 0x02 ILLEGAL DATA ADDRESS. SimDevice rather than ModbusServerContext/ModbusDeviceContext:
+3.16 deprecates the latter (a warning at construction, removal announced for v4) and points to
+SimDevice, although pymodbus still labels it experimental; tests/test_modbus.py pins the behaviour
+we rely on.
 """
 
 from __future__ import annotations

@@ -225,6 +225,13 @@ def test_out_of_range_addresses_and_foreign_functions_are_refused(link: PlcLink)
         client.close()
 
 
+def test_unit_id_zero_answers_any_unit_on_tcp() -> None:
+    with PlcLink(TcpEndpoint(LOCALHOST, 0), unit_id=0) as link:
+        for unit in (1, 7, 255):
+            with simulator(link, unit_id=unit) as plc:
+                assert plc.read_header().map_version == 1
+
+
 def raw_request(port: int, payload: bytes) -> bytes:
     """Send raw bytes as one Modbus TCP client and return whatever comes back within 1 s."""
     with socket.create_connection((LOCALHOST, port), timeout=1.0) as raw:
