@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,7 +44,11 @@ SCENES: dict[str, SceneInfo] = {
 }
 
 # <repo>/cellctl/middlebury.py -> <repo>/../shared/data/middlebury/2001-2003
-DEFAULT_DATA_DIR = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "middlebury" / "2001-2003"
+# ../shared beside the checkout, unless CELLCTL_MIDDLEBURY names another folder (used by
+# builds that run from a copy of the tree, such as `make asan`).
+DEFAULT_DATA_DIR = Path(os.environ.get(
+    "CELLCTL_MIDDLEBURY",
+    Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "middlebury" / "2001-2003"))
 
 
 @dataclass(frozen=True)

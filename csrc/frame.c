@@ -134,7 +134,8 @@ static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int 
     }
 }
 
-size_t cc_frame_scratch_bytes(int width) { return (size_t)width * (sizeof(uint64_t) + 2) + 64; }
+/* Rounded to 64 bytes so that every thread's slice starts aligned for its uint64 row. */
+size_t cc_frame_scratch_bytes(int width) { return ((size_t)width * (sizeof(uint64_t) + 2) + 127) / 64 * 64; }
 
 /* scratch: threads * cc_frame_scratch_bytes(width) bytes, one slice per thread. */
 void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int stride_left,

@@ -8,15 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
+from cellctl.middlebury import resolve_data_dir
 from cellctl.stereo import StereoMatcher
 
-MIDDLEBURY = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "middlebury" / "2001-2003"
-
-
 def _scene(name: str):
-    d = MIDDLEBURY / name
-    if not d.is_dir():
-        pytest.fail(f"Middlebury data missing at {d}: the tests need ../shared beside the checkout")
+    d = resolve_data_dir() / name  # a clear failure, not a skip, when ../shared is missing
     left, right = cv2.imread(str(d / "left.png")), cv2.imread(str(d / "right.png"))
     return left, right, d
 
