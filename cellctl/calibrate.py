@@ -44,6 +44,14 @@ class Checkerboard:
         if not self.square_mm > 0:
             raise ValueError(f"the square size must be positive, got {self.square_mm} mm")
 
+    @classmethod
+    def from_spec(cls, spec: str, square_mm: float) -> Checkerboard:
+        """A board from "COLSxROWS" inner corners, e.g. "9x6", and its square size."""
+        match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", spec)
+        if not match:
+            raise ValueError(f"board {spec!r} is not COLSxROWS inner corners, e.g. 9x6 for a board of 10x7 squares")
+        return cls(int(match.group(1)), int(match.group(2)), float(square_mm))
+
     @property
     def pattern_size(self) -> tuple[int, int]:
         """(cols, rows) as OpenCV's chessboard functions take it."""

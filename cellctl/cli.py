@@ -17,6 +17,9 @@ COMMAND_MODULES: tuple[str, ...] = (
     "demo",
     "eval",
     "plc_sim",
+    "calibrate",
+    "rectify",
+    "simulate",
 )
 
 
