@@ -1,0 +1,348 @@
+"""Rendering of simulated stereo pairs: a sole on a dark table, seen through a calibrated rig.
+
+Geometry is exact: every pixel's ray is traced with Open3D's `RaycastingScene` (CPU). Rays start from the
+*distorted* pixel positions, undistorted with the camera's own model (cv2.undistortPoints), so the images
+carry the lens distortion of the calibration. Pixels on geometric edges are supersampled 4 x 4 so that
+the sole's silhouette has the sub-pixel edge profile a real sensor records. Appearance: diffuse shading
+from two light bars plus ambient, a weak specular term, low-contrast procedural texture (fractal noise,
+not a dot pattern: real soles are weakly textured), a slight lens blur, vignetting, and shot plus read
+noise, quantised to 8 bits.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import open3d as o3d
+
+from cellctl.calibration import Calibration
+from cellctl.sim.sole import SoleModel
+
+RIG_HEIGHT_MM = 550.0  # rig (baseline mid-point) above the table
+RIG_TILT_DEG = (2.0, -1.0)  # a rig is never mounted perfectly level: about its x and y axes
+
+TABLE_GEOMETRY, SOLE_GEOMETRY = 0, 1
+PART_TOP, PART_WALL, PART_UNDERSIDE = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class Material:
+    """Surface appearance: BGR albedo (0..1), texture octaves (wavelength mm, relative amplitude), gloss."""
+
+    albedo_bgr: tuple[float, float, float]
+    octaves: tuple[tuple[float, float], ...]
+    specular: float
+    shininess: float
+
+
+TABLE = Material((0.16, 0.15, 0.14), ((14.0, 0.07), (4.0, 0.06), (1.2, 0.06)), 0.01, 8.0)
+SOLE_MATERIALS: dict[str, Material] = {
+    # Roughened white rubber and black leather: a few per cent of texture contrast, nothing more.
+    "white": Material((0.70, 0.72, 0.73), ((8.0, 0.04), (2.5, 0.035), (0.9, 0.035)), 0.02, 10.0),
+    "black": Material((0.20, 0.19, 0.19), ((8.0, 0.04), (2.5, 0.035), (0.9, 0.035)), 0.05, 20.0),
+}
+
+LIGHTS_MM = np.array([[-260.0, 0.0, 640.0], [260.0, 0.0, 640.0]])  # the cell's two LED bars
+AMBIENT = 0.35
+EXPOSURE_DN = 255.0  # pixel value of a white (albedo 1) horizontal surface at the table centre
+READ_NOISE_DN = 1.0
+SHOT_NOISE_DN_PER_DN = 0.02  # variance added per DN of signal (conversion gain of the sensor)
+LENS_BLUR_PX = 0.5
+VIGNETTING = 0.12  # relative fall-off at the image corners
+RIGHT_GAIN = 0.97  # the two cameras never expose identically
+SUPERSAMPLE = 4
+
+
+def rig_pose(
+    calib: Calibration, height_mm: float = RIG_HEIGHT_MM, tilt_deg: tuple[float, float] = RIG_TILT_DEG
+) -> np.ndarray:
+    """Pose of the left camera in the table frame (4 x 4, table <- camera) for a rig looking down.
+
+    The baseline mid-point sits `height_mm` above the table origin; the cameras look down (camera z = -table
+    z, camera x = table x) with a small tilt, as a mounted rig does.
+    """
+    down = np.diag([1.0, -1.0, -1.0])
+    tilt = cv2.Rodrigues(np.radians([tilt_deg[0], tilt_deg[1], 0.0]))[0]
+    rotation = down @ tilt
+    right_centre = (-calib.R.T @ calib.T).ravel()  # right optical centre in the left camera frame
+    centre = np.array([0.0, 0.0, height_mm]) - rotation @ (right_centre / 2.0)
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rotation, centre
+    return pose
+
+
+def right_pose(calib: Calibration, left_pose: np.ndarray) -> np.ndarray:
+    """Pose of the right camera in the table frame from the left camera's pose and the stereo extrinsics."""
+    camera_from_right = np.eye(4)
+    camera_from_right[:3, :3] = calib.R.T
+    camera_from_right[:3, 3] = (-calib.R.T @ calib.T).ravel()
+    return left_pose @ camera_from_right
+
+
+def project(calib: Calibration, pose: np.ndarray, side: str, points: np.ndarray) -> np.ndarray:
+    """Pixel positions (N x 2) of table-frame points in the left or right raw image (with distortion)."""
+    if side == "right":
+        pose = right_pose(calib, pose)
+    K, D = (calib.K1, calib.D1) if side == "left" else (calib.K2, calib.D2)
+    inverse = np.linalg.inv(pose)
+    rvec = cv2.Rodrigues(inverse[:3, :3])[0]
+    pixels, _ = cv2.projectPoints(np.asarray(points, np.float64).reshape(-1, 1, 3), rvec, inverse[:3, 3], K, D)
+    return pixels.reshape(-1, 2)
+
+
+@dataclass
+class RenderedPair:
+    """A rendered stereo pair (BGR uint8) and the left camera's true depth (z in the camera frame, mm)."""
+
+    left: np.ndarray
+    right: np.ndarray
+    depth_left: np.ndarray  # float32, H x W, NaN where nothing was hit
+    sole_mask_left: np.ndarray  # bool, H x W, pixel centre sees the sole
+
+
+class SceneRenderer:
+    """Renders one scene (table and optional sole) through a calibrated rig."""
+
+    def __init__(self, calib: Calibration, camera_pose: np.ndarray, sole: SoleModel | None,
+                 color: str = "white", seed: int = 0) -> None:
+        if color not in SOLE_MATERIALS:
+            raise ValueError(f"sole colour must be one of {', '.join(SOLE_MATERIALS)}, got {color!r}")
+        self.calib = calib
+        self.camera_pose = np.asarray(camera_pose, dtype=np.float64)
+        self.sole = sole
+        self.material = SOLE_MATERIALS[color]
+        rng = np.random.default_rng([seed, 7])
+        self._table_texture = _Texture.fractal(rng, (-400.0, -350.0), (800.0, 700.0), 0.25, TABLE.octaves)
+        self._sole_texture = _Texture.fractal(rng, (-5.0, -80.0), (320.0, 160.0), 0.2, self.material.octaves)
+        self._noise_rng = np.random.default_rng([seed, 11])
+        self._scene = o3d.t.geometry.RaycastingScene()
+        self._scene.add_triangles(_table_mesh())  # geometry id 0 = TABLE_GEOMETRY
+        self._parts = np.zeros(0, np.int32)
+        if sole is not None:
+            vertices, triangles, self._parts = sole.mesh()
+            mesh = o3d.t.geometry.TriangleMesh()
+            mesh.vertex.positions = o3d.core.Tensor(vertices.astype(np.float32))
+            mesh.triangle.indices = o3d.core.Tensor(triangles)
+            self._scene.add_triangles(mesh)  # geometry id 1 = SOLE_GEOMETRY
+
+    def render(self) -> RenderedPair:
+        """Render both cameras."""
+        left, depth, sole_mask = self._render_camera("left")
+        right, _, _ = self._render_camera("right")
+        return RenderedPair(left, right, depth, sole_mask)
+
+    # ---- one camera ----------------------------------------------------------------------------------
+
+    def _render_camera(self, side: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        width, height = self.calib.image_size
+        pose = self.camera_pose if side == "left" else right_pose(self.calib, self.camera_pose)
+        K, D = (self.calib.K1, self.calib.D1) if side == "left" else (self.calib.K2, self.calib.D2)
+        hits = self._cast(None, K, D, pose)
+        radiance = self._shade(hits, pose)
+        edges = self._edge_pixels(hits, (height, width))
+        if edges.size:
+            pixels = np.column_stack([edges % width, edges // width]).astype(np.float64)
+            radiance[edges] = self._supersample(pixels, K, D, pose)
+        image = radiance.reshape(height, width, 3)
+        gain = 1.0 if side == "left" else RIGHT_GAIN
+        image = self._sensor(image * gain, (width, height), K)
+        depth = np.where(np.isfinite(hits["t"]), hits["t"], np.nan).astype(np.float32).reshape(height, width)
+        sole_mask = (hits["geometry"] == SOLE_GEOMETRY).reshape(height, width)
+        return image, depth, sole_mask
+
+    def _cast(self, pixels: np.ndarray | None, K: np.ndarray, D: np.ndarray, pose: np.ndarray) -> dict[str, np.ndarray]:
+        """Trace the rays of the given pixel positions (all pixel centres when None)."""
+        if pixels is None:
+            normalised = _pixel_rays(K.tobytes(), D.tobytes(), self.calib.image_size)
+        else:
+            normalised = _undistort(pixels, K, D)
+        # Direction (x, y, 1) in the camera frame: the hit distance t is then the camera z-depth.
+        rotation = pose[:3, :3].astype(np.float32)
+        directions = normalised @ rotation[:, :2].T + rotation[:, 2]
+        rays = np.empty((len(directions), 6), np.float32)
+        rays[:, :3] = pose[:3, 3]
+        rays[:, 3:] = directions
+        result = self._scene.cast_rays(o3d.core.Tensor(rays))
+        t = result["t_hit"].numpy()
+        hit = np.isfinite(t)
+        geometry = np.where(hit, result["geometry_ids"].numpy().astype(np.int32), -1)
+        part = np.full(len(t), -1, np.int32)
+        on_sole = geometry == SOLE_GEOMETRY
+        part[on_sole] = self._parts[result["primitive_ids"].numpy()[on_sole]]
+        # Positions in float64: the texture and the sole's height field need better than 0.01 mm.
+        points = pose[:3, 3] + directions.astype(np.float64) * np.where(hit, t, 0.0)[:, None]
+        return {
+            "t": t,
+            "geometry": geometry,
+            "part": part,
+            "points": points,
+            "facet_normals": result["primitive_normals"].numpy(),
+        }
+
+    def _shade(self, hits: dict[str, np.ndarray], pose: np.ndarray) -> np.ndarray:
+        """Linear radiance (BGR, exposure-scaled DN before sensor effects) of every ray's hit."""
+        n = len(hits["t"])
+        points = hits["points"]
+        normals = np.zeros((n, 3), np.float32)
+        normals[:, 2] = 1.0
+        albedo = np.zeros((n, 3), np.float32)
+        texture = np.ones(n, np.float32)
+        specular = np.zeros(n, np.float32)
+        shininess = np.ones(n, np.float32)
+        table = hits["geometry"] == TABLE_GEOMETRY
+        albedo[table] = TABLE.albedo_bgr
+        texture[table] = self._table_texture.sample(points[table, 0], points[table, 1])
+        specular[table], shininess[table] = TABLE.specular, TABLE.shininess
+        sole = hits["geometry"] == SOLE_GEOMETRY
+        if np.any(sole):
+            self._shade_sole(hits, sole, normals, texture)
+            albedo[sole] = self.material.albedo_bgr
+            specular[sole], shininess[sole] = self.material.specular, self.material.shininess
+        diffuse, highlight = _lighting(points, normals, pose[:3, 3], shininess)
+        radiance = albedo * (texture * (AMBIENT + diffuse))[:, None] + (specular * highlight)[:, None]
+        radiance[hits["geometry"] < 0] = 0.0
+        return radiance * EXPOSURE_DN
+
+    def _shade_sole(self, hits: dict[str, np.ndarray], sole: np.ndarray, normals: np.ndarray,
+                    texture: np.ndarray) -> None:
+        shape, pose = self.sole.shape, self.sole.pose
+        uv = pose.to_sole(hits["points"][sole, :2], shape.length)
+        z = hits["points"][sole, 2]
+        part = hits["part"][sole]
+        # Smooth analytic normals on the top surface; the walls and underside are flat facets.
+        local = shape.top_normal(uv[:, 0], uv[:, 1])
+        top_normals = self._sole_normals_to_table(local)
+        facet = hits["facet_normals"][sole]
+        normals[sole] = np.where((part == 0)[:, None], top_normals, facet)
+        # Walls take the texture at (u, v + z) so that it varies down the wall too.
+        tex_v = np.where(part == 0, uv[:, 1], uv[:, 1] + z)
+        texture[sole] = self._sole_texture.sample(uv[:, 0], tex_v)
+
+    def _sole_normals_to_table(self, local: np.ndarray) -> np.ndarray:
+        pose = self.sole.pose
+        nu, nv, nz = local.T
+        if pose.mirrored:
+            nv = -nv
+        a = np.radians(pose.yaw_deg)
+        return np.column_stack([np.cos(a) * nu - np.sin(a) * nv, np.sin(a) * nu + np.cos(a) * nv, nz])
+
+    def _edge_pixels(self, hits: dict[str, np.ndarray], shape: tuple[int, int]) -> np.ndarray:
+        """Indices of pixels next to a change of surface or a depth step: these get supersampled."""
+        label = (hits["geometry"] * 4 + np.maximum(hits["part"], 0)).reshape(shape).astype(np.int32)
+        depth = np.nan_to_num(hits["t"], nan=1e6).reshape(shape)
+        kernel = np.ones((3, 3), np.uint8)
+        label_f = label.astype(np.float32)
+        changes = cv2.dilate(label_f, kernel) != cv2.erode(label_f, kernel)
+        steps = (cv2.dilate(depth.astype(np.float32), kernel) - cv2.erode(depth.astype(np.float32), kernel)) > 2.0
+        return np.flatnonzero(changes | steps)
+
+    def _supersample(self, pixels: np.ndarray, K: np.ndarray, D: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
+        ox, oy = np.meshgrid(offsets, offsets)
+        sub = (pixels[:, None, :] + np.column_stack([ox.ravel(), oy.ravel()])[None]).reshape(-1, 2)
+        radiance = self._shade(self._cast(sub, K, D, pose), pose)
+        return radiance.reshape(len(pixels), SUPERSAMPLE * SUPERSAMPLE, 3).mean(axis=1)
+
+    def _sensor(self, radiance: np.ndarray, size: tuple[int, int], K: np.ndarray) -> np.ndarray:
+        width, height = size
+        image = cv2.GaussianBlur(radiance.astype(np.float32), (0, 0), LENS_BLUR_PX)
+        ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
+        r2 = ((xs - K[0, 2]) ** 2 + (ys - K[1, 2]) ** 2) / (0.25 * (width**2 + height**2))
+        image *= (1.0 - VIGNETTING * r2)[..., None]
+        sigma = np.sqrt(READ_NOISE_DN**2 + SHOT_NOISE_DN_PER_DN * np.maximum(image, 0.0))
+        image = image + sigma * self._noise_rng.standard_normal(image.shape, dtype=np.float32)
+        return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def _lighting(points: np.ndarray, normals: np.ndarray, eye: np.ndarray, shininess: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Diffuse and Blinn-Phong specular terms of the light bars, normalised to 1 - AMBIENT at the table origin."""
+    points = points.astype(np.float32)
+    normals = normals.astype(np.float32)
+    diffuse = np.zeros(len(points), np.float32)
+    highlight = np.zeros(len(points), np.float32)
+    view = _unit(eye.astype(np.float32) - points)
+    reference = 0.0
+    for light in LIGHTS_MM:
+        to_light = light.astype(np.float32) - points
+        distance2 = np.einsum("ij,ij->i", to_light, to_light)
+        to_light /= np.sqrt(distance2)[:, None]
+        falloff = float(light @ light) / distance2
+        diffuse += np.clip(np.einsum("ij,ij->i", normals, to_light), 0.0, None) * falloff
+        half = _unit(to_light + view)
+        highlight += np.clip(np.einsum("ij,ij->i", normals, half), 0.0, None) ** shininess * falloff
+        reference += light[2] / np.linalg.norm(light)
+    return diffuse * np.float32((1.0 - AMBIENT) / reference), highlight
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    return vectors / np.maximum(np.sqrt(np.einsum("ij,ij->i", vectors, vectors)), 1e-9)[:, None]
+
+
+def _undistort(pixels: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """Normalised image coordinates (N x 2, float32) of distorted pixel positions."""
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+    points = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+    return cv2.undistortPoints(points, K, D, criteria=criteria).reshape(-1, 2).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=4)
+def _pixel_rays(K_bytes: bytes, D_bytes: bytes, size: tuple[int, int]) -> np.ndarray:
+    """Normalised coordinates of every pixel centre of a camera; cached because it is the slow part of a render."""
+    K = np.frombuffer(K_bytes, np.float64).reshape(3, 3)
+    D = np.frombuffer(D_bytes, np.float64).reshape(1, -1)
+    width, height = size
+    xs, ys = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
+    rays = _undistort(np.column_stack([xs.ravel(), ys.ravel()]), K, D)
+    rays.setflags(write=False)
+    return rays
+
+
+def _table_mesh() -> o3d.t.geometry.TriangleMesh:
+    half = 2000.0
+    mesh = o3d.t.geometry.TriangleMesh()
+    mesh.vertex.positions = o3d.core.Tensor(
+        np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]], np.float32)
+    )
+    mesh.triangle.indices = o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], np.int32))
+    return mesh
+
+
+@dataclass
+class _Texture:
+    """A relative brightness map (mean 1) over a rectangle of a surface, sampled bilinearly."""
+
+    image: np.ndarray  # float32
+    origin: tuple[float, float]  # mm at texel (0, 0)
+    texel_mm: float
+
+    @classmethod
+    def fractal(cls, rng: np.random.Generator, origin: tuple[float, float], size_mm: tuple[float, float],
+                texel_mm: float, octaves: tuple[tuple[float, float], ...]) -> _Texture:
+        """Sum of smooth noise octaves (band-limited noise upsampled with bicubic interpolation)."""
+        width, height = int(size_mm[0] / texel_mm), int(size_mm[1] / texel_mm)
+        image = np.ones((height, width), np.float32)
+        for wavelength, amplitude in octaves:
+            coarse = rng.standard_normal(
+                (max(2, int(size_mm[1] / wavelength) + 1), max(2, int(size_mm[0] / wavelength) + 1))
+            ).astype(np.float32)
+            octave = cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)
+            image += amplitude * octave / max(float(octave.std()), 1e-6)
+        return cls(image, origin, texel_mm)
+
+    def sample(self, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
+        if len(x_mm) == 0:
+            return np.zeros(0)
+        # cv2.remap does the bilinear lookup; it wants 2-D maps, so fold the points into rows of 1024.
+        n = len(x_mm)
+        rows = -(-n // 1024)
+        mx = np.zeros(rows * 1024, np.float32)
+        my = np.zeros(rows * 1024, np.float32)
+        mx[:n] = (np.asarray(x_mm) - self.origin[0]) / self.texel_mm
+        my[:n] = (np.asarray(y_mm) - self.origin[1]) / self.texel_mm
+        out = cv2.remap(self.image, mx.reshape(rows, 1024), my.reshape(rows, 1024), cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REFLECT)
+        return out.ravel()[:n]

@@ -1,0 +1,318 @@
+"""A parametric shoe sole with known geometry, and its measurements computed from the model itself.
+
+The sole is described in its own plane coordinates: u runs along the sole from the heel tip (u = 0) to the
+toe tip (u = L), v across it. The outline is a medial and a lateral half-width profile around a slightly
+bent centre line, with elliptical caps at both ends, so the forefoot is wider than the heel and the arch is
+cut in deeper on the medial side. The top (gluing) surface is a height field over (u, v): heel thickness
+blending into forefoot thickness, toe spring lifting the front of the sole, and a slight cross curvature.
+The side walls are vertical, so the footprint on the table is exactly the outline.
+
+`SoleModel.truth()` computes length, heel height and toe height from this definition (polygon moments of
+the densely sampled outline, exact height-field evaluation) following docs/measurements.md, without any of
+the measuring code, so the simulator can judge the measurement.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+# Parameter ranges of the generated soles (mm unless noted).
+LENGTH_RANGE_MM = (240.0, 300.0)
+HEEL_HEIGHT_RANGE_MM = (20.0, 35.0)
+TOE_HEIGHT_RANGE_MM = (8.0, 28.0)
+MIN_EDGE_THICKNESS_MM = 5.0  # thinnest the top surface gets above the sole's underside at the edge
+# Samples of the outline used for the truth; the rendered mesh uses fewer (MESH_U_SAMPLES).
+TRUTH_OUTLINE_SAMPLES = 20000
+MESH_U_SAMPLES = 600
+MESH_S_SAMPLES = 61
+HEIGHT_POINT_FRACTION = 0.10  # heights are taken 10 % of the length in from each end
+
+
+def _smoothstep(x: np.ndarray | float) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass(frozen=True)
+class SoleShape:
+    """Shape parameters of one sole, in mm in the sole's own (u, v) plane coordinates."""
+
+    length: float
+    heel_half_width: float
+    ball_half_width: float
+    medial_arch: float  # how far the arch cuts into the medial half-width
+    lateral_arch: float
+    heel_cap: float  # radius of the elliptical heel cap along u
+    toe_cap: float  # length of the elliptical toe cap along u
+    toe_shift: float  # medial shift of the centre line at the toe
+    heel_thickness: float
+    forefoot_thickness: float
+    thickness_blend: tuple[float, float]  # fractions of the length where heel blends into forefoot
+    toe_spring_start: float  # fraction of the length where the toe spring begins
+    toe_spring: float  # lift of the underside at the toe tip
+    cross_curvature: float  # dome (> 0) or cup (< 0) height across the sole
+
+    @classmethod
+    def random(cls, rng: np.random.Generator) -> SoleShape:
+        """A plausible sole with the parameter ranges of the simulator."""
+        length = rng.uniform(*LENGTH_RANGE_MM)
+        heel_half = length * rng.uniform(0.115, 0.135)
+        ball_half = length * rng.uniform(0.170, 0.190)
+        heel_height = rng.uniform(*HEEL_HEIGHT_RANGE_MM)
+        # A toe higher than the heel is not a shoe: draw the toe height up to the heel height.
+        toe_height = rng.uniform(TOE_HEIGHT_RANGE_MM[0], min(TOE_HEIGHT_RANGE_MM[1], heel_height))
+        cross = rng.uniform(-1.5, 1.5)
+        spring_start = rng.uniform(0.60, 0.70)
+        # The toe spring may take at most what leaves the forefoot MIN_EDGE_THICKNESS_MM thick.
+        lift_at_toe_point = rng.uniform(1.0, max(1.0, min(8.0, toe_height - cross - MIN_EDGE_THICKNESS_MM)))
+        reach = ((1.0 - HEIGHT_POINT_FRACTION) - spring_start) / (1.0 - spring_start)
+        toe_spring = lift_at_toe_point / reach**2
+        forefoot = max(MIN_EDGE_THICKNESS_MM, toe_height - cross - lift_at_toe_point)
+        return cls(
+            length=length,
+            heel_half_width=heel_half,
+            ball_half_width=ball_half,
+            medial_arch=ball_half * rng.uniform(0.20, 0.35),
+            lateral_arch=ball_half * rng.uniform(0.04, 0.12),
+            heel_cap=heel_half * rng.uniform(0.9, 1.2),
+            toe_cap=length * rng.uniform(0.14, 0.20),
+            toe_shift=length * rng.uniform(0.0, 0.03),
+            heel_thickness=heel_height - cross,
+            forefoot_thickness=forefoot,
+            thickness_blend=(rng.uniform(0.18, 0.25), rng.uniform(0.55, 0.65)),
+            toe_spring_start=spring_start,
+            toe_spring=toe_spring,
+            cross_curvature=cross,
+        )
+
+    # ---- outline -------------------------------------------------------------------------------------
+
+    def centre_line(self, u: np.ndarray) -> np.ndarray:
+        """v of the centre line; bends to the medial side (+v) towards the toe."""
+        return self.toe_shift * _smoothstep((u / self.length - 0.55) / 0.45)
+
+    def half_width(self, u: np.ndarray, medial: bool) -> np.ndarray:
+        """Distance from the centre line to the medial (+v) or lateral (-v) edge at u."""
+        t = u / self.length
+        arch = self.medial_arch if medial else self.lateral_arch
+        profile = (
+            self.heel_half_width
+            + (self.ball_half_width - self.heel_half_width) * _smoothstep((t - 0.30) / 0.40)
+            - arch * np.exp(-(((t - 0.45) / 0.12) ** 2))
+        )
+        # Elliptical caps: the width goes to zero at both tips with a vertical tangent, so the ends are round.
+        heel = np.clip(u / self.heel_cap, 0.0, 1.0)
+        toe = np.clip((self.length - u) / self.toe_cap, 0.0, 1.0)
+        cap = np.sqrt(np.clip(1.0 - (1.0 - heel) ** 2, 0.0, 1.0)) * np.sqrt(np.clip(1.0 - (1.0 - toe) ** 2, 0.0, 1.0))
+        return profile * cap
+
+    def u_samples(self, n: int) -> np.ndarray:
+        """n values of u from heel tip to toe tip, dense near the tips where the outline turns fastest."""
+        return self.length * 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n)))
+
+    def outline(self, n: int = TRUTH_OUTLINE_SAMPLES) -> np.ndarray:
+        """Closed outline (first point not repeated) in (u, v), counter-clockwise, about 2n points."""
+        u = self.u_samples(n)
+        centre = self.centre_line(u)
+        medial = np.column_stack([u, centre + self.half_width(u, True)])
+        lateral = np.column_stack([u, centre - self.half_width(u, False)])
+        # Lateral side heel->toe (v < centre), then medial side toe->heel: counter-clockwise in (u, v).
+        return np.vstack([lateral, medial[-2:0:-1]])
+
+    # ---- top surface ---------------------------------------------------------------------------------
+
+    def underside(self, u: np.ndarray) -> np.ndarray:
+        """Height of the sole's underside above the table: zero except under the sprung toe."""
+        t = u / self.length
+        reach = np.clip((t - self.toe_spring_start) / (1.0 - self.toe_spring_start), 0.0, None)
+        return self.toe_spring * reach**2
+
+    def top_height(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Height of the top (gluing) surface above the table at sole coordinates (u, v)."""
+        u = np.asarray(u, dtype=np.float64)
+        v = np.asarray(v, dtype=np.float64)
+        t = u / self.length
+        lo, hi = self.thickness_blend
+        thickness = self.heel_thickness + (self.forefoot_thickness - self.heel_thickness) * _smoothstep((t - lo) / (hi - lo))
+        # A quadratic in the absolute lateral offset keeps the surface smooth at the narrow tips.
+        across = (v - self.centre_line(u)) / (1.05 * self.ball_half_width)
+        return self.underside(u) + thickness + self.cross_curvature * (1.0 - across**2)
+
+    def top_normal(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Unit normals (N x 3, in u, v, z) of the top surface, by central differences of the height field."""
+        h = 1e-3
+        dzdu = (self.top_height(u + h, v) - self.top_height(u - h, v)) / (2 * h)
+        dzdv = (self.top_height(u, v + h) - self.top_height(u, v - h)) / (2 * h)
+        n = np.column_stack([-dzdu, -dzdv, np.ones_like(dzdu)])
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class SolePose:
+    """Where the sole lies on the table: mid-length point, heading of the heel->toe direction, and side."""
+
+    x: float
+    y: float
+    yaw_deg: float
+    mirrored: bool  # a left shoe: its medial side is at -v
+
+    def to_table(self, uv: np.ndarray, length: float) -> np.ndarray:
+        """Sole (u, v) coordinates (N x 2) to table (x, y)."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        local = np.column_stack([uv[:, 0] - length / 2.0, -uv[:, 1] if self.mirrored else uv[:, 1]])
+        return local @ self._rotation().T + np.array([self.x, self.y])
+
+    def to_sole(self, xy: np.ndarray, length: float) -> np.ndarray:
+        """Table (x, y) (N x 2) to sole (u, v) coordinates."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        local = (xy - np.array([self.x, self.y])) @ self._rotation()
+        return np.column_stack([local[:, 0] + length / 2.0, -local[:, 1] if self.mirrored else local[:, 1]])
+
+    def _rotation(self) -> np.ndarray:
+        a = np.radians(self.yaw_deg)
+        return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+
+
+@dataclass(frozen=True)
+class SoleTruth:
+    """The three measurements of docs/measurements.md, computed from the model, in the table frame."""
+
+    length_mm: float
+    heel_height_mm: float
+    toe_height_mm: float
+    axis: tuple[float, float]  # unit heel->toe direction in the table plane
+    heel_point: tuple[float, float, float]  # where heel_height_mm is taken (on the top surface)
+    toe_point: tuple[float, float, float]
+    half_area_difference: float  # (toe half - heel half) / footprint area
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class SoleModel:
+    """One sole (shape) lying on the table (pose)."""
+
+    shape: SoleShape
+    pose: SolePose
+
+    def outline_table(self, n: int = TRUTH_OUTLINE_SAMPLES) -> np.ndarray:
+        """The footprint outline in the table frame (N x 2), counter-clockwise seen from above."""
+        xy = self.pose.to_table(self.shape.outline(n), self.shape.length)
+        return xy[::-1] if self.pose.mirrored else xy  # mirroring flips the winding
+
+    def top_height_at(self, xy: np.ndarray) -> np.ndarray:
+        """Top-surface height at table points (N x 2); meaningful inside the footprint only."""
+        uv = self.pose.to_sole(xy, self.shape.length)
+        return self.shape.top_height(uv[:, 0], uv[:, 1])
+
+    def truth(self) -> SoleTruth:
+        """Length, heel and toe height as docs/measurements.md defines them, from the model geometry."""
+        outline = self.outline_table()
+        area, centroid, cov = _polygon_moments(outline)
+        eigvals, eigvecs = np.linalg.eigh(cov)
+        axis = eigvecs[:, int(np.argmax(eigvals))]
+        proj = (outline - centroid) @ axis
+        lo, hi = float(proj.min()), float(proj.max())
+        mid = 0.5 * (lo + hi)
+        # Toe = end whose half of the footprint has the larger area (the definition, not the model's u axis).
+        upper = _polygon_area(_clip_half_plane(outline, axis, float(centroid @ axis + mid)))
+        difference = (upper - (area - upper)) / area
+        if difference < 0:
+            axis, lo, hi, difference = -axis, -hi, -lo, -difference
+        length = hi - lo
+        heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
+        toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
+        heel_z, toe_z = self.top_height_at(np.vstack([heel_xy, toe_xy]))
+        return SoleTruth(
+            length_mm=float(length),
+            heel_height_mm=float(heel_z),
+            toe_height_mm=float(toe_z),
+            axis=(float(axis[0]), float(axis[1])),
+            heel_point=(float(heel_xy[0]), float(heel_xy[1]), float(heel_z)),
+            toe_point=(float(toe_xy[0]), float(toe_xy[1]), float(toe_z)),
+            half_area_difference=float(difference),
+        )
+
+    def mesh(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closed triangle mesh in the table frame: vertices (V x 3), triangles (T x 3), part per triangle.
+
+        Parts: 0 top surface, 1 side wall, 2 underside. The top is a (u, s) grid where s in [-1, 1] runs
+        from the lateral to the medial edge; the grid collapses to a point at each tip.
+        """
+        shape = self.shape
+        u = shape.u_samples(MESH_U_SAMPLES)
+        s = np.linspace(-1.0, 1.0, MESH_S_SAMPLES)
+        centre = shape.centre_line(u)
+        medial, lateral = shape.half_width(u, True), shape.half_width(u, False)
+        uu = np.repeat(u, s.size)
+        ss = np.tile(s, u.size)
+        vv = np.repeat(centre, s.size) + np.where(ss >= 0, ss * np.repeat(medial, s.size), ss * np.repeat(lateral, s.size))
+        xy = self.pose.to_table(np.column_stack([uu, vv]), shape.length)
+        top = np.column_stack([xy, shape.top_height(uu, vv)])
+        bottom = np.column_stack([xy, shape.underside(uu)])
+        grid = _grid_triangles(u.size, s.size)
+        n_grid = top.shape[0]
+        # Wall quads between the top and underside edge rings (lateral s=-1 and medial s=+1 columns).
+        walls = []
+        for column in (0, s.size - 1):
+            ring = np.arange(u.size) * s.size + column
+            a, b = ring[:-1], ring[1:]
+            quads = np.vstack([np.column_stack([a, b, b + n_grid]), np.column_stack([a, b + n_grid, a + n_grid])])
+            # Winding so that facet normals point out of the sole: the lateral ring (s = -1) runs the other way.
+            walls.append(quads[:, ::-1] if column == 0 else quads)
+        vertices = np.vstack([top, bottom])
+        triangles = np.vstack([grid, *walls, grid[:, ::-1] + n_grid])
+        parts = np.concatenate(
+            [np.zeros(len(grid), np.int32), np.ones(sum(len(w) for w in walls), np.int32), np.full(len(grid), 2, np.int32)]
+        )
+        if self.pose.mirrored:
+            # Mirroring reverses the winding; keep triangle normals pointing out of the sole.
+            triangles = triangles[:, ::-1]
+        return vertices, triangles.astype(np.int32), parts
+
+
+def _grid_triangles(rows: int, cols: int) -> np.ndarray:
+    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    a = (r * cols + c).ravel()
+    b, d = a + 1, a + cols
+    return np.vstack([np.column_stack([a, d, b]), np.column_stack([b, d, d + 1])])
+
+
+def _polygon_area(poly: np.ndarray) -> float:
+    x, y = poly[:, 0], poly[:, 1]
+    return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _polygon_moments(poly: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Area, centroid and second central moments (2 x 2, per unit area) of a simple polygon (Green's theorem)."""
+    # Shift to a point near the centroid first: the formulas lose precision far from the origin.
+    origin = poly.mean(axis=0)
+    x, y = (poly - origin).T
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cross = x * yn - xn * y
+    area = 0.5 * np.sum(cross)
+    cx = np.sum((x + xn) * cross) / (6 * area)
+    cy = np.sum((y + yn) * cross) / (6 * area)
+    sxx = np.sum((x * x + x * xn + xn * xn) * cross) / (12 * area) - cx * cx
+    syy = np.sum((y * y + y * yn + yn * yn) * cross) / (12 * area) - cy * cy
+    sxy = np.sum((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * cross) / (24 * area) - cx * cy
+    return float(area), np.array([cx, cy]) + origin, np.array([[sxx, sxy], [sxy, syy]])
+
+
+def _clip_half_plane(poly: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
+    """Part of a polygon where p . normal >= offset (Sutherland-Hodgman against one line, vectorised)."""
+    side = poly @ normal - offset
+    nxt = np.roll(poly, -1, axis=0)
+    side_next = np.roll(side, -1)
+    inside = side >= 0
+    crossing = inside != (side_next >= 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(crossing, side / (side - side_next), 0.0)
+    cut = poly + f[:, None] * (nxt - poly)
+    # Per edge: the start vertex if inside, then the crossing point if the edge crosses the line.
+    candidates = np.stack([poly, cut], axis=1).reshape(-1, 2)
+    keep = np.stack([inside, crossing], axis=1).ravel()
+    return candidates[keep]
