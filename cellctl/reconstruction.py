@@ -1,0 +1,366 @@
+"""From a stereo pair to the sole's point cloud in the table frame.
+
+Steps (after Wang et al. 2022, section 2.2.4 and the colour filter of section 3):
+
+1. rectify with the calibration and match with `StereoMatcher` over the disparity range of the working
+   depth range (d = f * B / Z); keep only pixels the matcher really measured (left-right check passed);
+2. reproject through Q into the rectified left camera frame;
+3. find the table plane (RANSAC, refined by least squares) or use a plane stored at set-up, and move
+   everything into the table frame (docs/measurements.md);
+4. background removal: points at least `min_height_mm` above the table, and, when the sole's colour
+   separates from the table's, only sole-coloured points (the paper's colour filter, with the threshold
+   learnt from the scene). The colour filter also removes the halo of table pixels that window-based
+   matching drags onto the sole's disparity at its edge (edge fattening), which would lengthen the sole;
+5. the sole is the largest connected region of the footprint raster (cellctl.footprint), holes filled;
+6. statistical outlier removal (Open3D) on the sole's points.
+
+`SoleReconstructor.reconstruct(left, right)` runs all of it; `points_from_disparity` and `segment` are the
+two halves, so a cloud from another source (e.g. the simulator's true depth) can be segmented the same way.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import open3d as o3d
+
+from cellctl.calibration import Calibration
+from cellctl.footprint import Footprint
+
+DEFAULT_DEPTH_RANGE_MM: tuple[float, float] = (450.0, 650.0)  # covers a table 550 mm below the rig and soles on it
+MIN_HEIGHT_MM = 3.0  # points lower than this belong to the table (its height noise is well below 1 mm)
+MAX_HEIGHT_MM = 150.0  # anything higher is not a sole lying on the table (a hand, the robot)
+TABLE_INLIER_MM = 1.5  # RANSAC inlier distance for the table plane
+MIN_VALID_FRACTION = 0.15  # fewer measured pixels than this: the pair cannot be trusted
+MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
+BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
+MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
+
+
+@dataclass
+class StereoCloud:
+    """Measured points of one pair in the rectified left camera frame (mm), with their pixels and colours."""
+
+    points: np.ndarray  # N x 3 float64
+    colors: np.ndarray  # N x 3 float32 BGR 0..255, from the (slightly smoothed) rectified left image
+    pixels: np.ndarray  # N x 2 float64 (x, y) in the rectified left image
+    disparity: np.ndarray  # N float64, px
+    image_size: tuple[int, int]  # (width, height) of the rectified images
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TablePlane:
+    """The table as n . p + d = 0 in the rectified left camera frame, n unit and pointing towards the camera."""
+
+    normal: np.ndarray
+    offset: float
+
+    @classmethod
+    def fit(cls, points: np.ndarray) -> TablePlane:
+        """Least-squares plane through points (N x 3), oriented towards the camera at the origin."""
+        centre = points.mean(axis=0)
+        _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+        normal = vt[2]
+        offset = -float(normal @ centre)
+        if offset < 0:  # the camera (origin) must be on the positive side
+            normal, offset = -normal, -offset
+        return cls(normal, offset)
+
+    def heights(self, points: np.ndarray) -> np.ndarray:
+        return points @ self.normal + self.offset
+
+    def camera_to_table(self) -> np.ndarray:
+        """4 x 4 rigid transform from the rectified left camera frame to the table frame.
+
+        Origin: the foot of the camera centre on the table; z: the normal; x: the camera's x axis
+        projected onto the table (docs/measurements.md).
+        """
+        z = self.normal
+        x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        origin = -self.offset * z
+        transform = np.eye(4)
+        transform[:3, :3] = np.vstack([x, y, z])
+        transform[:3, 3] = -transform[:3, :3] @ origin
+        return transform
+
+
+@dataclass
+class Reconstruction:
+    """The sole's points in the table frame, or the reason there are none."""
+
+    sole_points: np.ndarray  # N x 3, table frame, mm
+    sole_colors: np.ndarray  # N x 3 BGR 0..255
+    sole_pixels: np.ndarray  # N x 2 (x, y) in the rectified left image
+    footprint: Footprint | None
+    camera_to_table: np.ndarray | None  # 4 x 4, rectified left camera -> table
+    table_plane: TablePlane | None
+    colour_filter: bool  # whether the colour filter was applied
+    colour_separation: float  # sole/table colour distance in standard deviations
+    measured_points: int
+    measured_fraction: float
+    reason: str | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def valid(self) -> bool:
+        return self.reason is None
+
+    def point_cloud(self) -> o3d.geometry.PointCloud:
+        """The sole as an Open3D cloud with RGB colours (for PLY output and viewing)."""
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.sole_points))
+        cloud.colors = o3d.utility.Vector3dVector(np.clip(self.sole_colors[:, ::-1] / 255.0, 0.0, 1.0))
+        return cloud
+
+
+def disparity_range(calib: Calibration, depth_range_mm: tuple[float, float]) -> tuple[int, int]:
+    """(min_disparity, num_disparities) covering a working depth range, from d = f * B / Z."""
+    near, far = float(depth_range_mm[0]), float(depth_range_mm[1])
+    if not (0 < near < far):
+        raise ValueError(f"depth range must be two distances MIN < MAX in mm, got {near:g} {far:g}")
+    fb = calib.focal_px * calib.baseline_mm
+    lowest = int(np.floor(fb / far))
+    highest = int(np.ceil(fb / near))
+    width = calib.image_size[0]
+    if highest >= width:
+        raise ValueError(
+            f"depth range {near:g}-{far:g} mm needs disparities up to {highest} px, more than the image is wide "
+            f"({width} px): raise the near limit"
+        )
+    return lowest, highest - lowest + 1
+
+
+class SoleReconstructor:
+    """Rectify, match, reproject and segment the sole; one instance per rig, reused across cycles."""
+
+    def __init__(
+        self,
+        calib: Calibration,
+        depth_range_mm: tuple[float, float] = DEFAULT_DEPTH_RANGE_MM,
+        table_plane: TablePlane | None = None,
+        min_height_mm: float = MIN_HEIGHT_MM,
+        **matcher_params: object,
+    ) -> None:
+        self.calib = calib
+        self.depth_range_mm = (float(depth_range_mm[0]), float(depth_range_mm[1]))
+        self.min_disparity, self.num_disparities = disparity_range(calib, self.depth_range_mm)
+        self.table_plane = table_plane
+        self.min_height_mm = float(min_height_mm)
+        self._matcher_params = {"fill": "none", **matcher_params}
+        self._matcher = None
+
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+        """The sole's cloud from one raw (unrectified) stereo pair."""
+        return self.segment(self.points_from_disparity(left, right))
+
+    def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
+        """Rectify, match and reproject: every really measured pixel as a 3-D point."""
+        self.calib.check_image(left)
+        self.calib.check_image(right)
+        timings: dict[str, float] = {}
+        start = time.perf_counter()
+        rect_left, rect_right = self.calib.rectify(left, right)
+        timings["rectify"] = time.perf_counter() - start
+        start = time.perf_counter()
+        result = self._stereo_matcher().compute_detailed(rect_left, rect_right)
+        timings["match"] = time.perf_counter() - start
+        start = time.perf_counter()
+        disparity = result.disparity
+        measured = result.valid & np.isfinite(disparity)
+        xyz = cv2.reprojectImageTo3D(np.where(measured, disparity, 0.0).astype(np.float32), self.calib.Q)
+        ys, xs = np.nonzero(measured)
+        cloud = StereoCloud(
+            points=xyz[ys, xs].astype(np.float64),
+            colors=_smoothed_colours(rect_left)[ys, xs],
+            pixels=np.column_stack([xs, ys]).astype(np.float64),
+            disparity=disparity[ys, xs].astype(np.float64),
+            image_size=self.calib.image_size,
+            timings=timings,
+        )
+        timings["reproject"] = time.perf_counter() - start
+        return cloud
+
+    def segment(self, cloud: StereoCloud) -> Reconstruction:
+        """Table plane, background removal, largest region and outlier removal on a measured cloud."""
+        return _Segmentation(cloud, self.table_plane, self.min_height_mm).run()
+
+    def _stereo_matcher(self):  # noqa: ANN202 - StereoMatcher is imported lazily (compiled core)
+        if self._matcher is None:
+            from cellctl.stereo import StereoMatcher
+
+            self._matcher = StereoMatcher(self.min_disparity, self.num_disparities, **self._matcher_params)
+        return self._matcher
+
+
+def _smoothed_colours(image: np.ndarray) -> np.ndarray:
+    """Per-pixel colour for the colour filter: a 3 x 3 mean tames sensor noise but keeps the edge position."""
+    if image.ndim == 2:
+        image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    return cv2.blur(image.astype(np.float32), (3, 3))
+
+
+class _Segmentation:
+    """One run of the segmentation; a class only to keep the steps short and their shared state named."""
+
+    def __init__(self, cloud: StereoCloud, table_plane: TablePlane | None, min_height_mm: float) -> None:
+        self.cloud = cloud
+        self.plane = table_plane
+        self.min_height = min_height_mm
+        self.timings = dict(cloud.timings)
+        width, height = cloud.image_size
+        self.measured = len(cloud.points)
+        self.fraction = self.measured / float(width * height)
+        self.transform: np.ndarray | None = None
+        self.colour_filter = False
+        self.separation = 0.0
+
+    def run(self) -> Reconstruction:
+        if self.fraction < MIN_VALID_FRACTION:
+            return self._fail(
+                f"too few measured points: {self.measured} ({100 * self.fraction:.1f} % of the image, need "
+                f"{100 * MIN_VALID_FRACTION:.0f} %); check lighting, focus, the calibration and the depth range"
+            )
+        start = time.perf_counter()
+        if self.plane is None:
+            self.plane = _find_table(self.cloud.points)
+        self.timings["table_plane"] = time.perf_counter() - start
+        if self.plane is None:
+            return self._fail("no table plane found: the table must fill most of the view, below the sole")
+        heights = self.plane.heights(self.cloud.points)
+        below = float(np.mean(heights < -5.0 * TABLE_INLIER_MM))
+        if below > 0.05:
+            return self._fail(
+                f"{100 * below:.0f} % of the points lie below the table plane: the plane found is not the table"
+            )
+        self.transform = self.plane.camera_to_table()
+        points = self.cloud.points @ self.transform[:3, :3].T + self.transform[:3, 3]
+        return self._sole(points)
+
+    def _sole(self, points: np.ndarray) -> Reconstruction:
+        start = time.perf_counter()
+        z = points[:, 2]
+        high = (z > self.min_height) & (z < MAX_HEIGHT_MM)
+        footprint = _footprint(points[:, :2], high)
+        if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
+            return self._fail(f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table")
+        keep = high & self._colour_filter(points, footprint, np.abs(z) < TABLE_INLIER_MM, high)
+        if self.colour_filter:
+            footprint = _footprint(points[:, :2], keep)
+            if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
+                return self._fail("no sole in view: the region above the table has the table's colour")
+        keep &= footprint.contains(points[:, :2])
+        self.timings["background"] = time.perf_counter() - start
+        start = time.perf_counter()
+        index = np.flatnonzero(keep)
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[index]))
+        _, inliers = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
+        index = index[np.asarray(inliers, dtype=np.int64)]
+        self.timings["outliers"] = time.perf_counter() - start
+        cut = self._cut_by_border(index)
+        result = Reconstruction(
+            sole_points=points[index],
+            sole_colors=self.cloud.colors[index],
+            sole_pixels=self.cloud.pixels[index],
+            footprint=footprint,
+            camera_to_table=self.transform,
+            table_plane=self.plane,
+            colour_filter=self.colour_filter,
+            colour_separation=self.separation,
+            measured_points=self.measured,
+            measured_fraction=self.fraction,
+            reason=cut,
+            timings=self.timings,
+        )
+        return result
+
+    def _colour_filter(self, points: np.ndarray, footprint: Footprint, table: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """Sole-coloured points (all True when the colours do not separate).
+
+        Linear discriminant between the table's colour (plane inliers outside the sole) and the sole's
+        (points well inside the footprint), thresholded half way between the two means, which is where a
+        pixel half covered by the sole lies: the edge stays where it is.
+        """
+        colours = self.cloud.colors.astype(np.float64)
+        interior = high & footprint.eroded(5.0).contains(points[:, :2])
+        outside = table & ~footprint.dilated(10.0).contains(points[:, :2])
+        if interior.sum() < 100 or outside.sum() < 100:
+            return np.ones(len(points), bool)
+        sole_c, table_c = colours[interior], colours[outside]
+        pooled = 0.5 * (np.cov(sole_c.T) + np.cov(table_c.T)) + np.eye(3) * 1e-3
+        difference = sole_c.mean(axis=0) - table_c.mean(axis=0)
+        direction = np.linalg.solve(pooled, difference)
+        self.separation = float(np.sqrt(direction @ difference))
+        if self.separation < MIN_COLOUR_SEPARATION:
+            return np.ones(len(points), bool)
+        self.colour_filter = True
+        threshold = direction @ (0.5 * (sole_c.mean(axis=0) + table_c.mean(axis=0)))
+        return colours @ direction > threshold
+
+    def _cut_by_border(self, index: np.ndarray) -> str | None:
+        """Reason text if the sole reaches the edge of what both cameras see."""
+        if index.size == 0:
+            return "no sole in view: no sole points left after outlier removal"
+        width, height = self.cloud.image_size
+        x, y = self.cloud.pixels[index].T
+        d = self.cloud.disparity[index]
+        m = BORDER_MARGIN_PX
+        # x - d < m: the right camera does not see the point (it left the right image on the left).
+        at_edge = (x < m) | (x > width - 1 - m) | (y < m) | (y > height - 1 - m) | (x - d < m)
+        if np.any(at_edge):
+            return (
+                "sole cut by the image border: move the sole towards the middle of the table "
+                f"({int(at_edge.sum())} sole points within {m} px of the edge of the common view)"
+            )
+        return None
+
+    def _fail(self, reason: str) -> Reconstruction:
+        return Reconstruction(
+            sole_points=np.zeros((0, 3)),
+            sole_colors=np.zeros((0, 3)),
+            sole_pixels=np.zeros((0, 2)),
+            footprint=None,
+            camera_to_table=self.transform,
+            table_plane=self.plane,
+            colour_filter=self.colour_filter,
+            colour_separation=self.separation,
+            measured_points=self.measured,
+            measured_fraction=self.fraction,
+            reason=reason,
+            timings=self.timings,
+        )
+
+
+def _find_table(points: np.ndarray, sample: int = 60000, seed: int = 0) -> TablePlane | None:
+    """RANSAC (Open3D) on a subsample, then a least-squares refit to all inliers of the full cloud.
+
+    The refit matters: heights are measured from this plane, and RANSAC's three-point hypothesis on a
+    subsample is only good to about the inlier distance.
+    """
+    rng = np.random.default_rng(seed)
+    subset = points[rng.choice(len(points), size=min(sample, len(points)), replace=False)]
+    o3d.utility.random.seed(seed)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(subset))
+    model, inliers = cloud.segment_plane(distance_threshold=TABLE_INLIER_MM, ransac_n=3, num_iterations=300)
+    if len(inliers) < 0.2 * len(subset):
+        return None
+    plane = TablePlane(np.asarray(model[:3], np.float64), float(model[3]))
+    scale = np.linalg.norm(plane.normal)
+    plane = TablePlane(plane.normal / scale, plane.offset / scale)
+    for _ in range(2):  # refit, then refit once more on the refined inliers
+        near = np.abs(plane.heights(points)) < TABLE_INLIER_MM
+        plane = TablePlane.fit(points[near])
+    return plane
+
+
+def _footprint(xy: np.ndarray, high: np.ndarray) -> Footprint:
+    """Largest region where most measured points of a cell are sole points, closed and hole-free."""
+    raster = Footprint.empty_like(xy)
+    every, sole = raster.counts(xy), raster.counts(xy[high])
+    # A cell is sole if most of its own points are; cells without points are decided by the closing.
+    raster.mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
+    return raster.morphology(close_mm=2.0, open_mm=2.0).largest_region()
