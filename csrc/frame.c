@@ -6,27 +6,51 @@
 
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
-/* Census of one row with replicated borders; bit i is set when the centre is
- * >= the i-th neighbour of the window in raster order (the paper's Eq. 7). */
-void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw, int ch,
-                   int y, uint64_t *out)
+/* Census of row y as byte planes (plane b holds bits 8b..8b+7), borders
+ * replicated; bit i is set when the centre is >= the i-th neighbour of the
+ * window in raster order (the paper's Eq. 7).  Each neighbour row is copied
+ * with its border padding first so the inner loop has no clamping and
+ * vectorises.  `padded` holds width + 8 bytes. */
+static void census_row_planes(const uint8_t *img, int width, int height, int stride, int cw, int ch,
+                              int y, uint8_t *const *planes, int nbytes, uint8_t *padded)
 {
     int rx = cw / 2, ry = ch / 2;
     const uint8_t *centre = img + (size_t)y * stride;
-    for (int x = 0; x < width; x++)
-        out[x] = 0;
+    for (int b = 0; b < nbytes; b++)
+        memset(planes[b], 0, (size_t)width);
     int bit = 0;
     for (int dy = -ry; dy <= ry; dy++) {
         const uint8_t *row = img + (size_t)clampi(y + dy, 0, height - 1) * stride;
+        memset(padded, row[0], (size_t)rx);
+        memcpy(padded + rx, row, (size_t)width);
+        memset(padded + rx + width, row[width - 1], (size_t)rx);
         for (int dx = -rx; dx <= rx; dx++) {
             if (dx == 0 && dy == 0)
                 continue;
-            for (int x = 0; x < width; x++) {
-                uint64_t ge = centre[x] >= row[clampi(x + dx, 0, width - 1)];
-                out[x] |= ge << bit;
-            }
+            const uint8_t *nb = padded + rx + dx;
+            uint8_t *plane = planes[bit >> 3];
+            const uint8_t mask = (uint8_t)(1u << (bit & 7));
+            for (int x = 0; x < width; x++)
+                plane[x] |= centre[x] >= nb[x] ? mask : 0;
             bit++;
         }
+    }
+}
+
+void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw, int ch,
+                   int y, uint64_t *out, uint8_t *scratch)
+{
+    int nbytes = (cw * ch - 1 + 7) / 8;
+    nbytes = nbytes > 0 ? nbytes : 1;
+    uint8_t *planes[8];
+    for (int b = 0; b < nbytes; b++)
+        planes[b] = scratch + (size_t)b * width;
+    census_row_planes(img, width, height, stride, cw, ch, y, planes, nbytes, scratch + (size_t)8 * width);
+    for (int x = 0; x < width; x++) {
+        uint64_t v = 0;
+        for (int b = 0; b < nbytes; b++)
+            v |= (uint64_t)planes[b][x] << (8 * b);
+        out[x] = v;
     }
 }
 
@@ -101,31 +125,33 @@ void cc_frame_free(cc_frame *f)
     memset(f, 0, sizeof *f);
 }
 
+/* scratch: cc_frame_scratch_bytes(width) bytes of this thread. */
 static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int stride,
-                        int y, int mirrored, uint64_t *census, uint8_t *lo, uint8_t *hi)
+                        int y, int mirrored, uint8_t *scratch)
 {
-    int w = f->width, h = f->height;
+    int w = f->width, h = f->height, nb = f->nbytes;
     const uint8_t *row = img + (size_t)y * stride;
+    uint8_t *lo = scratch, *hi = scratch + w, *padded = scratch + 2 * (size_t)w;
+    uint8_t *planes[8];
+    for (int b = 0; b < nb; b++) /* the left image's planes go straight into the frame */
+        planes[b] = mirrored ? padded + (size_t)w + 8 + (size_t)b * w : f->lcen + ((size_t)b * h + y) * w;
     if (s->p.cost_mode != CC_COST_BT)
-        cc_census_row(img, w, h, stride, s->p.census_width, s->p.census_height, y, census);
+        census_row_planes(img, w, h, stride, s->p.census_width, s->p.census_height, y, planes, nb, padded);
     else
-        memset(census, 0, sizeof(uint64_t) * w);
-    bt_bounds_row(row, w, lo, hi);
+        for (int b = 0; b < nb; b++)
+            memset(planes[b], 0, (size_t)w);
     if (!mirrored) {
         size_t o = (size_t)y * w;
-        for (int b = 0; b < f->nbytes; b++)
-            for (int x = 0; x < w; x++)
-                f->lcen[(size_t)b * w * h + o + x] = (uint8_t)(census[x] >> (8 * b));
-        memcpy(f->lint + o, row, w);
-        memcpy(f->lmin + o, lo, w);
-        memcpy(f->lmax + o, hi, w);
+        bt_bounds_row(row, w, f->lmin + o, f->lmax + o);
+        memcpy(f->lint + o, row, (size_t)w);
         return;
     }
+    bt_bounds_row(row, w, lo, hi);
     size_t o = (size_t)y * f->rstride + f->pad + w - 1;
-    for (int b = 0; b < f->nbytes; b++) {
+    for (int b = 0; b < nb; b++) {
         uint8_t *plane = f->rcen + (size_t)b * f->rstride * h + o;
         for (int x = 0; x < w; x++)
-            plane[-x] = (uint8_t)(census[x] >> (8 * b));
+            plane[-x] = planes[b][x];
     }
     for (int x = 0; x < w; x++) {
         f->rint[o - x] = row[x];
@@ -135,7 +161,7 @@ static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int 
 }
 
 /* Rounded to 64 bytes so that every thread's slice starts aligned for its uint64 row. */
-size_t cc_frame_scratch_bytes(int width) { return ((size_t)width * (sizeof(uint64_t) + 2) + 127) / 64 * 64; }
+size_t cc_frame_scratch_bytes(int width) { return ((size_t)width * 11 + 16 + 127) / 64 * 64; }
 
 /* scratch: threads * cc_frame_scratch_bytes(width) bytes, one slice per thread. */
 void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int stride_left,
@@ -145,13 +171,10 @@ void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int s
 #pragma omp parallel num_threads(threads)
     {
         uint8_t *mine = scratch + cc_frame_scratch_bytes(w) * (size_t)omp_get_thread_num();
-        uint64_t *census = (uint64_t *)mine;
-        uint8_t *lo = mine + sizeof(uint64_t) * w;
 #pragma omp for schedule(static)
         for (int i = 0; i < 2 * h; i++) {
             int y = i >> 1, mirrored = i & 1;
-            prepare_row(f, s, mirrored ? right : left, mirrored ? stride_right : stride_left,
-                        y, mirrored, census, lo, lo + w);
+            prepare_row(f, s, mirrored ? right : left, mirrored ? stride_right : stride_left, y, mirrored, mine);
         }
     }
 }

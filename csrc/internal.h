@@ -50,8 +50,9 @@ void cc_frame_free(cc_frame *f);
 size_t cc_frame_scratch_bytes(int width);
 void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int stride_left,
                       const uint8_t *right, int stride_right, int threads, uint8_t *scratch);
+/* scratch: 9 * width + 8 bytes */
 void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw, int ch,
-                   int y, uint64_t *out);
+                   int y, uint64_t *out, uint8_t *scratch);
 
 /* cost.c: fused costs of pixels x0..x1-1 of row y, pixel x at out + (x - x0) * stride,
  * all disparities (Dp values, writing up to 32 bytes of slack past the last). */

@@ -246,8 +246,12 @@ int cc_census(const uint8_t *img, int width, int height, int stride,
     if (census_width < 1 || census_width > 9 || census_width % 2 == 0 || census_height < 1 ||
         census_height > 7 || census_height % 2 == 0)
         return CC_ERR_PARAM;
+    uint8_t *scratch = cc_alloc((size_t)width * 9 + 8);
+    if (!scratch)
+        return CC_ERR_NOMEM;
     for (int y = 0; y < height; y++)
-        cc_census_row(img, width, height, stride, census_width, census_height, y, out + (size_t)y * width);
+        cc_census_row(img, width, height, stride, census_width, census_height, y, out + (size_t)y * width, scratch);
+    cc_free(scratch);
     return CC_OK;
 }
 
