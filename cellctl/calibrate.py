@@ -40,7 +40,9 @@ class Checkerboard:
         if self.cols == self.rows:
             # A square corner grid has no defined orientation: OpenCV may number its corners rotated by 90
             # degrees in one camera and not in the other, which corrupts the stereo calibration.
-            raise ValueError(f"use a board with different inner-corner counts along each side, not {self.cols}x{self.rows}")
+            raise ValueError(
+                f"use a board with different inner-corner counts along each side, not {self.cols}x{self.rows}"
+            )
         if not self.square_mm > 0:
             raise ValueError(f"the square size must be positive, got {self.square_mm} mm")
 
@@ -158,7 +160,8 @@ def find_pairs(directory: str | os.PathLike[str]) -> list[PairFiles]:
     def natural(name: str) -> list[object]:
         return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", name)]
 
-    return [PairFiles(name, sides.get("left"), sides.get("right")) for name, sides in sorted(found.items(), key=lambda kv: natural(kv[0]))]
+    names = sorted(found, key=natural)
+    return [PairFiles(name, found[name].get("left"), found[name].get("right")) for name in names]
 
 
 def find_corners(image: np.ndarray, board: Checkerboard) -> np.ndarray | None:
@@ -172,7 +175,7 @@ def find_corners(image: np.ndarray, board: Checkerboard) -> np.ndarray | None:
         return None
     grid = corners.reshape(board.rows, board.cols, 2)
     # The refinement window must stay inside one square: a quarter of the smallest corner spacing.
-    spacing = min(np.linalg.norm(np.diff(grid, axis=0), axis=2).min(), np.linalg.norm(np.diff(grid, axis=1), axis=2).min())
+    spacing = min(np.linalg.norm(np.diff(grid, axis=axis), axis=2).min() for axis in (0, 1))
     half = int(np.clip(spacing / 4, 2, 11))
     corners = cv2.cornerSubPix(gray, corners, (half, half), (-1, -1), _SUBPIX_CRITERIA)
     return _canonical_order(gray, corners.reshape(-1, 2), board)
@@ -237,7 +240,7 @@ def _detect_view(pair: PairFiles, board: Checkerboard) -> BoardView:
 def _check_sizes(views: Sequence[BoardView]) -> None:
     sizes = {view.image_size for view in views if view.image_size is not None}
     if len(sizes) > 1:
-        listing = ", ".join(f"{view.name}: {view.image_size[0]}x{view.image_size[1]}" for view in views if view.image_size)
+        listing = ", ".join(f"{v.name}: {v.image_size[0]}x{v.image_size[1]}" for v in views if v.image_size)
         raise ValueError(f"the pairs have different image sizes ({listing}): capture all pairs at one resolution")
 
 
@@ -346,7 +349,8 @@ def _draw_error_chart(pairs: Sequence[PairResult], threshold_px: float) -> np.nd
         x0 = left + gap + i * (bar + gap)
         if pair.error_px is not None:
             clipped = pair.error_px > scale_max
-            cv2.rectangle(chart, (x0, y_of(min(pair.error_px, scale_max))), (x0 + bar, base_y), colours[pair.status], -1)
+            bar_top = y_of(min(pair.error_px, scale_max))
+            cv2.rectangle(chart, (x0, bar_top), (x0 + bar, base_y), colours[pair.status], -1)
             if clipped:
                 cv2.putText(chart, f"{pair.error_px:.2f}", (x0, top - 4), font, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
         else:  # skipped: no error to show, mark the slot
@@ -357,7 +361,8 @@ def _draw_error_chart(pairs: Sequence[PairResult], threshold_px: float) -> np.nd
         y = y_of(finite_threshold)
         for x in range(left, width - 10, 14):  # dashed: OpenCV has no dashed line
             cv2.line(chart, (x, y), (min(x + 8, width - 10), y), (0, 0, 200), 1)
-        cv2.putText(chart, f"threshold {finite_threshold:.3f}", (width - 190, y - 6), font, 0.45, (0, 0, 200), 1, cv2.LINE_AA)
+        label = f"threshold {finite_threshold:.3f}"
+        cv2.putText(chart, label, (width - 190, y - 6), font, 0.45, (0, 0, 200), 1, cv2.LINE_AA)
     legend = "green: kept   red: rejected   x: no corners (skipped)"
     cv2.putText(chart, legend, (left, base_y + 45), font, 0.45, (60, 60, 60), 1, cv2.LINE_AA)
     return chart

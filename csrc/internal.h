@@ -92,6 +92,8 @@ void cc_pass_rows(const cc_setup *s, const cc_frame *f, cc_workspace *ws, int16_
                   int16_t *raw_right, uint16_t *volume_out);
 
 /* select.c */
+/* tmp: cc_select_tmp_bytes(s, width) bytes */
+size_t cc_select_tmp_bytes(const cc_setup *s, int width);
 void cc_select_row(const cc_setup *s, const uint16_t *row, int stride, int width,
                    int16_t *left_out, int16_t *right_out, uint16_t *tmp);
 

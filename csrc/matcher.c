@@ -50,7 +50,7 @@ size_t cc_thread_scratch_bytes(const cc_setup *s, int width)
     size_t n = round_up(w * dp + 64, CC_ALIGN);                /* cost row */
     n += round_up(w * dp * 2, CC_ALIGN);                       /* sum row */
     n += 2 * round_up((dp + 2 * CC_GUARD) * 2, CC_ALIGN);      /* horizontal paths */
-    n += round_up(w * 2, CC_ALIGN);                            /* selection */
+    n += round_up(cc_select_tmp_bytes(s, width), CC_ALIGN);    /* selection */
     /* The frame preparation runs before the passes and borrows the same slices. */
     size_t frame = round_up(cc_frame_scratch_bytes(width), CC_ALIGN);
     return n > frame ? n : frame;
@@ -298,7 +298,7 @@ int cc_select(const cc_params *p, const uint16_t *volume, int width, int height,
         return rc;
     if (width < 1 || height < 1 || width > CC_MAX_DIM || height > CC_MAX_DIM)
         return CC_ERR_SIZE;
-    uint16_t *tmp = cc_alloc(sizeof(uint16_t) * width);
+    uint16_t *tmp = cc_alloc(cc_select_tmp_bytes(&s, width));
     if (!tmp)
         return CC_ERR_NOMEM;
     for (int y = 0; y < height; y++)

@@ -52,6 +52,61 @@ static inline int argmin(const cc_setup *s, const uint16_t *c)
     return argmin_scalar(c, 0, s->D, 0x10000u, 0);
 }
 
+size_t cc_select_tmp_bytes(const cc_setup *s, int width)
+{
+    int dmin = s->p.min_disparity;
+    return ((size_t)width + (size_t)(dmin < 0 ? -dmin : dmin) + (size_t)s->D + 64) * 2 * sizeof(uint16_t);
+}
+
+/* Right view: the best of S(xr + d, d).  Kept in mirrored order, slot
+ * off + (width-1-xr), so the candidates of one left pixel x for consecutive d
+ * fill consecutive slots.  Candidates for xr arrive with increasing d (outer
+ * loop over x), so a strict comparison keeps the smallest d among equal costs. */
+static void right_view_scalar(const cc_setup *s, const uint16_t *row, int stride, int width,
+                              uint16_t *best, int16_t *disp, int off)
+{
+    const int dmin = s->p.min_disparity;
+    for (int x = 0; x < width; x++) {
+        const uint16_t *c = row + (size_t)x * stride;
+        int base = off + width - 1 - x + dmin;
+        for (int k = 0; k < s->D; k++)
+            if (c[k] < best[base + k]) {
+                best[base + k] = c[k];
+                disp[base + k] = (int16_t)((dmin + k) * CC_DISP_SCALE);
+            }
+    }
+}
+
+#if CC_HAVE_X86
+__attribute__((target("avx2"))) static void right_view_avx2(const cc_setup *s, const uint16_t *row, int stride,
+                                                           int width, uint16_t *best, int16_t *disp, int off)
+{
+    const int dmin = s->p.min_disparity, full = s->D / CC_LANES * CC_LANES;
+    const __m256i lane16 = _mm256_setr_epi16(0, 16, 32, 48, 64, 80, 96, 112, 128, 144, 160, 176, 192, 208, 224, 240);
+    const __m256i ones = _mm256_set1_epi16(-1);
+    for (int x = 0; x < width; x++) {
+        const uint16_t *c = row + (size_t)x * stride;
+        int base = off + width - 1 - x + dmin;
+        for (int k = 0; k < full; k += CC_LANES) {
+            __m256i v = _mm256_loadu_si256((const __m256i *)(c + k));
+            __m256i b = _mm256_loadu_si256((const __m256i *)(best + base + k));
+            __m256i d = _mm256_loadu_si256((const __m256i *)(disp + base + k));
+            /* v < b (unsigned) exactly when min(v, b) != b */
+            __m256i lt = _mm256_xor_si256(_mm256_cmpeq_epi16(_mm256_min_epu16(v, b), b), ones);
+            __m256i dk = _mm256_add_epi16(_mm256_set1_epi16((short)((dmin + k) * CC_DISP_SCALE)), lane16);
+            _mm256_storeu_si256((__m256i *)(best + base + k), _mm256_blendv_epi8(b, v, lt));
+            _mm256_storeu_si256((__m256i *)(disp + base + k), _mm256_blendv_epi8(d, dk, lt));
+        }
+        /* the remaining disparities of this pixel, in the same order as the scalar loop */
+        for (int k = full; k < s->D; k++)
+            if (c[k] < best[base + k]) {
+                best[base + k] = c[k];
+                disp[base + k] = (int16_t)((dmin + k) * CC_DISP_SCALE);
+            }
+    }
+}
+#endif
+
 void cc_select_row(const cc_setup *s, const uint16_t *row, int stride, int width,
                    int16_t *left_out, int16_t *right_out, uint16_t *tmp)
 {
@@ -68,23 +123,21 @@ void cc_select_row(const cc_setup *s, const uint16_t *row, int stride, int width
         }
         left_out[x] = (int16_t)d;
     }
-    /* Right view: candidates for xr arrive with increasing k, so a strict
-     * comparison keeps the smallest disparity among equal costs. */
-    for (int x = 0; x < width; x++) {
-        tmp[x] = 0xFFFFu;
-        right_out[x] = CC_INVALID;
+    /* Mirrored scratch: slots for every x - d, in or out of the image. */
+    const int off = (dmin < 0 ? -dmin : 0) + 16;
+    const size_t slots = cc_select_tmp_bytes(s, width) / (2 * sizeof(uint16_t));
+    uint16_t *best = tmp;
+    int16_t *disp = (int16_t *)(tmp + slots);
+    for (size_t i = 0; i < slots; i++) {
+        best[i] = 0xFFFFu;
+        disp[i] = CC_INVALID;
     }
-    for (int x = 0; x < width; x++) {
-        const uint16_t *c = row + (size_t)x * stride;
-        int k_lo = x - dmin - (width - 1), k_hi = x - dmin;
-        k_lo = k_lo > 0 ? k_lo : 0;
-        k_hi = k_hi < D - 1 ? k_hi : D - 1;
-        for (int k = k_lo; k <= k_hi; k++) {
-            int xr = x - dmin - k;
-            if (c[k] < tmp[xr]) {
-                tmp[xr] = c[k];
-                right_out[xr] = (int16_t)((dmin + k) * CC_DISP_SCALE);
-            }
-        }
-    }
+#if CC_HAVE_X86
+    if (s->use_avx2)
+        right_view_avx2(s, row, stride, width, best, disp, off);
+    else
+#endif
+        right_view_scalar(s, row, stride, width, best, disp, off);
+    for (int xr = 0; xr < width; xr++)
+        right_out[xr] = disp[off + width - 1 - xr];
 }

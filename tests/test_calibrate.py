@@ -146,7 +146,8 @@ def test_corners_are_numbered_by_the_board_not_by_the_view(session: dict) -> Non
     turned = find_corners(cv2.rotate(image, cv2.ROTATE_180), BOARD)
     height, width = image.shape
     # Turning the image by 180 degrees moves each corner to (w-1-x, h-1-y) but must not renumber it.
-    np.testing.assert_allclose(turned, np.column_stack([width - 1 - upright[:, 0], height - 1 - upright[:, 1]]), atol=0.05)
+    expected = np.column_stack([width - 1 - upright[:, 0], height - 1 - upright[:, 1]])
+    np.testing.assert_allclose(turned, expected, atol=0.05)
 
 
 def test_min_pairs_is_never_undercut_by_rejection(session: dict) -> None:

@@ -21,10 +21,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("directory", metavar="DIR", type=Path, help="directory with left_NN.png / right_NN.png pairs")
     parser.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners of the board, e.g. 9x6")
     parser.add_argument("--square", required=True, type=float, metavar="MM", help="side of one square, mm")
-    parser.add_argument("-o", "--output", required=True, type=Path, metavar="calib.yaml", help="calibration file to write")
-    parser.add_argument("--chart", type=Path, metavar="PNG", help="per-pair error chart (default: next to the output, NAME-errors.png)")
-    parser.add_argument("--min-pairs", type=int, default=MIN_PAIRS, metavar="N", help=f"never keep fewer pairs than this (default {MIN_PAIRS})")
-    parser.add_argument("--fit-k3", action="store_true", help="also fit the third radial distortion term (wide-angle lenses)")
+    parser.add_argument(
+        "-o", "--output", required=True, type=Path, metavar="calib.yaml", help="calibration file to write"
+    )
+    parser.add_argument(
+        "--chart", type=Path, metavar="PNG", help="per-pair error chart (default: NAME-errors.png next to the output)"
+    )
+    parser.add_argument(
+        "--min-pairs", type=int, default=MIN_PAIRS, metavar="N", help=f"never keep fewer pairs (default {MIN_PAIRS})"
+    )
+    parser.add_argument(
+        "--fit-k3", action="store_true", help="also fit the third radial distortion term (wide-angle lenses)"
+    )
     parser.set_defaults(func=run)
 
 
@@ -34,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(f"--board/--square: {exc}") from None
     pairs = find_pairs(args.directory)
-    print(f"{len(pairs)} pairs in {args.directory}, board {board.cols}x{board.rows} inner corners of {board.square_mm:g} mm")
+    board_text = f"{board.cols}x{board.rows} inner corners of {board.square_mm:g} mm"
+    print(f"{len(pairs)} pairs in {args.directory}, board {board_text}")
     views = detect_views(pairs, board)
     for view in views:
         if not view.usable:

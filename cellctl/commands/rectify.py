@@ -20,7 +20,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Write the rectified pair, side-by-side views with equally spaced rows before and after "
         "rectification, and print the vertical disparity left over between matched features.",
     )
-    parser.add_argument("calibration", metavar="calib.yaml", type=Path, help="calibration file from `cellctl calibrate`")
+    parser.add_argument(
+        "calibration", metavar="calib.yaml", type=Path, help="calibration file from `cellctl calibrate`"
+    )
     parser.add_argument("left", metavar="LEFT", type=Path, help="left camera image")
     parser.add_argument("right", metavar="RIGHT", type=Path, help="right camera image")
     parser.add_argument("-o", "--output", required=True, type=Path, metavar="DIR", help="directory for the images")

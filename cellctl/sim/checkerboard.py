@@ -190,9 +190,8 @@ class CheckerboardSimulator:
         if np.any((edges @ rotation.T + translation.T)[:, 2] <= 0):
             return False
         points = self._project(edges, pose, side)
-        return bool(
-            np.all(points >= margin_px) and np.all(points[:, 0] < width - margin_px) and np.all(points[:, 1] < height - margin_px)
-        )
+        limit = np.array([width, height]) - margin_px
+        return bool(np.all(points >= margin_px) and np.all(points < limit))
 
     # -- imaging ----------------------------------------------------------------------------------
 
@@ -209,7 +208,7 @@ class CheckerboardSimulator:
         texture = self.texture_for(pose)
         # The right camera starts its exposure when the left one is half-way through.
         frames = {
-            side: np.mean([self.render_image(pose.moved(s * shift, s * turn), side, texture) for s in steps + start], axis=0)
+            side: np.mean([self.render_image(pose.moved(s * shift, s * turn), side, texture) for s in start + steps], 0)
             for side, start in (("left", 0.0), ("right", 0.5))
         }
         return self._sensor(frames["left"]), self._sensor(frames["right"])

@@ -22,7 +22,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pairs", type=int, default=16, help="number of good pairs (default 16)")
     parser.add_argument("--board", default="9x6", metavar="COLSxROWS", help="inner corners (default 9x6)")
     parser.add_argument("--square", type=float, default=30.0, metavar="MM", help="square side, mm (default 30)")
-    parser.add_argument("--rig", type=Path, metavar="calib.yaml", help="rig to simulate (default: the built-in simulated rig)")
+    parser.add_argument(
+        "--rig", type=Path, metavar="calib.yaml", help="rig to simulate (default: the built-in simulated rig)"
+    )
     parser.add_argument("--no-bad", action="store_true", help="leave out the bad pairs")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the board poses and noise")
     parser.set_defaults(func=run)
