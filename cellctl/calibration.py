@@ -64,6 +64,11 @@ class Calibration:
         self.P1 = _matrix(self.P1, (3, 4), "P1")
         self.P2 = _matrix(self.P2, (3, 4), "P2")
         self.Q = _matrix(self.Q, (4, 4), "Q")
+        if abs(self.P2[1, 3]) > abs(self.P2[0, 3]):
+            raise ValueError(
+                "the cameras are one above the other (vertical baseline): mount them side by side, "
+                "left and right, and calibrate again"
+            )
         if self.P2[0, 3] >= 0:
             # OpenCV puts -f*baseline here when the right camera really is on the right; otherwise
             # disparities would come out negative and every depth downstream would be wrong.
