@@ -13,14 +13,15 @@ import cv2
 import numpy as np
 
 MIN_MATCHES = 20  # fewer inliers than this say more about the scene than about the rectification
+MAX_MISMATCH_FRACTION = 0.25  # beyond this the scene is too repetitive for the figures to be trusted
 
 
 @dataclass(frozen=True)
 class VerticalDisparity:
     """Row offsets (left y - right y) of matched features in a rectified pair, px."""
 
-    dy: np.ndarray  # one value per matched feature that fits the pair's epipolar geometry
-    matches: int  # candidate matches before the geometric check
+    dy: np.ndarray  # one value per matched feature kept as a correct match
+    matches: int  # candidate matches before the checks
 
     @property
     def rms(self) -> float:
@@ -35,20 +36,35 @@ class VerticalDisparity:
         """95th percentile of |dy|."""
         return float(np.percentile(np.abs(self.dy), 95))
 
+    @property
+    def mismatch_fraction(self) -> float:
+        """Share of the candidate matches set aside as wrong."""
+        return 1.0 - self.dy.size / self.matches
+
     def summary(self) -> str:
-        return (
+        text = (
             f"residual vertical disparity over {self.dy.size} matched features: RMS {self.rms:.3f} px, "
-            f"median {self.median:+.3f} px, 95% within {self.p95:.3f} px"
+            f"median {self.median:+.3f} px, 95% within {self.p95:.3f} px "
+            f"({self.matches - self.dy.size} of {self.matches} matches set aside as mismatches)"
         )
+        if self.mismatch_fraction > MAX_MISMATCH_FRACTION:
+            text += (
+                "\nwarning: many mismatches, so these figures are unreliable: use images of a scene with "
+                "irregular texture (not a checkerboard or other repeated pattern)"
+            )
+        return text
 
 
 def vertical_disparity(left: np.ndarray, right: np.ndarray) -> VerticalDisparity:
     """Measure the row offsets of SIFT matches between a rectified left and right image.
 
     SIFT rather than ORB: its keypoints are refined to sub-pixel positions, ORB's are not, and a check
-    aiming at tenths of a pixel needs the former. Wrong matches are removed by the ratio test and by a
-    RANSAC fit of the fundamental matrix - which assumes nothing about the rectification being right,
-    so a bad rectification still shows in the figures instead of being filtered away.
+    aiming at tenths of a pixel needs the former. Wrong matches are removed by the ratio test, a RANSAC
+    fit of the fundamental matrix, and finally by their row offset, relative to the median offset of all
+    matches and its robust spread. None of these assumes the rectification is right, so a bad one still
+    shows in the figures instead of being filtered away. The last step is needed for flat, repetitive
+    scenes such as a checkerboard: a plane leaves the fundamental matrix undetermined, and RANSAC then
+    accepts matches one square off.
     """
     sift = cv2.SIFT_create(nfeatures=4000)
     kp_left, desc_left = sift.detectAndCompute(_grey(left), None)
@@ -63,9 +79,17 @@ def vertical_disparity(left: np.ndarray, right: np.ndarray) -> VerticalDisparity
     pts_right = np.float64([kp_right[m.trainIdx].pt for m in good])
     _, inliers = cv2.findFundamentalMat(pts_left, pts_right, cv2.FM_RANSAC, 1.0, 0.999)
     if inliers is None or int(inliers.sum()) < MIN_MATCHES:
-        raise ValueError(_too_few(0 if inliers is None else int(inliers.sum()), "geometrically consistent matches"))
+        raise ValueError(_too_few(0 if inliers is None else int(inliers.sum()), "consistent matches"))
     keep = inliers.ravel().astype(bool)
-    return VerticalDisparity(pts_left[keep, 1] - pts_right[keep, 1], len(good))
+    dy = pts_left[keep, 1] - pts_right[keep, 1]
+    median = np.median(dy)
+    spread = 1.4826 * np.median(np.abs(dy - median))
+    # 5 robust sigmas keep all of a real residual (even a tilted one); the 1 px floor keeps sub-pixel
+    # noise from being trimmed when almost all matches agree.
+    dy = dy[np.abs(dy - median) <= max(5.0 * spread, 1.0)]
+    if dy.size < MIN_MATCHES:
+        raise ValueError(_too_few(dy.size, "consistent matches"))
+    return VerticalDisparity(dy, len(good))
 
 
 def side_by_side(left: np.ndarray, right: np.ndarray, lines: int = 16) -> np.ndarray:

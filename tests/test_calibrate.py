@@ -108,8 +108,14 @@ def speckle(session: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def test_rectified_residual_vertical_disparity_below_0_3_px(session: dict, speckle: tuple) -> None:
     residual = vertical_disparity(*session["estimated"].rectify(*speckle))
-    assert residual.dy.size > 500
+    assert residual.dy.size > 500 and "warning" not in residual.summary()
     assert residual.rms < 0.3, residual.summary()
+
+
+def test_vertical_disparity_warns_that_a_checkerboard_is_too_repetitive_to_measure(session: dict) -> None:
+    left, right = (cv2.imread(str(session["dir"] / f"{side}_01.png")) for side in ("left", "right"))
+    residual = vertical_disparity(*session["estimated"].rectify(left, right))
+    assert "warning: many mismatches" in residual.summary()
 
 
 def test_vertical_disparity_exposes_a_camera_knocked_after_calibration(session: dict, speckle: tuple) -> None:
