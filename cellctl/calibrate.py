@@ -281,13 +281,6 @@ def calibrate_views(
     return CalibrationResult(calibration, [results[view.name] for view in views], threshold)
 
 
-def calibrate_directory(
-    directory: str | os.PathLike[str], board: Checkerboard, *, min_pairs: int = MIN_PAIRS, fit_k3: bool = False
-) -> CalibrationResult:
-    """Find the pairs in `directory`, detect the board and calibrate."""
-    return calibrate_views(detect_views(find_pairs(directory), board), board, min_pairs=min_pairs, fit_k3=fit_k3)
-
-
 def _calibrate(views: Sequence[BoardView], board: Checkerboard, fit_k3: bool) -> tuple[Calibration, np.ndarray]:
     """One calibration round: each camera alone for a start, then both jointly. Returns per-pair errors."""
     size = views[0].image_size
