@@ -1,0 +1,60 @@
+"""What every camera backend delivers: a stereo pair taken at (nearly) the same moment, or a CameraError."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from firmware_io.registers import ErrorCode
+
+
+class CameraError(Exception):
+    """A pair could not be delivered; `code` is what the PLC is told."""
+
+    code: ErrorCode = ErrorCode.CAMERA_MISSING
+
+
+class CameraMissing(CameraError):
+    """A camera is not connected or cannot be opened."""
+
+    code = ErrorCode.CAMERA_MISSING
+
+
+class FrameTimeout(CameraError):
+    """A camera delivered no frame in time."""
+
+    code = ErrorCode.FRAME_TIMEOUT
+
+
+class OutOfSync(CameraError):
+    """The two frames were taken too far apart, even after re-grabbing."""
+
+    code = ErrorCode.CAMERAS_OUT_OF_SYNC
+
+
+@dataclass
+class StereoFrame:
+    """One synchronised pair: BGR uint8 images and their capture times (seconds, one clock per source)."""
+
+    left: np.ndarray
+    right: np.ndarray
+    t_left: float
+    t_right: float
+    # Where the pair came from, journaled with the cycle: e.g. the simulated scene seed, the replay file.
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def skew_s(self) -> float:
+        return abs(self.t_left - self.t_right)
+
+
+class FrameSource(Protocol):
+    """A pair of cameras. grab_pair() either returns a synchronised pair or raises a CameraError;
+    after an error the next grab_pair() tries again (reconnecting if needed), so the service
+    recovers without a restart."""
+
+    def grab_pair(self) -> StereoFrame: ...
+
+    def close(self) -> None: ...

@@ -1,0 +1,48 @@
+"""Replay cameras: stereo pairs from a directory (left_NN.png / right_NN.png), in turn, for trials and support."""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import cv2
+
+from cellctl.cameras.base import CameraMissing, StereoFrame
+
+_LEFT = re.compile(r"left_(\w+)\.png$")
+
+
+class ReplayCameras:
+    """A FrameSource that serves the pairs of a directory one after the other, wrapping round."""
+
+    def __init__(self, directory: str | Path) -> None:
+        self.directory = Path(directory)
+        self._next = 0
+
+    def pairs(self) -> list[tuple[Path, Path]]:
+        """The (left, right) files of the directory, sorted by their NN."""
+        if not self.directory.is_dir():
+            raise CameraMissing(f"replay directory {self.directory} does not exist")
+        found = []
+        for left in sorted(self.directory.glob("left_*.png")):
+            match = _LEFT.search(left.name)
+            right = left.with_name(f"right_{match.group(1)}.png") if match else None
+            if right is not None and right.is_file():
+                found.append((left, right))
+        if not found:
+            raise CameraMissing(f"replay directory {self.directory} holds no left_NN.png/right_NN.png pair")
+        return found
+
+    def grab_pair(self) -> StereoFrame:
+        pairs = self.pairs()
+        left_path, right_path = pairs[self._next % len(pairs)]
+        self._next += 1
+        left, right = cv2.imread(str(left_path), cv2.IMREAD_COLOR), cv2.imread(str(right_path), cv2.IMREAD_COLOR)
+        if left is None or right is None:
+            raise CameraMissing(f"replay pair {left_path.name}/{right_path.name} cannot be read as images")
+        now = time.monotonic()
+        return StereoFrame(left, right, now, now, {"backend": "replay", "left": str(left_path), "right": str(right_path)})
+
+    def close(self) -> None:
+        pass

@@ -1,0 +1,24 @@
+"""A half-size simulated rig for service tests: same geometry, 640x512 images, ~4 x faster to render and measure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from cellctl.calibration import Calibration
+from cellctl.sim.rig import default_rig
+
+
+def half_size_rig() -> Calibration:
+    """default_rig() with both cameras' pixel grids halved (focal lengths and principal points scaled)."""
+    rig = default_rig()
+    scale = np.diag([0.5, 0.5, 1.0])
+    width, height = rig.image_size
+    return Calibration.from_extrinsics((width // 2, height // 2), scale @ rig.K1, rig.D1, scale @ rig.K2, rig.D2, rig.R, rig.T)
+
+
+def write_half_size_rig(directory: Path) -> Path:
+    path = directory / "calib-half.yaml"
+    half_size_rig().save(path)
+    return path
