@@ -55,6 +55,9 @@ class FrameSource(Protocol):
     after an error the next grab_pair() tries again (reconnecting if needed), so the service
     recovers without a restart."""
 
+    def open(self) -> None:
+        """Connect and prepare (called at service start); raises a CameraError if not possible now."""
+
     def grab_pair(self) -> StereoFrame: ...
 
     def close(self) -> None: ...

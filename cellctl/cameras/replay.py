@@ -34,6 +34,9 @@ class ReplayCameras:
             raise CameraMissing(f"replay directory {self.directory} holds no left_NN.png/right_NN.png pair")
         return found
 
+    def open(self) -> None:
+        self.pairs()
+
     def grab_pair(self) -> StereoFrame:
         pairs = self.pairs()
         left_path, right_path = pairs[self._next % len(pairs)]

@@ -81,11 +81,14 @@ class SimulatedCameras:
             self._cache[seed] = (scene.render(), info)
         return self._cache[seed]
 
+    def open(self) -> None:
+        """Render every scene now, so that no cycle waits for the renderer (seconds per 1280x1024 pair)."""
+        self._check_plugged()
+        for seed in self.seeds:
+            self.scene_for(seed)
+
     def grab_pair(self) -> StereoFrame:
-        with self._lock:
-            unplugged = self._unplugged
-        if unplugged is not None:
-            raise CameraMissing(f"{unplugged} camera (simulated) is unplugged")
+        self._check_plugged()
         seed = self.seeds[self._next % len(self.seeds)]
         self._next += 1
         start = time.monotonic()
@@ -106,6 +109,12 @@ class SimulatedCameras:
 
     def close(self) -> None:
         self._cache.clear()
+
+    def _check_plugged(self) -> None:
+        with self._lock:
+            unplugged = self._unplugged
+        if unplugged is not None:
+            raise CameraMissing(f"{unplugged} camera (simulated) is unplugged")
 
     def _take_frame(self, side: str) -> None:
         with self._lock:

@@ -127,6 +127,14 @@ class V4l2Cameras:
         self.sync_tolerance_s = sync_tolerance_s
         self.max_regrabs = max_regrabs
 
+    def open(self) -> None:
+        try:
+            self.left.open()
+            self.right.open()
+        except CameraMissing:
+            self.close()
+            raise
+
     def grab_pair(self) -> StereoFrame:
         try:
             left, right = grab_synchronised(self.left.grab, self.right.grab, self.sync_tolerance_s, self.max_regrabs)

@@ -1,0 +1,43 @@
+"""systemd's notify protocol (sd_notify(3)): READY=1, WATCHDOG=1, STATUS=... over $NOTIFY_SOCKET.
+
+A handful of lines over an AF_UNIX datagram socket rather than a dependency (python-systemd needs
+libsystemd headers to build); the protocol is one datagram of newline-separated KEY=VALUE lines.
+Without $NOTIFY_SOCKET (not run by systemd, or Type= is not notify) every call does nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+
+log = logging.getLogger(__name__)
+
+
+class SystemdNotifier:
+    def __init__(self, address: str | None = None) -> None:
+        address = os.environ.get("NOTIFY_SOCKET") if address is None else address
+        # A leading '@' names a socket in the abstract namespace, which Python spells with a NUL byte.
+        self._address = None if not address else "\0" + address[1:] if address.startswith("@") else address
+        self._socket: socket.socket | None = None
+        if self._address is not None:
+            self._socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
+
+    @property
+    def enabled(self) -> bool:
+        return self._socket is not None
+
+    def notify(self, **fields: str | int) -> None:
+        """Send e.g. notify(READY=1, STATUS="waiting for trigger"); failures are logged, never raised."""
+        if self._socket is None:
+            return
+        message = "\n".join(f"{key}={value}" for key, value in fields.items()).encode()
+        try:
+            self._socket.sendto(message, self._address)
+        except OSError as exc:  # systemd gone or socket full: the service must keep running regardless
+            log.warning("cannot notify systemd at %s: %s", self._address, exc)
+
+    def close(self) -> None:
+        if self._socket is not None:
+            self._socket.close()
+            self._socket = None
