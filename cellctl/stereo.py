@@ -30,7 +30,7 @@ DISP_SCALE = lib.CC_DISP_SCALE
 INVALID = lib.CC_INVALID
 
 _COSTS = {"census_bt": lib.CC_COST_CENSUS_BT, "census": lib.CC_COST_CENSUS, "bt": lib.CC_COST_BT}
-_FILLS = {"none": lib.CC_FILL_NONE, "background": lib.CC_FILL_BACKGROUND}
+_FILLS = {"none": lib.CC_FILL_NONE, "background": lib.CC_FILL_BACKGROUND, "weighted": lib.CC_FILL_WEIGHTED}
 _SIMD = {"auto": lib.CC_SIMD_AUTO, "scalar": lib.CC_SIMD_SCALAR}
 _ERRORS = {
     lib.CC_ERR_NULL: "a required buffer is missing",
@@ -56,8 +56,12 @@ class MatcherParams:
     paths: int                       # 4 (the paper) or 8
     subpixel: bool                   # parabola refinement
     lr_max_diff: float               # left-right tolerance in px; negative disables the check
-    fill: str                        # "background" or "none"
+    fill: str                        # "weighted" (background, then colour-weighted median), "background" or "none"
     median: int                      # 0, 3 or 5
+    fill_radius: int                 # window radius (px) of the weighted fill, 1..15
+    weighted_median: int             # window radius (px) of the final colour-weighted median, 0 = off
+    wm_sigma_colour: float           # weighted medians: colour scale, summed |dB| + |dG| + |dR|
+    wm_sigma_space: float            # weighted medians: distance scale, px
     threads: int                     # 0: all cores
     simd: str                        # "auto" or "scalar"
 
@@ -80,6 +84,10 @@ class MatcherParams:
         p.lr_max_diff = -1 if self.lr_max_diff < 0 else round(self.lr_max_diff * DISP_SCALE)
         p.fill_mode = _choice("fill", self.fill, _FILLS)
         p.median = self.median
+        p.fill_radius = self.fill_radius
+        p.weighted_median = self.weighted_median
+        p.wm_sigma_colour = self.wm_sigma_colour
+        p.wm_sigma_space = self.wm_sigma_space
         p.threads = self.threads
         p.simd = _choice("simd", self.simd, _SIMD)
         message = ffi.new("const char **")
@@ -98,6 +106,8 @@ def _c_defaults() -> dict[str, Any]:
         lambda_census=float(p.lambda_census), lambda_bt=float(p.lambda_bt), cost_scale=p.cost_scale,
         p1=p.p1, p2=p.p2, p2_gamma=p.p2_gamma, paths=p.paths, subpixel=bool(p.subpixel),
         lr_max_diff=p.lr_max_diff / DISP_SCALE, fill=names[1][p.fill_mode], median=p.median,
+        fill_radius=p.fill_radius, weighted_median=p.weighted_median,
+        wm_sigma_colour=float(p.wm_sigma_colour), wm_sigma_space=float(p.wm_sigma_space),
         threads=p.threads, simd="auto",
     )
 
@@ -138,10 +148,11 @@ def make_params(**overrides: Any) -> MatcherParams:
     window = v["census_window"]
     if not (isinstance(window, (tuple, list)) and len(window) == 2):
         raise ValueError(f"census_window must be (width, height) (got {window!r})")
-    ints = ("min_disparity", "num_disparities", "cost_scale", "p1", "p2", "p2_gamma", "paths", "median", "threads")
+    ints = ("min_disparity", "num_disparities", "cost_scale", "p1", "p2", "p2_gamma", "paths", "median",
+            "fill_radius", "weighted_median", "threads")
     for name in ints:
         v[name] = _as_int(name, v[name])
-    for name in ("lambda_census", "lambda_bt", "lr_max_diff"):
+    for name in ("lambda_census", "lambda_bt", "lr_max_diff", "wm_sigma_colour", "wm_sigma_space"):
         v[name] = _as_float(name, v[name])
     v["census_window"] = (_as_int("census_window", window[0]), _as_int("census_window", window[1]))
     v["subpixel"] = bool(v["subpixel"])
@@ -159,7 +170,7 @@ class StereoResult:
     raw_left: np.ndarray     # winner-takes-all of the left view, sub-pixel
     raw_right: np.ndarray    # winner-takes-all of the right view, integer
     checked: np.ndarray      # raw_left after the left-right check
-    filled: np.ndarray       # after the fill, before the median
+    filled: np.ndarray       # after the fill, before the medians
 
 
 def to_float(fixed: np.ndarray) -> np.ndarray:
@@ -192,6 +203,17 @@ def _pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if left.shape != right.shape:
         raise ValueError(f"left and right images differ in size: {left.shape[::-1]} vs {right.shape[::-1]} (w x h)")
     return left, right
+
+
+def as_guide(image: np.ndarray, name: str = "guide") -> np.ndarray:
+    """The colour image the weighted medians compare pixels in: C-contiguous BGR, or grey for grey input.
+
+    Matching itself uses grey (the paper's cost); colour only decides which neighbours
+    belong to the same surface when disparities are filled and filtered.
+    """
+    if isinstance(image, np.ndarray) and image.dtype == np.uint8 and image.ndim == 3 and image.shape[2] in (3, 4):
+        return np.ascontiguousarray(image[:, :, :3])
+    return as_grey(image, name)
 
 
 def _u8(a: np.ndarray) -> Any:
@@ -243,23 +265,22 @@ class StereoMatcher:
 
     def compute(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Final left-view disparity, float32 HxW in px, NaN where invalid."""
-        left, right = _pair(left, right)
-        disp = np.empty(left.shape, np.int16)
-        self._run(left, right, disp)
-        return to_float(disp)
+        return to_float(self.compute_fixed(left, right))
 
     def compute_fixed(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Final disparity as OpenCV-style int16 fixed point (x16), INVALID where invalid."""
+        guide = as_guide(left, "left")
         left, right = _pair(left, right)
         disp = np.empty(left.shape, np.int16)
-        self._run(left, right, disp)
+        self._run(left, right, guide, disp)
         return disp
 
     def compute_detailed(self, left: np.ndarray, right: np.ndarray) -> StereoResult:
         """Every stage of the pipeline for one pair (debugging and evaluation)."""
+        guide = as_guide(left, "left")
         left, right = _pair(left, right)
         maps = np.empty((5,) + left.shape, np.int16)
-        self._run(left, right, *maps)
+        self._run(left, right, guide, *maps)
         disp, raw_left, raw_right, checked, filled = (to_float(m) for m in maps)
         valid = (maps[3] != INVALID) & (maps[0] != INVALID)
         return StereoResult(disp, valid, raw_left, raw_right, checked, filled)
@@ -274,11 +295,14 @@ class StereoMatcher:
         _check(rc, self.params, left.shape)
         return out
 
-    def _run(self, left: np.ndarray, right: np.ndarray, disp: np.ndarray, *stages: np.ndarray) -> None:
+    def _run(self, left: np.ndarray, right: np.ndarray, guide: np.ndarray, disp: np.ndarray,
+             *stages: np.ndarray) -> None:
         h, w = left.shape
         ptrs = [ffi.cast("int16_t *", ffi.from_buffer(a)) for a in (disp, *stages)]
         ptrs += [ffi.NULL] * (5 - len(ptrs))
-        rc = lib.cc_matcher_compute(self._handle, _u8(left), _u8(right), w, h, w, w, *ptrs)
+        channels = 1 if guide.ndim == 2 else 3
+        rc = lib.cc_matcher_compute(self._handle, _u8(left), _u8(right), w, h, w, w,
+                                    _u8(guide), channels, w * channels, *ptrs)
         _check(rc, self.params, left.shape)
 
 
@@ -320,16 +344,25 @@ def select(volume: np.ndarray, **params: Any) -> tuple[np.ndarray, np.ndarray]:
     return left, right
 
 
-def postprocess(raw_left: np.ndarray, raw_right: np.ndarray, **params: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Left-right check, fill and median on int16 fixed-point maps: (checked, filled, final)."""
+def postprocess(raw_left: np.ndarray, raw_right: np.ndarray, guide: np.ndarray,
+                **params: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Left-right check, fills and medians on int16 fixed-point maps: (checked, filled, final).
+
+    `guide` is the left image (grey or BGR) the weighted stages compare colours in.
+    """
     p = make_params(**params)
     rl = np.ascontiguousarray(raw_left, dtype=np.int16)
     rr = np.ascontiguousarray(raw_right, dtype=np.int16)
     if rl.shape != rr.shape or rl.ndim != 2:
         raise ValueError(f"raw maps must be two 2-D arrays of one shape (got {rl.shape} and {rr.shape})")
+    g = as_guide(guide)
+    if g.shape[:2] != rl.shape:
+        raise ValueError(f"guide image is {g.shape[1]}x{g.shape[0]} but the maps are {rl.shape[1]}x{rl.shape[0]} (w x h)")
     h, w = rl.shape
+    channels = 1 if g.ndim == 2 else 3
     out = [np.empty((h, w), np.int16) for _ in range(3)]
     ptr = lambda a: ffi.cast("int16_t *", ffi.from_buffer(a))  # noqa: E731
-    rc = lib.cc_postprocess(p.to_c(), ptr(rl), ptr(rr), w, h, *(ptr(a) for a in out))
+    rc = lib.cc_postprocess(p.to_c(), ptr(rl), ptr(rr), _u8(g), channels, w * channels, w, h,
+                            *(ptr(a) for a in out))
     _check(rc, p, (h, w))
     return out[0], out[1], out[2]

@@ -28,7 +28,7 @@ enum cc_status {
 };
 
 enum cc_cost_mode { CC_COST_CENSUS_BT = 0, CC_COST_CENSUS = 1, CC_COST_BT = 2 };
-enum cc_fill_mode { CC_FILL_NONE = 0, CC_FILL_BACKGROUND = 1 };
+enum cc_fill_mode { CC_FILL_NONE = 0, CC_FILL_BACKGROUND = 1, CC_FILL_WEIGHTED = 2 };
 enum cc_simd_mode { CC_SIMD_AUTO = 0, CC_SIMD_SCALAR = 1 };
 
 typedef struct cc_params {
@@ -48,6 +48,10 @@ typedef struct cc_params {
     int lr_max_diff;        /* left-right tolerance in 1/16 px; < 0 disables the check */
     int fill_mode;          /* enum cc_fill_mode */
     int median;             /* 0 (off), 3 or 5 */
+    int fill_radius;        /* CC_FILL_WEIGHTED: window radius of the weighted median over filled pixels */
+    int weighted_median;    /* radius of the final colour-weighted median, 0 (off)..CC_MAX_WM_RADIUS */
+    float wm_sigma_colour;  /* weighted medians: colour scale (summed |dB|+|dG|+|dR|), > 0 */
+    float wm_sigma_space;   /* weighted medians: distance scale in px, > 0 */
     int threads;            /* 0: all available */
     int simd;               /* enum cc_simd_mode */
 } cc_params;
@@ -56,6 +60,7 @@ typedef struct cc_params {
 #define CC_MAX_DISPARITIES 2048
 #define CC_MAX_DIM 16384
 #define CC_BT_CAP 63        /* BT costs are truncated here before the rho table */
+#define CC_MAX_WM_RADIUS 15 /* largest weighted-median window: 31 x 31 */
 
 /* Fills *p with the defaults (tuned on Middlebury v2, see docs/benchmarks.md). */
 void cc_params_default(cc_params *p);
@@ -73,13 +78,17 @@ size_t cc_matcher_bytes(const cc_matcher *m);
 int cc_matcher_simd(const cc_matcher *m);
 
 /*
- * Full pipeline.  `disp` receives the final map (width*height int16).  The
- * optional stage outputs (NULL to skip) are: raw_left (WTA + sub-pixel),
- * raw_right (WTA of the right view, integer), checked (raw_left after the
- * left-right check) and filled (after the fill, before the median).
+ * Full pipeline.  `disp` receives the final map (width*height int16).  `guide`
+ * is the left image the weighted medians compare colours in: 8-bit, 1 (grey)
+ * or 3 (BGR) interleaved channels, `stride_guide` bytes per row; NULL uses the
+ * grey left image.  The optional stage outputs (NULL to skip) are: raw_left
+ * (WTA + sub-pixel), raw_right (WTA of the right view, integer), checked
+ * (raw_left after the left-right check) and filled (after the fill, before the
+ * medians).
  */
 int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
                        int width, int height, int stride_left, int stride_right,
+                       const uint8_t *guide, int guide_channels, int stride_guide,
                        int16_t *disp, int16_t *raw_left, int16_t *raw_right,
                        int16_t *checked, int16_t *filled);
 
@@ -97,8 +106,10 @@ int cc_aggregate(cc_matcher *m, const uint8_t *left, const uint8_t *right,
 /* WTA of an aggregated volume: left (sub-pixel) and right (integer) maps. */
 int cc_select(const cc_params *p, const uint16_t *volume, int width, int height,
               int16_t *raw_left, int16_t *raw_right);
-/* Left-right check, fill and median on raw maps, as the pipeline does. */
+/* Left-right check, fill and medians on raw maps, as the pipeline does; the
+ * guide (see cc_matcher_compute) is required only by the weighted stages. */
 int cc_postprocess(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
+                   const uint8_t *guide, int guide_channels, int stride_guide,
                    int width, int height, int16_t *checked, int16_t *filled, int16_t *disp);
 
 #endif

@@ -97,10 +97,38 @@ size_t cc_select_tmp_bytes(const cc_setup *s, int width);
 void cc_select_row(const cc_setup *s, const uint16_t *row, int stride, int width,
                    int16_t *left_out, int16_t *right_out, uint16_t *tmp);
 
-/* postprocess.c */
+/* weighted_median.c */
+#define CC_WM_COLOURS (3 * 255 + 1)                                  /* summed channel differences */
+#define CC_WM_SPACES (2 * CC_MAX_WM_RADIUS * CC_MAX_WM_RADIUS + 1)   /* squared distances */
+typedef struct cc_wm_tables {
+    uint16_t colour[CC_WM_COLOURS];
+    uint16_t space[CC_WM_SPACES];
+} cc_wm_tables;
+typedef struct cc_wm_image {  /* the guide: 1 or 3 interleaved 8-bit channels */
+    const uint8_t *data;
+    int width, height, channels;
+    size_t stride;
+} cc_wm_image;
+typedef struct cc_wm_hist {   /* per thread, one entry per disparity level, kept zero between pixels */
+    int64_t *value;
+    uint32_t *weight;
+} cc_wm_hist;
+void cc_wm_tables_init(cc_wm_tables *t, float sigma_colour, float sigma_space);
+size_t cc_wm_hist_bytes(int levels);
+cc_wm_hist cc_wm_hist_at(void *base, int levels);
+void cc_wm_hist_clear(cc_wm_hist *h, int levels);
+#define CC_WM_NO_LEVEL 0xFFFF
+/* Histogram level of a disparity: rounded to whole px, clamped to the range; CC_WM_NO_LEVEL if invalid. */
+int cc_wm_level(int v, int dmin, int levels);
+/* Weighted median at (x, y) of `map`, whose levels (cc_wm_level) are in `level`. */
+int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
+                    const uint16_t *level, int x, int y, int radius, cc_wm_hist *h);
+
+/* postprocess.c: `scratch` holds cc_postprocess_scratch_bytes (one map and a histogram per thread). */
+size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, int threads);
 void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
-                         int width, int height, int16_t *checked, int16_t *filled,
-                         int16_t *disp, int threads);
+                         const cc_wm_image *guide, int width, int height, int16_t *checked,
+                         int16_t *filled, int16_t *disp, void *scratch, int threads);
 
 /* memory helpers (matcher.c) */
 void *cc_alloc(size_t bytes);

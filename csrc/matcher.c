@@ -39,6 +39,7 @@ struct cc_matcher {
     cc_frame frame;
     cc_workspace ws;
     int16_t *maps;           /* raw_left, raw_right, checked, filled when not supplied */
+    void *post;              /* scratch of the post-processing (a map, histograms) */
     size_t bytes;
 };
 
@@ -144,6 +145,8 @@ static void matcher_release(cc_matcher *m)
     workspace_free(&m->ws);
     cc_free(m->maps);
     m->maps = NULL;
+    cc_free(m->post);
+    m->post = NULL;
     m->bytes = 0;
 }
 
@@ -169,13 +172,14 @@ static int matcher_reserve(cc_matcher *m, int width, int height)
     if (rc == CC_OK)
         rc = workspace_alloc(&m->ws, &m->setup, width, height, &ws_bytes);
     size_t maps = (size_t)width * height * 4 * sizeof(int16_t);
-    if (rc == CC_OK && !(m->maps = cc_alloc(maps)))
+    size_t post = cc_postprocess_scratch_bytes(&m->setup.p, width, height, m->ws.threads);
+    if (rc == CC_OK && (!(m->maps = cc_alloc(maps)) || !(m->post = cc_alloc(post))))
         rc = CC_ERR_NOMEM;
     if (rc != CC_OK) {
         matcher_release(m);
         return rc;
     }
-    m->bytes = cc_frame_bytes(&m->setup, width, height) + ws_bytes + maps;
+    m->bytes = cc_frame_bytes(&m->setup, width, height) + ws_bytes + maps + post;
     return CC_OK;
 }
 
@@ -199,11 +203,18 @@ static int run_passes(cc_matcher *m, const uint8_t *left, const uint8_t *right, 
 
 int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
                        int width, int height, int stride_left, int stride_right,
+                       const uint8_t *guide, int guide_channels, int stride_guide,
                        int16_t *disp, int16_t *raw_left, int16_t *raw_right,
                        int16_t *checked, int16_t *filled)
 {
     if (!m || !disp)
         return CC_ERR_NULL;
+    cc_wm_image g = {guide ? guide : left, width, height, guide ? guide_channels : 1,
+                     (size_t)(guide ? stride_guide : stride_left)};
+    if (g.channels != 1 && g.channels != 3)
+        return CC_ERR_PARAM;
+    if (g.stride < (size_t)width * g.channels)
+        return CC_ERR_SIZE;
     int rc = cc_check_images(left, right, width, height, stride_left, stride_right, &m->setup.p);
     if (rc == CC_OK)
         rc = matcher_reserve(m, width, height);
@@ -217,8 +228,8 @@ int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
     rc = run_passes(m, left, right, width, height, stride_left, stride_right, raw_left, raw_right, NULL);
     if (rc != CC_OK)
         return rc;
-    cc_postprocess_maps(&m->setup.p, raw_left, raw_right, width, height, checked, filled, disp,
-                        m->ws.threads);
+    cc_postprocess_maps(&m->setup.p, raw_left, raw_right, &g, width, height, checked, filled, disp,
+                        m->post, m->ws.threads);
     return CC_OK;
 }
 
@@ -309,6 +320,7 @@ int cc_select(const cc_params *p, const uint16_t *volume, int width, int height,
 }
 
 int cc_postprocess(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
+                   const uint8_t *guide, int guide_channels, int stride_guide,
                    int width, int height, int16_t *checked, int16_t *filled, int16_t *disp)
 {
     if (!p || !raw_left || !raw_right || !checked || !filled || !disp)
@@ -318,6 +330,18 @@ int cc_postprocess(const cc_params *p, const int16_t *raw_left, const int16_t *r
         return rc;
     if (width < 1 || height < 1 || width > CC_MAX_DIM || height > CC_MAX_DIM)
         return CC_ERR_SIZE;
-    cc_postprocess_maps(p, raw_left, raw_right, width, height, checked, filled, disp, cc_thread_count(p));
+    if (!guide && (p->fill_mode == CC_FILL_WEIGHTED || p->weighted_median > 0))
+        return CC_ERR_NULL;
+    if (guide && guide_channels != 1 && guide_channels != 3)
+        return CC_ERR_PARAM;
+    if (guide && stride_guide < width * guide_channels)
+        return CC_ERR_SIZE;
+    cc_wm_image g = {guide, width, height, guide_channels, (size_t)stride_guide};
+    int threads = cc_thread_count(p);
+    void *scratch = cc_alloc(cc_postprocess_scratch_bytes(p, width, height, threads));
+    if (!scratch)
+        return CC_ERR_NOMEM;
+    cc_postprocess_maps(p, raw_left, raw_right, &g, width, height, checked, filled, disp, scratch, threads);
+    cc_free(scratch);
     return CC_OK;
 }

@@ -25,6 +25,10 @@ void cc_params_default(cc_params *p)
     p->lr_max_diff = CC_DISP_SCALE;
     p->fill_mode = CC_FILL_BACKGROUND;
     p->median = 3;
+    p->fill_radius = 9;
+    p->weighted_median = 0;
+    p->wm_sigma_colour = 30.0f;
+    p->wm_sigma_space = 8.0f;
     p->threads = 0;
     p->simd = CC_SIMD_AUTO;
 }
@@ -74,10 +78,18 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("subpixel must be 0 or 1");
     if (p->lr_max_diff > 16 * CC_MAX_DISPARITIES)
         REJECT("lr_max_diff is out of range");
-    if (p->fill_mode != CC_FILL_NONE && p->fill_mode != CC_FILL_BACKGROUND)
-        REJECT("fill_mode must be none or background");
+    if (p->fill_mode < CC_FILL_NONE || p->fill_mode > CC_FILL_WEIGHTED)
+        REJECT("fill_mode must be none, background or weighted");
     if (p->median != 0 && p->median != 3 && p->median != 5)
         REJECT("median must be 0, 3 or 5");
+    if (p->fill_radius < 1 || p->fill_radius > CC_MAX_WM_RADIUS)
+        REJECT("fill_radius must be between 1 and 15 (px)");
+    if (p->weighted_median < 0 || p->weighted_median > CC_MAX_WM_RADIUS)
+        REJECT("weighted_median must be between 0 (off) and 15 (window radius in px)");
+    if (!(p->wm_sigma_colour > 0.0f) || !isfinite(p->wm_sigma_colour))
+        REJECT("wm_sigma_colour must be a finite number > 0");
+    if (!(p->wm_sigma_space > 0.0f) || !isfinite(p->wm_sigma_space))
+        REJECT("wm_sigma_space must be a finite number > 0");
     if (p->threads < 0 || p->threads > 256)
         REJECT("threads must be between 0 (all) and 256");
     if (p->simd != CC_SIMD_AUTO && p->simd != CC_SIMD_SCALAR)

@@ -1,4 +1,5 @@
-/* Left-right consistency check, background fill and median filter. */
+/* Left-right consistency check, fills, median and colour-weighted median. */
+#include <omp.h>
 #include <string.h>
 
 #include "internal.h"
@@ -98,29 +99,83 @@ static void median_row(const int16_t *in, int width, int height, int y, int size
     }
 }
 
-void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
-                         int width, int height, int16_t *checked, int16_t *filled,
-                         int16_t *disp, int threads)
+static size_t round64(size_t v) { return (v + 63) / 64 * 64; }
+
+size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, int threads)
 {
+    return 2 * round64((size_t)width * height * sizeof(int16_t)) +
+           round64(cc_wm_hist_bytes(p->num_disparities)) * (size_t)threads;
+}
+
+static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out)
+{
+    for (int x = 0; x < width; x++)
+        out[x] = (uint16_t)cc_wm_level(in[x], p->min_disparity, p->num_disparities);
+}
+
+/* Stages, each over all rows before the next starts (the windows read
+ * neighbouring rows): check + border + background fill; the weighted fill of
+ * the pixels the check rejected; the median; the weighted median. */
+void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
+                         const cc_wm_image *guide, int width, int height, int16_t *checked,
+                         int16_t *filled, int16_t *disp, void *scratch, int threads)
+{
+    const int weighted_fill = p->fill_mode == CC_FILL_WEIGHTED, wmedian = p->weighted_median > 0;
+    const size_t n = (size_t)width * height, map_bytes = round64(n * sizeof(int16_t));
+    const size_t hist_stride = round64(cc_wm_hist_bytes(p->num_disparities));
+    int16_t *tmp = scratch;
+    uint16_t *level = (uint16_t *)((uint8_t *)scratch + map_bytes);
+    uint8_t *hist_base = (uint8_t *)scratch + 2 * map_bytes;
+    cc_wm_tables tables;
+    if (weighted_fill || wmedian)
+        cc_wm_tables_init(&tables, p->wm_sigma_colour, p->wm_sigma_space);
+    int16_t *fill_out = weighted_fill ? tmp : filled;
+    int16_t *median_out = wmedian ? tmp : disp;
+    const int16_t *wm_in = p->median ? tmp : filled;
 #pragma omp parallel num_threads(threads)
     {
+        cc_wm_hist h = cc_wm_hist_at(hist_base + hist_stride * (size_t)omp_get_thread_num(), p->num_disparities);
+        if (weighted_fill || wmedian)
+            cc_wm_hist_clear(&h, p->num_disparities);
 #pragma omp for schedule(static)
         for (int y = 0; y < height; y++) {
             size_t o = (size_t)y * width;
             lr_check_row(p, raw_left + o, raw_right + o, width, checked + o);
             if (p->lr_max_diff >= 0)
                 border_occlusion_row(checked + o, width);
-            if (p->fill_mode == CC_FILL_BACKGROUND)
-                fill_row(checked + o, width, filled + o);
+            if (p->fill_mode != CC_FILL_NONE)
+                fill_row(checked + o, width, fill_out + o);
             else
-                memcpy(filled + o, checked + o, sizeof(int16_t) * width);
+                memcpy(fill_out + o, checked + o, sizeof(int16_t) * width);
+            if (weighted_fill)
+                levels_row(p, tmp + o, width, level + o);
+        }
+        if (weighted_fill) { /* weighted median of the background fill where the check failed */
+#pragma omp for schedule(dynamic, 4)
+            for (int y = 0; y < height; y++)
+                for (int x = 0; x < width; x++) {
+                    size_t o = (size_t)y * width + x;
+                    filled[o] = checked[o] == CC_INVALID
+                                    ? cc_wm_pixel(&tables, guide, tmp, level, x, y, p->fill_radius, &h)
+                                    : tmp[o];
+                }
         }
 #pragma omp for schedule(static)
         for (int y = 0; y < height; y++) {
+            size_t o = (size_t)y * width;
             if (p->median)
-                median_row(filled, width, height, y, p->median, disp + (size_t)y * width);
-            else
-                memcpy(disp + (size_t)y * width, filled + (size_t)y * width, sizeof(int16_t) * width);
+                median_row(filled, width, height, y, p->median, median_out + o);
+            else if (!wmedian)
+                memcpy(disp + o, filled + o, sizeof(int16_t) * width);
+            if (wmedian) /* levels of the weighted median's input, complete for this row */
+                levels_row(p, p->median ? median_out + o : filled + o, width, level + o);
+        }
+        if (wmedian) {
+#pragma omp for schedule(dynamic, 4)
+            for (int y = 0; y < height; y++)
+                for (int x = 0; x < width; x++)
+                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, guide, wm_in, level, x, y,
+                                                              p->weighted_median, &h);
         }
     }
 }

@@ -161,7 +161,51 @@ def _border_occlusion(row, w):
                 ref = int(row[x])
 
 
-def postprocess(raw_left, raw_right, p):
+def wm_tables(sigma_colour: float, sigma_space: float) -> tuple[np.ndarray, np.ndarray]:
+    """round(256 exp(-x / sigma)) by summed colour difference (0..765) and by squared distance (0..450)."""
+    def weight(x, sigma):
+        return np.floor(256.0 * np.exp(-x / np.float64(np.float32(sigma))) + 0.5).astype(np.int64)
+    return weight(np.arange(766, dtype=np.float64), sigma_colour), weight(np.sqrt(np.arange(451.0)), sigma_space)
+
+
+def _level(v, p):
+    """Whole-pixel level of a fixed-point disparity inside the range, None if invalid."""
+    if v == INVALID:
+        return None
+    return min(max((int(v) + 8) // 16 - p["min_disparity"], 0), p["num_disparities"] - 1)
+
+
+def weighted_median_at(m, guide, y, x, r, p):
+    """Colour-weighted median of map m at (y, x): the level with half the weight, the centre's own
+    value when it lies on that level, else the rounded weighted mean of the votes on it."""
+    if m[y, x] == INVALID:
+        return INVALID
+    colour, space = wm_tables(p["wm_sigma_colour"], p["wm_sigma_space"])
+    g = guide.astype(np.int64)
+    if g.ndim == 2:
+        g = np.repeat(g[:, :, None], 3, axis=2)  # grey counts as three equal channels
+    h, w = m.shape
+    weights, values = {}, {}
+    for yy in range(max(0, y - r), min(h, y + r + 1)):
+        for xx in range(max(0, x - r), min(w, x + r + 1)):
+            level = _level(m[yy, xx], p)
+            if level is None:
+                continue
+            wt = colour[np.abs(g[y, x] - g[yy, xx]).sum()] * space[(yy - y) ** 2 + (xx - x) ** 2]
+            weights[level] = weights.get(level, 0) + int(wt)
+            values[level] = values.get(level, 0) + int(wt) * int(m[yy, xx])
+    total, acc = sum(weights.values()), 0
+    for level in sorted(weights):
+        acc += weights[level]
+        if 2 * acc >= total:
+            break
+    if _level(m[y, x], p) == level:
+        return int(m[y, x])
+    ws = weights[level]
+    return (2 * values[level] + ws) // (2 * ws)
+
+
+def postprocess(raw_left, raw_right, p, guide=None):
     h, w = raw_left.shape
     checked = raw_left.copy()
     if p["lr_max_diff"] >= 0:
@@ -175,13 +219,17 @@ def postprocess(raw_left, raw_right, p):
         for y in range(h):
             _border_occlusion(checked[y], w)
     filled = checked.copy()
-    if p["fill"] == "background":
+    if p["fill"] in ("background", "weighted"):
         for y in range(h):
             valid = np.flatnonzero(checked[y] != INVALID)
             for x in np.flatnonzero(checked[y] == INVALID):
                 before, after = valid[valid < x], valid[valid > x]
                 cands = ([checked[y, before[-1]]] if len(before) else []) + ([checked[y, after[0]]] if len(after) else [])
                 filled[y, x] = min(cands) if cands else INVALID
+    if p["fill"] == "weighted":
+        background = filled.copy()
+        for y, x in zip(*np.nonzero(checked == INVALID)):
+            filled[y, x] = weighted_median_at(background, guide, y, x, p["fill_radius"], p)
     final = filled.copy()
     r = p["median"] // 2
     if p["median"]:
@@ -192,4 +240,9 @@ def postprocess(raw_left, raw_right, p):
                 win = filled[max(0, y - r): y + r + 1, max(0, x - r): x + r + 1].ravel()
                 vals = np.sort(win[win != INVALID])
                 final[y, x] = vals[(len(vals) - 1) // 2]
+    if p["weighted_median"]:
+        before = final.copy()
+        for y in range(h):
+            for x in range(w):
+                final[y, x] = weighted_median_at(before, guide, y, x, p["weighted_median"], p)
     return checked, filled, final

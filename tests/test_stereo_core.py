@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -82,35 +83,76 @@ def test_selection_matches_reference(subpixel, dmin):
 
 
 POST_CASES = [
-    dict(),
-    dict(fill="none"),
-    dict(median=5, lr_max_diff=0.5),
-    dict(median=0, lr_max_diff=-1),
-    dict(median=5, fill="none", lr_max_diff=2.0),
+    dict(fill="background", median=3, weighted_median=0),
+    dict(fill="none", median=3, weighted_median=0),
+    dict(fill="background", median=5, lr_max_diff=0.5, weighted_median=0),
+    dict(median=0, lr_max_diff=-1, weighted_median=0),
+    dict(median=5, fill="none", lr_max_diff=2.0, weighted_median=0),
+    dict(fill="weighted", fill_radius=2, median=0, weighted_median=0),
+    dict(fill="background", median=0, weighted_median=2),
+    dict(fill="weighted", fill_radius=3, median=3, weighted_median=1, wm_sigma_colour=7.0, wm_sigma_space=1.5),
+    dict(fill="weighted", fill_radius=4, weighted_median=3, num_disparities=6, min_disparity=1),  # clamped levels
+    dict(fill="none", weighted_median=2, wm_sigma_colour=400.0, wm_sigma_space=100.0),  # near-plain weighted median
+    dict(),  # the defaults
 ]
 
 
-@pytest.mark.parametrize("case", POST_CASES)
-def test_postprocess_matches_reference(case):
+def _raw_maps(h: int = 13, w: int = 30):
     rng = np.random.default_rng(5)
-    h, w = 13, 30
     raw_left = (rng.integers(0, 8, (h, w)) * 16 + rng.integers(-8, 8, (h, w))).astype(np.int16)
     raw_right = (rng.integers(0, 8, (h, w)) * 16).astype(np.int16)
     raw_right[rng.random((h, w)) < 0.1] = stereo.INVALID
     raw_right[2, :] = raw_left[2, :]  # a row that passes the check everywhere it can
-    got = stereo.postprocess(raw_left, raw_right, **case)
-    want = ref.postprocess(raw_left.astype(np.int64), raw_right.astype(np.int64), _params(**case))
+    guide = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    guide[:, w // 2:] //= 8  # two colour regions, so the weights matter
+    return raw_left, raw_right, guide
+
+
+@pytest.mark.parametrize("colour", [True, False])
+@pytest.mark.parametrize("case", POST_CASES)
+def test_postprocess_matches_reference(case, colour):
+    raw_left, raw_right, guide = _raw_maps()
+    if not colour:
+        guide = guide[:, :, 1].copy()
+    got = stereo.postprocess(raw_left, raw_right, guide, **case)
+    want = ref.postprocess(raw_left.astype(np.int64), raw_right.astype(np.int64), _params(**case), guide)
     for g, r in zip(got, want):
         np.testing.assert_array_equal(g, r)
 
 
-@pytest.mark.parametrize("case", [dict(num_disparities=8), dict(num_disparities=12, paths=8, min_disparity=-2, median=5)])
-def test_full_pipeline_matches_reference_chain(case):
+def test_weighted_stages_change_the_result_and_need_a_matching_guide():
+    raw_left, raw_right, guide = _raw_maps()
+    plain = stereo.postprocess(raw_left, raw_right, guide, fill="background", median=0, weighted_median=0)
+    weighted = stereo.postprocess(raw_left, raw_right, guide, fill="weighted", median=0, weighted_median=2)
+    assert not np.array_equal(plain[1], weighted[1]) and not np.array_equal(plain[2], weighted[2])
+    with pytest.raises(ValueError, match="guide image is"):
+        stereo.postprocess(raw_left, raw_right, guide[:, :-1])
+
+
+@pytest.mark.parametrize("bad", [dict(fill_radius=0), dict(fill_radius=16), dict(weighted_median=-1),
+                                 dict(weighted_median=16), dict(wm_sigma_colour=0.0), dict(wm_sigma_space=-1.0),
+                                 dict(fill="nearest")])
+def test_weighted_parameters_are_validated(bad):
+    with pytest.raises(ValueError, match=next(iter(bad)).split("_")[0]):
+        make_params(**bad)
+
+
+@pytest.mark.parametrize("colour", [False, True])
+@pytest.mark.parametrize("case", [
+    dict(num_disparities=8, fill="background", median=3, weighted_median=0),
+    dict(num_disparities=12, paths=8, min_disparity=-2, median=5, fill="background", weighted_median=0),
+    dict(num_disparities=8, fill="weighted", fill_radius=3, median=0, weighted_median=2),
+])
+def test_full_pipeline_matches_reference_chain(case, colour):
     left, right = _pair(6, 15, 28)
+    guide = left
+    if colour:  # matching uses grey; the colour only guides the weighted stages
+        guide = np.dstack([left, 255 - left, np.roll(left, 3, axis=1)])
+        left = cv2.cvtColor(guide, cv2.COLOR_BGR2GRAY)
     p = _params(**case)
     raw_left, raw_right = ref.select(ref.aggregate(left, right, p), p)
-    want = ref.postprocess(raw_left, raw_right, p)
-    result = StereoMatcher(**case).compute_detailed(left, right)
+    want = ref.postprocess(raw_left, raw_right, p, guide)
+    result = StereoMatcher(**case).compute_detailed(guide, right)
     for got, r in zip((result.raw_left, result.raw_right, result.checked, result.filled, result.disparity),
                       (raw_left, raw_right) + tuple(want)):
         np.testing.assert_array_equal(got, stereo.to_float(r.astype(np.int16)))
