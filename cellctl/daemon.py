@@ -14,9 +14,10 @@ One cycle, in this order (docs/modbus.md, handshake):
 Every accepted trigger gets exactly one answer. While the cameras are failing the service probes them
 between cycles, so CAMERAS_OK and READY come back by themselves when a camera is plugged in again.
 
-Stopping (request_stop, e.g. SIGTERM): a cycle already being measured is finished and published (it takes
-about a second, far below systemd's stop timeout, and the PLC gets its answer); a trigger that arrives
-once stopping has begun is answered with CYCLE_ABORTED. Then the Modbus link closes.
+Stopping (request_stop, e.g. SIGTERM): a cycle triggered before the stop request is finished and published
+(it takes a second or two, far below systemd's stop timeout, and the PLC gets its answer); a trigger that
+arrives once stopping has begun is answered with CYCLE_ABORTED. The link then keeps serving for
+STOP_LINGER_S, so the PLC can read that last answer, and closes.
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ log = logging.getLogger(__name__)
 
 #: How long one wait for a trigger lasts: the loop's tick for stop requests, watchdog pings and probes.
 TICK_S = 0.25
+#: After a stop request, how long the Modbus link still serves so the PLC can read the last answer.
+STOP_LINGER_S = 0.5
 #: Cameras that failed are probed this often between cycles so READY comes back without a trigger.
 CAMERA_PROBE_PERIOD_S = 1.0
 #: Plausible sole measurements (mm); anything outside is MEASUREMENT_INVALID, never sent as a result.
@@ -95,6 +98,7 @@ class Daemon:
         )
         self._reconstructor = None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
         self._stop = threading.Event()
+        self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
         self._cameras_ok = False
         self._last_probe = 0.0
@@ -105,6 +109,7 @@ class Daemon:
 
     def request_stop(self) -> None:
         """Finish the running cycle, answer later triggers with CYCLE_ABORTED, then stop (thread-safe)."""
+        self._stop_at = min(self._stop_at, time.monotonic())
         self._stop.set()
 
     def wait_started(self, timeout_s: float) -> bool:
@@ -138,14 +143,20 @@ class Daemon:
             if trigger is None:
                 self._probe_cameras()
                 continue
-            if self._stop.is_set():
-                self._abort(trigger)
-                break
+            self._answer(trigger)
+        # Serve a little longer: the PLC reads the last answer, and a trigger arriving now is answered.
+        deadline = time.monotonic() + STOP_LINGER_S
+        while (left := deadline - time.monotonic()) > 0:
+            late = self.link.wait_trigger(timeout_s=left)
+            if late is not None:
+                self._answer(late)
+
+    def _answer(self, trigger: Trigger) -> None:
+        """Measure a trigger accepted before any stop request; abort one accepted after it."""
+        if trigger.received_at >= self._stop_at:
+            self._abort(trigger)
+        else:
             self._cycle(trigger)
-        # A trigger accepted between the last wait and the stop still gets its answer.
-        late = self.link.wait_trigger(timeout_s=0)
-        if late is not None:
-            self._abort(late)
 
     # ---- one cycle -----------------------------------------------------------------------------
 
