@@ -120,9 +120,11 @@ class Daemon:
         """Serve until request_stop(); raises if the journal or the Modbus port cannot be opened."""
         self._journal = Journal.open(self.config.journal.state_dir)
         try:
+            # Cameras first: preparing them may take long (the simulator renders its scenes), and the
+            # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
+            self._probe_cameras(force=True)
             self.link.start()
             try:
-                self._probe_cameras(force=True)
                 self._report_health()
                 self.notifier.notify(READY=1, STATUS=self._status_text())
                 log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self._cameras_ok else "NOT ok")
@@ -263,7 +265,8 @@ class Daemon:
             return
         self._cameras_ok = True
         log.info("cameras ok")
-        self._report_health()
+        if not force:
+            self._report_health()
 
     def _report_health(self) -> None:
         self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=self.calib is not None)

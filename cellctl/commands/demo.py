@@ -1,7 +1,9 @@
-"""`cellctl demo`: the main job on simulated input, showing what the cell does.
+"""`cellctl demo`: the cell on simulated hardware, as `make demo` shows it.
 
-Until the daemon exists (issue 6) this runs the matcher on Middlebury Teddy and
-writes the coloured disparity map beside a colour-mapped ground truth.
+Starts the service (`cellctl run --config deploy/cell-sim.toml`, simulated 1280x1024 cameras, Modbus TCP)
+in a child process, drives it with the PLC simulator for several cycles, and prints what the PLC received
+next to the simulated sole's true measurements. `--teddy` instead runs the stereo matcher on Middlebury
+Teddy and writes the coloured disparity map beside the ground truth.
 """
 
 from __future__ import annotations
@@ -13,15 +15,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cellctl.middlebury import load_scene, bad_pixel_percent
-from cellctl.stereo import StereoMatcher
+from cellctl.commands.demo_cell import run_cell_demo
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("demo", help="run the matcher on Teddy and write a coloured disparity PNG",
-                              description=__doc__)
-    p.add_argument("--data", help="Middlebury 2001-2003 folder (default ../shared/data/middlebury/2001-2003)")
-    p.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
+    p = subparsers.add_parser("demo", help="run the service on simulated cameras against the PLC simulator",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--cycles", type=int, default=6, help="PLC cycles to run (default 6)")
+    p.add_argument("--config", type=Path, help="service config (default deploy/cell-sim.toml)")
+    p.add_argument("--port", type=int, default=5020, help="Modbus TCP port for the demo (default 5020)")
+    p.add_argument("--teddy", action="store_true", help="instead: the matcher on Middlebury Teddy")
+    p.add_argument("--data", help="with --teddy: Middlebury 2001-2003 folder (default ../shared/data/middlebury/2001-2003)")
+    p.add_argument("--out", default="demo-out", help="output folder: journal, PLY and overlays, Teddy PNG (default demo-out)")
     p.set_defaults(func=run)
 
 
@@ -34,6 +39,15 @@ def colourise(disparity: np.ndarray, max_disparity: float) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.teddy:
+        return run_teddy(args)
+    return run_cell_demo(args.config, args.port, args.cycles, Path(args.out))
+
+
+def run_teddy(args: argparse.Namespace) -> int:
+    from cellctl.middlebury import bad_pixel_percent, load_scene
+    from cellctl.stereo import StereoMatcher
+
     scene = load_scene("teddy", args.data)
     matcher = StereoMatcher(scene.info.min_disparity, scene.info.num_disparities)
     matcher.compute(scene.left, scene.right)  # first call allocates the buffers
