@@ -212,3 +212,13 @@ def test_stop_finishes_the_running_cycle_and_restart_loses_no_result(tmp_path: P
     ]
     assert records[1].length_mm == pytest.approx(finished.length_mm, rel=1e-6)
     listener.close()
+
+
+def test_run_refuses_a_bad_config_with_one_clear_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cellctl.cli import main
+
+    path = tmp_path / "cell.toml"
+    path.write_text('[cameras]\nbackend = "simulated"\n[calibration]\npath = "nope.yaml"\n[journal]\nstate_dir = "s"\n')
+    assert main(["run", "--config", str(path)]) == 2
+    assert "[calibration] path: calibration file" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()  # nothing started
