@@ -17,15 +17,13 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-import open3d as o3d
 
 from cellctl.footprint import Footprint
 from cellctl.reconstruction import Reconstruction
+from cellctl.surface import MIN_CLOUD_POINTS, SoleSurface
 
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
-HEIGHT_RADIUS_MM = 4.0
-HEIGHT_TRIM = 0.2  # fraction of points dropped at each end before averaging the heights
-MIN_HEIGHT_POINTS = 20
+HEIGHT_RADIUS_MM = 8.0
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
 GLUE_OFFSET_MM = 2.0
 GLUE_SPACING_MM = 2.0
@@ -122,19 +120,21 @@ def measure_sole(
         )
     heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
     toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
-    heel_z, toe_z = (_surface_height(points, xy) for xy in (heel_xy, toe_xy))
+    surface = SoleSurface(reconstruction)
+    heights = surface.sample(np.vstack([heel_xy, toe_xy]), HEIGHT_RADIUS_MM)
     timings["measure"] = time.perf_counter() - start
-    for name, value, xy in (("heel", heel_z, heel_xy), ("toe", toe_z, toe_xy)):
-        if value is None:
+    for name, value, xy in (("heel", heights.z[0], heel_xy), ("toe", heights.z[1], toe_xy)):
+        if not np.isfinite(value):
             return _invalid(
                 f"no measured surface at the {name} point ({xy[0]:.1f}, {xy[1]:.1f}) mm: fewer than "
-                f"{MIN_HEIGHT_POINTS} points within {HEIGHT_RADIUS_MM:g} mm",
+                f"{MIN_CLOUD_POINTS} points within {HEIGHT_RADIUS_MM:g} mm",
                 **base,
             )
+    heel_z, toe_z = float(heights.z[0]), float(heights.z[1])
     heel_point, toe_point = np.array([*heel_xy, heel_z]), np.array([*toe_xy, toe_z])
     base.update(heel_point=heel_point, toe_point=toe_point)
     start = time.perf_counter()
-    path, problem = glue_path(points, outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
+    path, problem = glue_path(surface, outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(problem or "no glue path", **base)
@@ -163,22 +163,8 @@ def _half_area_difference(footprint: Footprint, centroid: np.ndarray, axis: np.n
     return (2.0 * upper - len(proj)) / max(len(proj), 1)
 
 
-def _surface_height(points: np.ndarray, xy: np.ndarray) -> float | None:
-    """Trimmed mean height of the points within HEIGHT_RADIUS_MM of xy in the table plane.
-
-    A trimmed mean rather than the median: disparities come in 1/16 px steps (~0.2 mm at 550 mm) and
-    a median would keep that step; the trim still discards mismatches.
-    """
-    near = np.sum((points[:, :2] - xy) ** 2, axis=1) <= HEIGHT_RADIUS_MM**2
-    z = np.sort(points[near, 2])
-    if len(z) < MIN_HEIGHT_POINTS:
-        return None
-    cut = int(HEIGHT_TRIM * len(z))
-    return float(z[cut : len(z) - cut].mean())
-
-
 def glue_path(
-    points: np.ndarray,
+    surface: SoleSurface,
     outline: np.ndarray,
     centroid: np.ndarray,
     axis: np.ndarray,
@@ -195,39 +181,15 @@ def glue_path(
     path_xy = _resample_closed(resampled + offset_mm * inward, spacing_mm)
     start = int(np.argmin((path_xy - centroid) @ axis))  # the heel end
     path_xy = np.roll(path_xy, -start, axis=0)
-    # Neighbours in the table plane: search a copy of the cloud flattened onto z = 0.
-    flat_cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.column_stack([points[:, :2], np.zeros(len(points))])))
-    flat = o3d.geometry.KDTreeFlann(flat_cloud)
-    lifted, normals = [], []
-    for xy in path_xy:
-        fit = _local_plane(points, flat, xy)
-        if fit is None:
-            return None, (
-                f"glue path: no top surface measured near ({xy[0]:.1f}, {xy[1]:.1f}) mm "
-                f"within {2 * GLUE_FIT_RADIUS_MM:g} mm"
-            )
-        lifted.append(fit[0])
-        normals.append(fit[1])
-    return GluePath(np.column_stack([path_xy, lifted]), np.array(normals), closed=True), None
-
-
-def _local_plane(points: np.ndarray, tree: o3d.geometry.KDTreeFlann, xy: np.ndarray) -> tuple[float, np.ndarray] | None:
-    """Height at xy and unit normal of a least-squares plane through the nearby points (one trimmed refit)."""
-    for radius in (GLUE_FIT_RADIUS_MM, 2 * GLUE_FIT_RADIUS_MM):
-        count, index, _ = tree.search_radius_vector_3d(np.array([xy[0], xy[1], 0.0]), radius)
-        if count >= 12:
-            break
-    else:
-        return None
-    near = points[np.asarray(index)]
-    design = np.column_stack([near[:, 0] - xy[0], near[:, 1] - xy[1], np.ones(len(near))])
-    coef = np.linalg.lstsq(design, near[:, 2], rcond=None)[0]
-    residual = np.abs(design @ coef - near[:, 2])
-    keep = residual <= max(3.0 * np.median(residual), 0.3)
-    if keep.sum() >= 6:
-        coef = np.linalg.lstsq(design[keep], near[keep, 2], rcond=None)[0]
-    normal = np.array([-coef[0], -coef[1], 1.0])
-    return float(coef[2]), normal / np.linalg.norm(normal)
+    samples = surface.sample(path_xy, GLUE_FIT_RADIUS_MM)
+    missing = np.flatnonzero(~np.isfinite(samples.z))
+    if missing.size:
+        x, y = path_xy[missing[0]]
+        return None, (
+            f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
+            f"({missing.size} of {len(path_xy)} path points)"
+        )
+    return GluePath(np.column_stack([path_xy, samples.z]), samples.normals, closed=True), None
 
 
 def _resample_closed(poly: np.ndarray, spacing: float) -> np.ndarray:

@@ -54,6 +54,7 @@ LENS_BLUR_PX = 0.5
 VIGNETTING = 0.12  # relative fall-off at the image corners
 RIGHT_GAIN = 0.97  # the two cameras never expose identically
 SUPERSAMPLE = 4
+PIXEL_FOOTPRINT_SIGMA_MM = 0.2  # texture pre-filter: pixel box (0.39 mm at 550 mm) plus lens blur
 
 
 def rig_pose(
@@ -330,6 +331,10 @@ class _Texture:
                 (max(2, int(size_mm[1] / wavelength) + 1), max(2, int(size_mm[0] / wavelength) + 1))
             ).astype(np.float32)
             octave = cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)
+            # A pixel integrates light over its footprint (~0.4 mm on the table) but a ray samples a point:
+            # pre-filtering by the footprint stops the samples from aliasing. The amplitude is set after
+            # the filter, so it is the contrast the camera actually records.
+            octave = cv2.GaussianBlur(octave, (0, 0), PIXEL_FOOTPRINT_SIGMA_MM / texel_mm)
             image += amplitude * octave / max(float(octave.std()), 1e-6)
         return cls(image, origin, texel_mm)
 

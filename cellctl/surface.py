@@ -1,0 +1,104 @@
+"""The sole's top surface at given table points: height and normal, as precisely as the data allows.
+
+With the rectified images at hand (a stereo reconstruction), each query is a small patch of the surface
+whose disparity plane is fitted directly to the images (cellctl.subpixel), then reprojected and turned
+into a plane in the table frame. Without images (a cloud from elsewhere, e.g. the simulator's true depth)
+the same plane is fitted to the cloud's points near the query.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+
+from cellctl.reconstruction import Reconstruction
+from cellctl.subpixel import refine_patches
+
+MIN_CLOUD_POINTS = 12
+TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
+
+
+@dataclass
+class SurfaceSamples:
+    """Heights (mm above the table) and unit normals at the queried table points; NaN where not measured."""
+
+    z: np.ndarray  # K
+    normals: np.ndarray  # K x 3
+    refined: np.ndarray  # K bool: fitted on the images (else on the cloud)
+
+
+class SoleSurface:
+    """Queries of a reconstructed sole's top surface."""
+
+    def __init__(self, reconstruction: Reconstruction) -> None:
+        self.rec = reconstruction
+        points = reconstruction.sole_points
+        flat = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.column_stack([points[:, :2], np.zeros(len(points))])))
+        self._tree = o3d.geometry.KDTreeFlann(flat)  # neighbours in the table plane
+
+    def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
+        """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        z, normals = self._from_cloud(xy, radius_mm)
+        refined = np.zeros(len(xy), bool)
+        if self.rec.rectified is not None and np.any(np.isfinite(z)):
+            self._refine(xy, z, normals, refined, radius_mm)
+        return SurfaceSamples(z, normals, refined)
+
+    def _from_cloud(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        points = self.rec.sole_points
+        z = np.full(len(xy), np.nan)
+        normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
+        for k, (x, y) in enumerate(xy):
+            count, index, _ = self._tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
+            if count < MIN_CLOUD_POINTS:
+                continue
+            near = points[np.asarray(index)]
+            z[k], normals[k] = _robust_plane(near, np.array([x, y]))
+        return z, normals
+
+    def _refine(self, xy: np.ndarray, z: np.ndarray, normals: np.ndarray, refined: np.ndarray, radius_mm: float) -> None:
+        rec = self.rec
+        calib = rec.calibration
+        left, right = rec.rectified
+        table_to_camera = np.linalg.inv(rec.camera_to_table)
+        known = np.flatnonzero(np.isfinite(z))
+        guess = np.column_stack([xy[known], z[known]]) @ table_to_camera[:3, :3].T + table_to_camera[:3, 3]
+        focal = calib.focal_px
+        centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
+        start = focal * calib.baseline_mm / guess[:, 2]
+        radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
+        fit = refine_patches(left, right, rec.sole_mask, centres, radius_px, start)
+        for j, k in enumerate(known):
+            if not fit.ok[j]:
+                continue
+            pixels = fit.pixels[j]
+            a, b, c = fit.params[j]
+            d = a + b * (pixels[:, 0] - centres[j, 0]) + c * (pixels[:, 1] - centres[j, 1])
+            homogeneous = np.column_stack([pixels, d, np.ones(len(d))]) @ calib.Q.T
+            camera = homogeneous[:, :3] / homogeneous[:, 3:4]
+            table = camera @ rec.camera_to_table[:3, :3].T + rec.camera_to_table[:3, 3]
+            z[k], normals[k] = _plane_at(table, xy[k])
+            refined[k] = True
+
+
+def _plane_at(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray]:
+    """Least-squares plane z = z0 + gx (x - x0) + gy (y - y0) through points: z0 and the unit normal."""
+    design = np.column_stack([np.ones(len(points)), points[:, 0] - xy[0], points[:, 1] - xy[1]])
+    coef = np.linalg.lstsq(design, points[:, 2], rcond=None)[0]
+    normal = np.array([-coef[1], -coef[2], 1.0])
+    return float(coef[0]), normal / np.linalg.norm(normal)
+
+
+def _robust_plane(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray]:
+    """Plane through the points after trimming the highest and lowest TRIM of their residuals."""
+    z0, normal = _plane_at(points, xy)
+    predicted = z0 - ((points[:, 0] - xy[0]) * normal[0] + (points[:, 1] - xy[1]) * normal[1]) / normal[2]
+    residual = points[:, 2] - predicted
+    lo, hi = np.quantile(residual, [TRIM, 1.0 - TRIM])
+    keep = (residual >= lo) & (residual <= hi)
+    if keep.sum() >= 3:
+        z0, normal = _plane_at(points[keep], xy)
+    return z0, normal
