@@ -20,6 +20,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "calibrate",
     "rectify",
     "simulate",
+    "measure",
     "results",
     "run",
 )

@@ -10,6 +10,7 @@ import importlib
 # Adding a scene is one line here and a module of its own.
 SCENES: dict[str, str] = {
     "checkerboard": "cellctl.sim.checkerboard_cli:configure",
+    "sole": "cellctl.sim.sole_cli:configure",
 }
 
 
