@@ -35,11 +35,17 @@ def test_output_shape_type_and_nan_for_invalid():
     assert np.nanmedian(inner) == pytest.approx(3.0, abs=0.2)
 
 
-def test_accepts_bgr_and_grey_identically():
+def test_matches_bgr_in_grey_and_uses_the_colour_only_to_guide_the_weighted_stages():
     left, right, _ = _scene("tsukuba")
     m = StereoMatcher(0, 16)
-    grey = m.compute(cv2.cvtColor(left, cv2.COLOR_BGR2GRAY), cv2.cvtColor(right, cv2.COLOR_BGR2GRAY))
-    np.testing.assert_array_equal(m.compute(left, right), grey)
+    grey_left, grey_right = cv2.cvtColor(left, cv2.COLOR_BGR2GRAY), cv2.cvtColor(right, cv2.COLOR_BGR2GRAY)
+    colour, grey = m.compute_detailed(left, right), m.compute_detailed(grey_left, grey_right)
+    for stage in ("raw_left", "raw_right", "checked"):
+        np.testing.assert_array_equal(getattr(colour, stage), getattr(grey, stage), err_msg=stage)
+    assert not np.array_equal(colour.disparity, grey.disparity, equal_nan=True)
+    # A BGR image whose channels are equal is the grey image, also for the weighted stages.
+    grey_as_bgr = cv2.cvtColor(grey_left, cv2.COLOR_GRAY2BGR)
+    np.testing.assert_array_equal(m.compute(grey_as_bgr, grey_right), grey.disparity)
 
 
 def test_thread_count_and_simd_do_not_change_the_result():
