@@ -103,12 +103,17 @@ void cc_select_row(const cc_setup *s, const uint16_t *row, int stride, int width
 typedef struct cc_wm_tables {
     uint16_t colour[CC_WM_COLOURS];
     uint16_t space[CC_WM_SPACES];
+    uint16_t gather_pad[2];   /* the vector kernel reads 32 bits at each 16-bit entry */
 } cc_wm_tables;
 typedef struct cc_wm_image {  /* the guide: 1 or 3 interleaved 8-bit channels */
     const uint8_t *data;
     int width, height, channels;
     size_t stride;
+    const uint32_t *packed;   /* optional: channels packed per pixel (B | G << 8 | R << 16), 8 px slack */
+    int use_avx2;             /* the vector kernel may read `packed` */
 } cc_wm_image;
+/* Pack row y of the guide into out[0..width) (grey counts as three equal channels). */
+void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out);
 typedef struct cc_wm_hist {   /* per thread, one entry per disparity level, kept zero between pixels */
     int64_t *value;
     uint32_t *weight;

@@ -136,8 +136,10 @@ static size_t round64(size_t v) { return (v + 63) / 64 * 64; }
 
 size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, int threads)
 {
-    return 2 * round64((size_t)width * height * sizeof(int16_t)) +
-           round64(cc_wm_hist_bytes(p->num_disparities)) * (size_t)threads;
+    size_t n = (size_t)width * height;
+    /* map, levels and packed guide, each with 8 pixels of slack for the vector loads */
+    return round64(n * sizeof(int16_t)) + round64((n + 8) * sizeof(uint16_t)) +
+           round64((n + 8) * sizeof(uint32_t)) + round64(cc_wm_hist_bytes(p->num_disparities)) * (size_t)threads;
 }
 
 static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out)
@@ -158,7 +160,13 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
     const size_t hist_stride = round64(cc_wm_hist_bytes(p->num_disparities));
     int16_t *tmp = scratch;
     uint16_t *level = (uint16_t *)((uint8_t *)scratch + map_bytes);
-    uint8_t *hist_base = (uint8_t *)scratch + 2 * map_bytes;
+    uint32_t *packed = (uint32_t *)((uint8_t *)level + round64((n + 8) * sizeof(uint16_t)));
+    uint8_t *hist_base = (uint8_t *)packed + round64((n + 8) * sizeof(uint32_t));
+    cc_wm_image g = *guide;
+    g.packed = packed;
+    g.use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();
+    memset(level + n, 0xFF, 8 * sizeof(uint16_t));
+    memset(packed + n, 0, 8 * sizeof(uint32_t));
     cc_wm_tables tables;
     if (weighted_fill || wmedian)
         cc_wm_tables_init(&tables, p->wm_sigma_colour, p->wm_sigma_space);
@@ -182,6 +190,8 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                 memcpy(fill_out + o, checked + o, sizeof(int16_t) * width);
             if (weighted_fill)
                 levels_row(p, tmp + o, width, level + o);
+            if (weighted_fill || wmedian)
+                cc_wm_pack_row(&g, y, packed + o);
         }
         if (weighted_fill) { /* weighted median of the background fill where the check failed */
 #pragma omp for schedule(dynamic, 4)
@@ -189,7 +199,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                 for (int x = 0; x < width; x++) {
                     size_t o = (size_t)y * width + x;
                     filled[o] = checked[o] == CC_INVALID
-                                    ? cc_wm_pixel(&tables, guide, tmp, level, x, y, p->fill_radius, &h)
+                                    ? cc_wm_pixel(&tables, &g, tmp, level, x, y, p->fill_radius, &h)
                                     : tmp[o];
                 }
         }
@@ -207,7 +217,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
 #pragma omp for schedule(dynamic, 4)
             for (int y = 0; y < height; y++)
                 for (int x = 0; x < width; x++)
-                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, guide, wm_in, level, x, y,
+                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, &g, wm_in, level, x, y,
                                                               p->weighted_median, &h);
         }
     }

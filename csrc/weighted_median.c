@@ -14,6 +14,10 @@
 
 #include "internal.h"
 
+#if CC_HAVE_X86
+#include <immintrin.h>
+#endif
+
 static double rounded_weight(double x, float sigma)
 {
     return floor(256.0 * exp(-x / (double)sigma) + 0.5);
@@ -25,6 +29,7 @@ void cc_wm_tables_init(cc_wm_tables *t, float sigma_colour, float sigma_space)
         t->colour[c] = (uint16_t)rounded_weight(c, sigma_colour);
     for (int d2 = 0; d2 < CC_WM_SPACES; d2++)
         t->space[d2] = (uint16_t)rounded_weight(sqrt((double)d2), sigma_space);
+    t->gather_pad[0] = t->gather_pad[1] = 0;
 }
 
 size_t cc_wm_hist_bytes(int levels) { return (size_t)levels * (sizeof(uint32_t) + sizeof(int64_t)); }
@@ -83,6 +88,110 @@ static inline uint64_t vote_row(const cc_wm_tables *t, const uint8_t *gc, const 
     return total;
 }
 
+/* Weights of one window row below and at level c; returns the row's total. */
+static inline uint64_t split_row(const cc_wm_tables *t, const uint8_t *gc, const uint8_t *grow,
+                                 const uint16_t *lrow, int x0, int x1, int x, int dy2, int channels,
+                                 int c, uint64_t *below, uint64_t *at)
+{
+    uint64_t total = 0, lo = 0, eq = 0;
+    for (int xx = x0; xx <= x1; xx++) {
+        const int b = lrow[xx];
+        if (b == CC_WM_NO_LEVEL)
+            continue;
+        const uint8_t *q = grow + (size_t)xx * channels;
+        int cd = channels == 1 ? 3 * absdiff(gc[0], q[0])
+                               : absdiff(gc[0], q[0]) + absdiff(gc[1], q[1]) + absdiff(gc[2], q[2]);
+        uint64_t wt = (uint32_t)t->colour[cd] * t->space[dy2 + (xx - x) * (xx - x)];
+        total += wt;
+        lo += b < c ? wt : 0;
+        eq += b == c ? wt : 0;
+    }
+    *below += lo;
+    *at += eq;
+    return total;
+}
+
+void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out)
+{
+    const uint8_t *row = g->data + (size_t)y * g->stride;
+    for (int x = 0; x < g->width; x++) {
+        const uint8_t *q = row + (size_t)x * g->channels;
+        uint32_t b = q[0], gr = g->channels == 3 ? q[1] : q[0], r = g->channels == 3 ? q[2] : q[0];
+        out[x] = b | gr << 8 | r << 16;
+    }
+}
+
+#if CC_HAVE_X86
+/* split_row for 8 neighbours at a time, from the packed guide: the same
+ * integer weights as the scalar loop, so the same decision. */
+__attribute__((target("avx2"))) static void split_window_avx2(const cc_wm_tables *t, const cc_wm_image *g,
+                                                             const uint16_t *level, int x, int y, int x0, int x1,
+                                                             int y0, int y1, int c, uint64_t sums[3])
+{
+    const int w = g->width;
+    const __m256i vc = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
+    const __m256i ones8 = _mm256_set1_epi8(1), ones16 = _mm256_set1_epi16(1);
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256i vlev = _mm256_set1_epi32(c), nolev = _mm256_set1_epi32(CC_WM_NO_LEVEL);
+    const __m256i low16 = _mm256_set1_epi32(0xFFFF), last = _mm256_set1_epi32(CC_WM_SPACES - 1);
+    __m256i tot = _mm256_setzero_si256(), below = tot, at = tot;
+    for (int yy = y0; yy <= y1; yy++) {
+        const uint32_t *prow = g->packed + (size_t)yy * w;
+        const uint16_t *lrow = level + (size_t)yy * w;
+        const __m256i dy2 = _mm256_set1_epi32((yy - y) * (yy - y));
+        for (int xx = x0; xx <= x1; xx += 8) {
+            __m256i q = _mm256_loadu_si256((const __m256i *)(prow + xx));
+            __m256i lv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(lrow + xx)));
+            __m256i ad = _mm256_sub_epi8(_mm256_max_epu8(q, vc), _mm256_min_epu8(q, vc));
+            __m256i cd = _mm256_madd_epi16(_mm256_maddubs_epi16(ad, ones8), ones16);
+            __m256i cw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->colour, cd, 2), low16);
+            __m256i dx = _mm256_add_epi32(_mm256_set1_epi32(xx - x), lane);
+            __m256i d2 = _mm256_min_epi32(_mm256_add_epi32(_mm256_mullo_epi32(dx, dx), dy2), last);
+            __m256i sw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->space, d2, 2), low16);
+            __m256i keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(lv, nolev),
+                                               _mm256_cmpgt_epi32(_mm256_set1_epi32(x1 - xx + 1), lane));
+            __m256i wt = _mm256_and_si256(_mm256_mullo_epi32(cw, sw), keep);
+            tot = _mm256_add_epi32(tot, wt);
+            below = _mm256_add_epi32(below, _mm256_and_si256(wt, _mm256_cmpgt_epi32(vlev, lv)));
+            at = _mm256_add_epi32(at, _mm256_and_si256(wt, _mm256_cmpeq_epi32(lv, vlev)));
+        }
+    }
+    __m256i v[3] = {tot, below, at};
+    for (int i = 0; i < 3; i++) { /* per-lane sums stay below 2^32: 31*31 votes of at most 2^16 */
+        uint32_t lanes[8];
+        _mm256_storeu_si256((__m256i *)lanes, v[i]);
+        sums[i] = 0;
+        for (int k = 0; k < 8; k++)
+            sums[i] += lanes[k];
+    }
+}
+#endif
+
+/* Whether the centre's own level c is the weighted median (the first level
+ * whose cumulative weight reaches half the total).  Most pixels are: then the
+ * output is the centre's value and no histogram is needed. */
+static int centre_is_median(const cc_wm_tables *t, const cc_wm_image *g, const uint16_t *level,
+                            const uint8_t *gc, int x, int y, int x0, int x1, int y0, int y1, int c)
+{
+    const int w = g->width, ch = g->channels;
+#if CC_HAVE_X86
+    if (g->use_avx2 && g->packed) {
+        uint64_t sums[3];
+        split_window_avx2(t, g, level, x, y, x0, x1, y0, y1, c, sums);
+        return 2 * sums[1] < sums[0] && 2 * (sums[1] + sums[2]) >= sums[0];
+    }
+#endif
+    uint64_t total = 0, below = 0, at = 0;
+    for (int yy = y0; yy <= y1; yy++) {
+        const uint8_t *grow = g->data + (size_t)yy * g->stride;
+        const uint16_t *lrow = level + (size_t)yy * w;
+        const int dy2 = (yy - y) * (yy - y);
+        total += ch == 3 ? split_row(t, gc, grow, lrow, x0, x1, x, dy2, 3, c, &below, &at)
+                         : split_row(t, gc, grow, lrow, x0, x1, x, dy2, 1, c, &below, &at);
+    }
+    return 2 * below < total && 2 * (below + at) >= total;
+}
+
 int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
                     const uint16_t *level, int x, int y, int radius, cc_wm_hist *h)
 {
@@ -93,6 +202,8 @@ int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *
     const uint8_t *gc = g->data + (size_t)y * g->stride + (size_t)x * ch;
     int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
     int x0 = x - radius < 0 ? 0 : x - radius, x1 = x + radius >= w ? w - 1 : x + radius;
+    if (centre_is_median(t, g, level, gc, x, y, x0, x1, y0, y1, level[o]))
+        return map[o];
     int lo = INT32_MAX, hi = -1;
     uint64_t total = 0;
     for (int yy = y0; yy <= y1; yy++) {
