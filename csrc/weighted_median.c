@@ -122,48 +122,95 @@ void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out)
 }
 
 #if CC_HAVE_X86
-/* split_row for 8 neighbours at a time, from the packed guide: the same
- * integer weights as the scalar loop, so the same decision. */
-__attribute__((target("avx2"))) static void split_window_avx2(const cc_wm_tables *t, const cc_wm_image *g,
-                                                             const uint16_t *level, int x, int y, int x0, int x1,
-                                                             int y0, int y1, int c, uint64_t sums[3])
+#define AVX2 __attribute__((target("avx2")))
+
+/* Votes of 8 neighbours xx..xx+7 of one window row, from the packed guide: the
+ * same integer weights as the scalar loops (0 where there is no level or the
+ * lane is past x1); their levels go to *levels. */
+AVX2 static inline __m256i chunk_weights(const cc_wm_tables *t, __m256i centre, const uint32_t *prow,
+                                         const uint16_t *lrow, int xx, int x, int x1, __m256i dy2,
+                                         __m256i *levels)
+{
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), low16 = _mm256_set1_epi32(0xFFFF);
+    __m256i q = _mm256_loadu_si256((const __m256i *)(prow + xx));
+    __m256i lv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(lrow + xx)));
+    __m256i ad = _mm256_sub_epi8(_mm256_max_epu8(q, centre), _mm256_min_epu8(q, centre));
+    __m256i cd = _mm256_madd_epi16(_mm256_maddubs_epi16(ad, _mm256_set1_epi8(1)), _mm256_set1_epi16(1));
+    __m256i cw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->colour, cd, 2), low16);
+    __m256i dx = _mm256_add_epi32(_mm256_set1_epi32(xx - x), lane);
+    __m256i d2 = _mm256_min_epi32(_mm256_add_epi32(_mm256_mullo_epi32(dx, dx), dy2),
+                                  _mm256_set1_epi32(CC_WM_SPACES - 1));
+    __m256i sw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->space, d2, 2), low16);
+    __m256i keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(lv, _mm256_set1_epi32(CC_WM_NO_LEVEL)),
+                                       _mm256_cmpgt_epi32(_mm256_set1_epi32(x1 - xx + 1), lane));
+    *levels = lv;
+    return _mm256_and_si256(_mm256_mullo_epi32(cw, sw), keep);
+}
+
+AVX2 static uint64_t hsum32(__m256i v)
+{
+    uint32_t lanes[8];
+    _mm256_storeu_si256((__m256i *)lanes, v);
+    uint64_t s = 0;
+    for (int k = 0; k < 8; k++)
+        s += lanes[k];
+    return s;
+}
+
+/* Total weight and the weight below and at level c of the whole window.
+ * Per-lane sums stay below 2^32: at most 31 * 31 votes of at most 2^16. */
+AVX2 static void split_window_avx2(const cc_wm_tables *t, const cc_wm_image *g, const uint16_t *level,
+                                   int x, int y, int x0, int x1, int y0, int y1, int c, uint64_t sums[3])
 {
     const int w = g->width;
-    const __m256i vc = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
-    const __m256i ones8 = _mm256_set1_epi8(1), ones16 = _mm256_set1_epi16(1);
-    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    const __m256i vlev = _mm256_set1_epi32(c), nolev = _mm256_set1_epi32(CC_WM_NO_LEVEL);
-    const __m256i low16 = _mm256_set1_epi32(0xFFFF), last = _mm256_set1_epi32(CC_WM_SPACES - 1);
-    __m256i tot = _mm256_setzero_si256(), below = tot, at = tot;
+    const __m256i centre = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
+    const __m256i vlev = _mm256_set1_epi32(c);
+    __m256i tot = _mm256_setzero_si256(), below = tot, at = tot, lv;
     for (int yy = y0; yy <= y1; yy++) {
-        const uint32_t *prow = g->packed + (size_t)yy * w;
-        const uint16_t *lrow = level + (size_t)yy * w;
         const __m256i dy2 = _mm256_set1_epi32((yy - y) * (yy - y));
         for (int xx = x0; xx <= x1; xx += 8) {
-            __m256i q = _mm256_loadu_si256((const __m256i *)(prow + xx));
-            __m256i lv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(lrow + xx)));
-            __m256i ad = _mm256_sub_epi8(_mm256_max_epu8(q, vc), _mm256_min_epu8(q, vc));
-            __m256i cd = _mm256_madd_epi16(_mm256_maddubs_epi16(ad, ones8), ones16);
-            __m256i cw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->colour, cd, 2), low16);
-            __m256i dx = _mm256_add_epi32(_mm256_set1_epi32(xx - x), lane);
-            __m256i d2 = _mm256_min_epi32(_mm256_add_epi32(_mm256_mullo_epi32(dx, dx), dy2), last);
-            __m256i sw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->space, d2, 2), low16);
-            __m256i keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(lv, nolev),
-                                               _mm256_cmpgt_epi32(_mm256_set1_epi32(x1 - xx + 1), lane));
-            __m256i wt = _mm256_and_si256(_mm256_mullo_epi32(cw, sw), keep);
+            __m256i wt = chunk_weights(t, centre, g->packed + (size_t)yy * w, level + (size_t)yy * w,
+                                       xx, x, x1, dy2, &lv);
             tot = _mm256_add_epi32(tot, wt);
             below = _mm256_add_epi32(below, _mm256_and_si256(wt, _mm256_cmpgt_epi32(vlev, lv)));
             at = _mm256_add_epi32(at, _mm256_and_si256(wt, _mm256_cmpeq_epi32(lv, vlev)));
         }
     }
-    __m256i v[3] = {tot, below, at};
-    for (int i = 0; i < 3; i++) { /* per-lane sums stay below 2^32: 31*31 votes of at most 2^16 */
-        uint32_t lanes[8];
-        _mm256_storeu_si256((__m256i *)lanes, v[i]);
-        sums[i] = 0;
-        for (int k = 0; k < 8; k++)
-            sums[i] += lanes[k];
+    sums[0] = hsum32(tot);
+    sums[1] = hsum32(below);
+    sums[2] = hsum32(at);
+}
+
+/* The histogram votes of the window: weights eight at a time, then scattered.
+ * A vote of weight 0 changes nothing, so skipping it keeps the result. */
+AVX2 static uint64_t vote_window_avx2(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
+                                      const uint16_t *level, int x, int y, int x0, int x1, int y0, int y1,
+                                      cc_wm_hist *h, int *lo, int *hi)
+{
+    const int w = g->width;
+    const __m256i centre = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
+    uint64_t total = 0;
+    uint32_t wt[8], lv[8];
+    __m256i lvv;
+    for (int yy = y0; yy <= y1; yy++) {
+        const size_t r = (size_t)yy * w;
+        const __m256i dy2 = _mm256_set1_epi32((yy - y) * (yy - y));
+        for (int xx = x0; xx <= x1; xx += 8) {
+            _mm256_storeu_si256((__m256i *)wt, chunk_weights(t, centre, g->packed + r, level + r, xx, x, x1, dy2, &lvv));
+            _mm256_storeu_si256((__m256i *)lv, lvv);
+            for (int k = 0; k < 8; k++) {
+                if (!wt[k])
+                    continue;
+                const int b = (int)lv[k];
+                h->weight[b] += wt[k];
+                h->value[b] += (int64_t)wt[k] * map[r + xx + k];
+                total += wt[k];
+                *lo = b < *lo ? b : *lo;
+                *hi = b > *hi ? b : *hi;
+            }
+        }
     }
+    return total;
 }
 #endif
 
@@ -206,6 +253,11 @@ int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *
         return map[o];
     int lo = INT32_MAX, hi = -1;
     uint64_t total = 0;
+#if CC_HAVE_X86
+    if (g->use_avx2 && g->packed)
+        total = vote_window_avx2(t, g, map, level, x, y, x0, x1, y0, y1, h, &lo, &hi);
+    else
+#endif
     for (int yy = y0; yy <= y1; yy++) {
         const size_t r = (size_t)yy * w;
         const uint8_t *grow = g->data + (size_t)yy * g->stride;
