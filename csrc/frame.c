@@ -171,7 +171,7 @@ void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int s
 #pragma omp parallel num_threads(threads)
     {
         uint8_t *mine = scratch + cc_frame_scratch_bytes(w) * (size_t)omp_get_thread_num();
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 8)
         for (int i = 0; i < 2 * h; i++) {
             int y = i >> 1, mirrored = i & 1;
             prepare_row(f, s, mirrored ? right : left, mirrored ? stride_right : stride_left, y, mirrored, mine);

@@ -178,7 +178,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
         cc_wm_hist h = cc_wm_hist_at(hist_base + hist_stride * (size_t)omp_get_thread_num(), p->num_disparities);
         if (weighted_fill || wmedian)
             cc_wm_hist_clear(&h, p->num_disparities);
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 8)
         for (int y = 0; y < height; y++) {
             size_t o = (size_t)y * width;
             lr_check_row(p, raw_left + o, raw_right + o, width, checked + o);
@@ -203,7 +203,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                                     : tmp[o];
                 }
         }
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 8)
         for (int y = 0; y < height; y++) {
             size_t o = (size_t)y * width;
             if (p->median)
