@@ -39,6 +39,12 @@ _ERRORS = {
 }
 
 
+# Parameters stored under the same name and unit in the C struct cc_params.
+_SAME_IN_C = ("min_disparity", "num_disparities", "lambda_census", "lambda_bt", "cost_scale", "p1", "p2",
+              "p2_gamma", "paths", "median", "fill_radius", "weighted_median", "wm_sigma_colour",
+              "wm_sigma_space", "threads")
+
+
 @dataclass(frozen=True)
 class MatcherParams:
     """Every parameter of the matcher; the defaults are the tuned ones of the C core."""
@@ -69,26 +75,13 @@ class MatcherParams:
         """The C struct, after the core's own validation (ValueError naming the problem)."""
         p = ffi.new("cc_params *")
         lib.cc_params_default(p)
-        p.min_disparity = self.min_disparity
-        p.num_disparities = self.num_disparities
+        for name in _SAME_IN_C:
+            setattr(p, name, getattr(self, name))
         p.census_width, p.census_height = self.census_window
         p.cost_mode = _choice("cost", self.cost, _COSTS)
-        p.lambda_census = self.lambda_census
-        p.lambda_bt = self.lambda_bt
-        p.cost_scale = self.cost_scale
-        p.p1 = self.p1
-        p.p2 = self.p2
-        p.p2_gamma = self.p2_gamma
-        p.paths = self.paths
         p.subpixel = int(self.subpixel)
         p.lr_max_diff = -1 if self.lr_max_diff < 0 else round(self.lr_max_diff * DISP_SCALE)
         p.fill_mode = _choice("fill", self.fill, _FILLS)
-        p.median = self.median
-        p.fill_radius = self.fill_radius
-        p.weighted_median = self.weighted_median
-        p.wm_sigma_colour = self.wm_sigma_colour
-        p.wm_sigma_space = self.wm_sigma_space
-        p.threads = self.threads
         p.simd = _choice("simd", self.simd, _SIMD)
         message = ffi.new("const char **")
         if lib.cc_params_check(p, message) != 0:
@@ -99,17 +92,10 @@ class MatcherParams:
 def _c_defaults() -> dict[str, Any]:
     p = ffi.new("cc_params *")
     lib.cc_params_default(p)
-    names = {v: k for k, v in _COSTS.items()}, {v: k for k, v in _FILLS.items()}
-    return dict(
-        min_disparity=p.min_disparity, num_disparities=p.num_disparities,
-        census_window=(p.census_width, p.census_height), cost=names[0][p.cost_mode],
-        lambda_census=float(p.lambda_census), lambda_bt=float(p.lambda_bt), cost_scale=p.cost_scale,
-        p1=p.p1, p2=p.p2, p2_gamma=p.p2_gamma, paths=p.paths, subpixel=bool(p.subpixel),
-        lr_max_diff=p.lr_max_diff / DISP_SCALE, fill=names[1][p.fill_mode], median=p.median,
-        fill_radius=p.fill_radius, weighted_median=p.weighted_median,
-        wm_sigma_colour=float(p.wm_sigma_colour), wm_sigma_space=float(p.wm_sigma_space),
-        threads=p.threads, simd="auto",
-    )
+    costs, fills = {v: k for k, v in _COSTS.items()}, {v: k for k, v in _FILLS.items()}
+    return {name: getattr(p, name) for name in _SAME_IN_C} | dict(
+        census_window=(p.census_width, p.census_height), cost=costs[p.cost_mode], subpixel=bool(p.subpixel),
+        lr_max_diff=p.lr_max_diff / DISP_SCALE, fill=fills[p.fill_mode], simd="auto")
 
 
 DEFAULTS: dict[str, Any] = _c_defaults()

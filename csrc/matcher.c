@@ -183,22 +183,23 @@ static int matcher_reserve(cc_matcher *m, int width, int height)
     return CC_OK;
 }
 
-/* Runs the cost and the aggregation passes; pass 3 also selects disparities. */
-static int run_passes(cc_matcher *m, const uint8_t *left, const uint8_t *right, int width,
-                      int height, int stride_left, int stride_right, int16_t *raw_left,
-                      int16_t *raw_right, uint16_t *volume_out)
+/* Checks the pair against the parameters and makes the buffers fit it. */
+static int matcher_prepare(cc_matcher *m, const uint8_t *left, const uint8_t *right, int width,
+                           int height, int stride_left, int stride_right)
 {
     int rc = cc_check_images(left, right, width, height, stride_left, stride_right, &m->setup.p);
-    if (rc == CC_OK)
-        rc = matcher_reserve(m, width, height);
-    if (rc != CC_OK)
-        return rc;
+    return rc == CC_OK ? matcher_reserve(m, width, height) : rc;
+}
+
+/* The cost and the aggregation passes of a prepared pair; pass 3 also selects disparities. */
+static void run_passes(cc_matcher *m, const uint8_t *left, const uint8_t *right, int stride_left,
+                       int stride_right, int16_t *raw_left, int16_t *raw_right, uint16_t *volume_out)
+{
     cc_frame_prepare(&m->frame, &m->setup, left, stride_left, right, stride_right, m->ws.threads,
                      m->ws.scratch);
     cc_pass_vertical(&m->setup, &m->frame, &m->ws, 1);
     cc_pass_vertical(&m->setup, &m->frame, &m->ws, 0);
     cc_pass_rows(&m->setup, &m->frame, &m->ws, raw_left, raw_right, volume_out);
-    return CC_OK;
 }
 
 int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
@@ -215,9 +216,7 @@ int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
         return CC_ERR_PARAM;
     if (g.stride < (size_t)width * g.channels)
         return CC_ERR_SIZE;
-    int rc = cc_check_images(left, right, width, height, stride_left, stride_right, &m->setup.p);
-    if (rc == CC_OK)
-        rc = matcher_reserve(m, width, height);
+    int rc = matcher_prepare(m, left, right, width, height, stride_left, stride_right);
     if (rc != CC_OK)
         return rc;
     size_t n = (size_t)width * height;
@@ -225,9 +224,7 @@ int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
     raw_right = raw_right ? raw_right : m->maps + n;
     checked = checked ? checked : m->maps + 2 * n;
     filled = filled ? filled : m->maps + 3 * n;
-    rc = run_passes(m, left, right, width, height, stride_left, stride_right, raw_left, raw_right, NULL);
-    if (rc != CC_OK)
-        return rc;
+    run_passes(m, left, right, stride_left, stride_right, raw_left, raw_right, NULL);
     cc_postprocess_maps(&m->setup.p, raw_left, raw_right, &g, width, height, checked, filled, disp,
                         m->post, m->ws.threads);
     return CC_OK;
@@ -238,13 +235,12 @@ int cc_aggregate(cc_matcher *m, const uint8_t *left, const uint8_t *right,
 {
     if (!m || !out)
         return CC_ERR_NULL;
-    int rc = cc_check_images(left, right, width, height, stride_left, stride_right, &m->setup.p);
-    if (rc == CC_OK)
-        rc = matcher_reserve(m, width, height);
+    int rc = matcher_prepare(m, left, right, width, height, stride_left, stride_right);
     if (rc != CC_OK)
         return rc;
     size_t n = (size_t)width * height;
-    return run_passes(m, left, right, width, height, stride_left, stride_right, m->maps, m->maps + n, out);
+    run_passes(m, left, right, stride_left, stride_right, m->maps, m->maps + n, out);
+    return CC_OK;
 }
 
 int cc_census(const uint8_t *img, int width, int height, int stride,
