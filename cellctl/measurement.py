@@ -23,11 +23,13 @@ from cellctl.reconstruction import Reconstruction
 from cellctl.surface import MIN_CLOUD_POINTS, SoleSurface
 
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
-HEIGHT_RADIUS_MM = 8.0
+HEIGHT_RADIUS_MM = 8.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
 GLUE_OFFSET_MM = 2.0
 GLUE_SPACING_MM = 2.0
-GLUE_FIT_RADIUS_MM = 3.0
+GLUE_FIT_RADIUS_MM = 4.0
+GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
+GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
 OUTLINE_SMOOTHING_MM = 2.0  # Gaussian along the outline: removes the raster's staircase, keeps the shape
 
 
@@ -175,21 +177,56 @@ def glue_path(
 
     Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
     offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
+    Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
+    from the slope along the path and the slope between the rings (a patch's own tilt is too noisy on a
+    weakly textured sole: ~10 degrees).
     """
     resampled = _resample_closed(outline, 0.25)
     inward = -_outward_normals(resampled)
     path_xy = _resample_closed(resampled + offset_mm * inward, spacing_mm)
     start = int(np.argmin((path_xy - centroid) @ axis))  # the heel end
     path_xy = np.roll(path_xy, -start, axis=0)
-    samples = surface.sample(path_xy, GLUE_FIT_RADIUS_MM)
-    missing = np.flatnonzero(~np.isfinite(samples.z))
+    path_inward = -_outward_normals(path_xy)
+    inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
+    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM)
+    missing = np.flatnonzero(~np.isfinite(samples.z[: len(path_xy)]))
     if missing.size:
         x, y = path_xy[missing[0]]
         return None, (
             f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
             f"({missing.size} of {len(path_xy)} path points)"
         )
-    return GluePath(np.column_stack([path_xy, samples.z]), samples.normals, closed=True), None
+    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth along
+    # the path, so a Gaussian along the arc takes the rest (its bias, z'' sigma^2 / 2, is ~0.01 mm here).
+    sigma = GLUE_SMOOTHING_MM / spacing_mm
+    z = _smooth_along(samples.z[: len(path_xy)], sigma)
+    inner = samples.z[len(path_xy) :]
+    inner = np.where(np.isfinite(inner), inner, samples.z[: len(path_xy)])  # no inner sample: flat across
+    across = _smooth_along(inner, sigma) - z
+    return GluePath(np.column_stack([path_xy, z]), _path_normals(path_xy, z, path_inward, across), closed=True), None
+
+
+def _path_normals(path_xy: np.ndarray, z: np.ndarray, inward: np.ndarray, across_rise: np.ndarray) -> np.ndarray:
+    """Unit surface normals from the slope along a closed path and the rise over GLUE_NORMAL_BASE_MM inward."""
+    step = np.roll(path_xy, -1, axis=0) - np.roll(path_xy, 1, axis=0)
+    run = np.maximum(np.linalg.norm(step, axis=1), 1e-9)
+    tangent = step / run[:, None]
+    along = (np.roll(z, -1) - np.roll(z, 1)) / run
+    gradient = along[:, None] * tangent + (across_rise / GLUE_NORMAL_BASE_MM)[:, None] * inward
+    normals = np.column_stack([-gradient, np.ones(len(z))])
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def _smooth_along(values: np.ndarray, sigma_samples: float) -> np.ndarray:
+    """Gaussian smoothing of per-point values (N or N x k) along a closed path."""
+    radius = min(int(np.ceil(3 * sigma_samples)), len(values) // 2)
+    if radius < 1:
+        return values
+    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma_samples).ravel()
+    padded = np.concatenate([values[-radius:], values, values[:radius]])
+    if padded.ndim == 1:
+        return np.convolve(padded, kernel, mode="valid")
+    return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(padded.shape[1])])
 
 
 def _resample_closed(poly: np.ndarray, spacing: float) -> np.ndarray:

@@ -7,12 +7,15 @@ Steps (after Wang et al. 2022, section 2.2.4 and the colour filter of section 3)
 2. reproject through Q into the rectified left camera frame;
 3. find the table plane (RANSAC, refined by least squares) or use a plane stored at set-up, and move
    everything into the table frame (docs/measurements.md);
-4. background removal: points at least `min_height_mm` above the table, and, when the sole's colour
-   separates from the table's, only sole-coloured points (the paper's colour filter, with the threshold
-   learnt from the scene). The colour filter also removes the halo of table pixels that window-based
-   matching drags onto the sole's disparity at its edge (edge fattening), which would lengthen the sole;
+1b. drop pixels without texture (flat, e.g. clipped): they match anywhere and can pass the LR check;
+4. background removal: points at least `min_height_mm` above the table and sole-coloured (the paper's
+   colour filter, with the threshold learnt from the scene). The colour filter also removes the halo of
+   table pixels that window-based matching drags onto the sole's disparity at its edge (edge fattening,
+   1-5 mm on simulated soles); a sole whose colour does not separate from the table's is therefore not
+   measured (invalid, with the reason) rather than measured too long;
 5. the sole is the largest connected region of the footprint raster (cellctl.footprint), holes filled;
-6. statistical outlier removal (Open3D) on the sole's points.
+6. statistical outlier removal (Open3D) on the sole's points, and a mask of the sole's pixels so that
+   heights can be refined on the images (cellctl.surface, cellctl.subpixel).
 
 `SoleReconstructor.reconstruct(left, right)` runs all of it; `points_from_disparity` and `segment` are the
 two halves, so a cloud from another source (e.g. the simulator's true depth) can be segmented the same way.
@@ -37,7 +40,9 @@ TABLE_INLIER_MM = 1.5  # RANSAC inlier distance for the table plane
 MIN_VALID_FRACTION = 0.15  # fewer measured pixels than this: the pair cannot be trusted
 MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
 BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
-FOOTPRINT_CELL_MM = 0.25
+FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is not quantised to a coarse grid
+SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
+MIN_TEXTURE_DN = 0.5  # grey-level std over 5 x 5 px below which a pixel has nothing to match (sensor noise is ~1)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 # Only really measured pixels (no fill); the widest census window, because the sole's texture is weak:
 # on simulated soles it halves the matcher's height noise for the same time.
@@ -180,7 +185,10 @@ class SoleReconstructor:
         timings["match"] = time.perf_counter() - start
         start = time.perf_counter()
         disparity = result.disparity
-        measured = result.valid & np.isfinite(disparity)
+        grey_left, grey_right = _grey(rect_left), _grey(rect_right)
+        # A flat patch (clipped highlight, covered lens) matches at any disparity and can still pass the
+        # left-right check: such pixels are not measurements.
+        measured = result.valid & np.isfinite(disparity) & (_local_std(grey_left) >= MIN_TEXTURE_DN)
         xyz = cv2.reprojectImageTo3D(np.where(measured, disparity, 0.0).astype(np.float32), self.calib.Q)
         ys, xs = np.nonzero(measured)
         cloud = StereoCloud(
@@ -190,7 +198,7 @@ class SoleReconstructor:
             disparity=disparity[ys, xs].astype(np.float64),
             image_size=self.calib.image_size,
             timings=timings,
-            rectified=(_grey(rect_left), _grey(rect_right)),
+            rectified=(grey_left, grey_right),
             calibration=self.calib,
         )
         timings["reproject"] = time.perf_counter() - start
@@ -211,6 +219,11 @@ class SoleReconstructor:
 def _grey(image: np.ndarray) -> np.ndarray:
     grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
     return grey.astype(np.float32)
+
+
+def _local_std(grey: np.ndarray, size: int = 5) -> np.ndarray:
+    mean = cv2.blur(grey, (size, size))
+    return np.sqrt(np.maximum(cv2.blur(grey * grey, (size, size)) - mean * mean, 0.0))
 
 
 def _smoothed_colours(image: np.ndarray) -> np.ndarray:
@@ -265,10 +278,16 @@ class _Segmentation:
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table")
         keep = high & self._colour_filter(points, footprint, np.abs(z) < TABLE_INLIER_MM, high)
-        if self.colour_filter:
-            footprint = _footprint(points[:, :2], keep)
-            if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
-                return self._fail("no sole in view: the region above the table has the table's colour")
+        if not self.colour_filter:
+            # Without the colour edge, matching halos widen the sole by 1-5 mm (simulated soles): no length.
+            return self._fail(
+                f"sole and table colours too similar to find the sole's edge (they differ by "
+                f"{self.separation:.1f} standard deviations, need {MIN_COLOUR_SEPARATION:g}): use a table "
+                "surface that contrasts with the sole"
+            )
+        footprint = _footprint(points[:, :2], keep)
+        if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
+            return self._fail("no sole in view: the region above the table has the table's colour")
         keep &= footprint.contains(points[:, :2])
         self.timings["background"] = time.perf_counter() - start
         start = time.perf_counter()
@@ -306,7 +325,7 @@ class _Segmentation:
         x, y = np.round(self.cloud.pixels[index]).astype(int).T
         mask[y, x] = 1
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-        return cv2.erode(mask, np.ones((3, 3), np.uint8)) > 0
+        return cv2.erode(mask, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
 
     def _colour_filter(self, points: np.ndarray, footprint: Footprint, table: np.ndarray, high: np.ndarray) -> np.ndarray:
         """Sole-coloured points (all True when the colours do not separate).
