@@ -21,6 +21,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "rectify",
     "simulate",
     "measure",
+    "bench_sole",
     "results",
     "run",
 )

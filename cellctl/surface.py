@@ -41,11 +41,29 @@ class SoleSurface:
     def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
         """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
-        z, normals = self._from_cloud(xy, radius_mm)
         refined = np.zeros(len(xy), bool)
-        if self.rec.rectified is not None and np.any(np.isfinite(z)):
+        if self.rec.rectified is None:
+            z, normals = self._from_cloud(xy, radius_mm)
+            return SurfaceSamples(z, normals, refined)
+        z = self._coarse_heights(xy, radius_mm)
+        normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
+        if np.any(np.isfinite(z)):
             self._refine(xy, z, normals, refined, radius_mm)
+        # Where the images gave no fit (too few pixels, no convergence), fall back to the cloud.
+        rest = np.flatnonzero(~refined)
+        if rest.size:
+            z[rest], normals[rest] = self._from_cloud(xy[rest], radius_mm)
         return SurfaceSamples(z, normals, refined)
+
+    def _coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
+        """Median height of the cloud's points within the radius: only the start of the refinement."""
+        points = self.rec.sole_points
+        z = np.full(len(xy), np.nan)
+        for k, (x, y) in enumerate(xy):
+            count, index, _ = self._tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
+            if count >= MIN_CLOUD_POINTS:
+                z[k] = np.median(points[np.asarray(index), 2])
+        return z
 
     def _from_cloud(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
         points = self.rec.sole_points

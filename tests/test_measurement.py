@@ -58,13 +58,6 @@ def errors(scene: SoleScene, result: SoleMeasurement) -> np.ndarray:
     ])
 
 
-def measured_to_true_table(scene: SoleScene, reconstruction: Reconstruction) -> np.ndarray:
-    """4 x 4 map from the measured table frame to the simulator's table frame (both have z = 0 on the table)."""
-    rectified_to_left = np.eye(4)
-    rectified_to_left[:3, :3] = scene.calib.R1.T
-    return scene.camera_pose @ rectified_to_left @ np.linalg.inv(reconstruction.camera_to_table)
-
-
 # ---- on the true depth: segmentation and measurement alone ----------------------------------------------
 
 
@@ -78,7 +71,7 @@ def test_measurement_on_true_depth(rig, reconstructor, seed: int, colour: str) -
     assert abs(length) < 0.5
     assert abs(heel) < 0.05 and abs(toe) < 0.05
     # The measured table frame really is the table: its z = 0 plane maps onto the true one.
-    transform = measured_to_true_table(scene, reconstruction)
+    transform = scene.table_from_measured(reconstruction.camera_to_table)
     assert abs(transform[2, 3]) < 0.05 and transform[2, 2] == pytest.approx(1.0, abs=1e-4)
 
 
@@ -110,27 +103,15 @@ def test_glue_path_follows_the_edge_on_the_surface(stereo_results) -> None:  # n
     assert 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) > 0
     assert np.argmin(xy @ result.axis) == 0
     # In the simulator's frame: 2 mm inside the true outline, on the true top surface, with its normal.
-    transform = measured_to_true_table(scene, reconstruction)
+    transform = scene.table_from_measured(reconstruction.camera_to_table)
     true_xyz = path.points @ transform[:3, :3].T + transform[:3, 3]
     outline = scene.sole.outline_table(4000).astype(np.float32).reshape(-1, 1, 2)
     inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in true_xyz[:, :2]])
     assert np.all(np.abs(inset - 2.0) < 0.6), (inset.min(), inset.max())
     height_error = true_xyz[:, 2] - scene.sole.top_height_at(true_xyz[:, :2])
     assert np.percentile(np.abs(height_error), 95) < 0.6 and np.abs(height_error).max() < 1.0
-    angles = np.degrees(np.arccos(np.clip(np.sum(path.normals @ transform[:3, :3].T * true_normals(scene, true_xyz), axis=1), -1, 1)))
+    angles = np.degrees(np.arccos(np.clip(np.sum(path.normals @ transform[:3, :3].T * scene.sole.top_normal_at(true_xyz[:, :2]), axis=1), -1, 1)))
     assert np.median(angles) < 3.0 and angles.max() < 8.0, (np.median(angles), angles.max())
-
-
-def true_normals(scene: SoleScene, xyz: np.ndarray) -> np.ndarray:
-    """The model's top-surface normals at table points, in the simulator's table frame."""
-    sole = scene.sole
-    uv = sole.pose.to_sole(xyz[:, :2], sole.shape.length)
-    local = sole.shape.top_normal(uv[:, 0], uv[:, 1])
-    along, across, up = local.T
-    if sole.pose.mirrored:
-        across = -across
-    a = np.radians(sole.pose.yaw_deg)
-    return np.column_stack([np.cos(a) * along - np.sin(a) * across, np.sin(a) * along + np.cos(a) * across, up])
 
 
 # ---- bad input -----------------------------------------------------------------------------------------

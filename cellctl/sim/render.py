@@ -214,21 +214,12 @@ class SceneRenderer:
         z = hits["points"][sole, 2]
         part = hits["part"][sole]
         # Smooth analytic normals on the top surface; the walls and underside are flat facets.
-        local = shape.top_normal(uv[:, 0], uv[:, 1])
-        top_normals = self._sole_normals_to_table(local)
+        top_normals = self.sole.top_normal_at(hits["points"][sole, :2])
         facet = hits["facet_normals"][sole]
         normals[sole] = np.where((part == 0)[:, None], top_normals, facet)
         # Walls take the texture at (u, v + z) so that it varies down the wall too.
         tex_v = np.where(part == 0, uv[:, 1], uv[:, 1] + z)
         texture[sole] = self._sole_texture.sample(uv[:, 0], tex_v)
-
-    def _sole_normals_to_table(self, local: np.ndarray) -> np.ndarray:
-        pose = self.sole.pose
-        nu, nv, nz = local.T
-        if pose.mirrored:
-            nv = -nv
-        a = np.radians(pose.yaw_deg)
-        return np.column_stack([np.cos(a) * nu - np.sin(a) * nv, np.sin(a) * nu + np.cos(a) * nv, nz])
 
     def _edge_pixels(self, hits: dict[str, np.ndarray], shape: tuple[int, int]) -> np.ndarray:
         """Indices of pixels next to a change of surface or a depth step: these get supersampled."""

@@ -73,6 +73,12 @@ class SoleScene:
                 return False
         return True
 
+    def table_from_measured(self, camera_to_table: np.ndarray) -> np.ndarray:
+        """4 x 4 map from a measured table frame (given as rectified left camera -> table) to this scene's."""
+        rectified_to_raw = np.eye(4)
+        rectified_to_raw[:3, :3] = self.calib.R1.T  # rectified = R1 @ raw
+        return self.camera_pose @ rectified_to_raw @ np.linalg.inv(camera_to_table)
+
     def render(self) -> RenderedPair:
         return SceneRenderer(self.calib, self.camera_pose, self.sole, self.color, self.seed).render()
 

@@ -208,6 +208,15 @@ class SoleModel:
         uv = self.pose.to_sole(xy, self.shape.length)
         return self.shape.top_height(uv[:, 0], uv[:, 1])
 
+    def top_normal_at(self, xy: np.ndarray) -> np.ndarray:
+        """Unit normals (N x 3) of the top surface at table points, in the table frame."""
+        uv = self.pose.to_sole(xy, self.shape.length)
+        along, across, up = self.shape.top_normal(uv[:, 0], uv[:, 1]).T
+        if self.pose.mirrored:
+            across = -across
+        a = np.radians(self.pose.yaw_deg)
+        return np.column_stack([np.cos(a) * along - np.sin(a) * across, np.sin(a) * along + np.cos(a) * across, up])
+
     def truth(self) -> SoleTruth:
         """Length, heel and toe height as docs/measurements.md defines them, from the model geometry."""
         outline = self.outline_table()
