@@ -25,8 +25,8 @@ from cellctl.journal import Journal
 from cellctl.sdnotify import SystemdNotifier
 from cellctl.sim.scene import SoleScene
 from firmware_io.endpoints import TcpEndpoint
-from firmware_io.plc_sim import PlcSimulator, TriggerRefused
-from firmware_io.registers import ErrorCode, StatusBit
+from firmware_io.plc_sim import ModbusRequestError, PlcSimulator, TriggerRefused
+from firmware_io.registers import ErrorCode, Register, StatusBit
 from cellctl.sim.rig import default_rig
 from tests.sim_rig import write_half_size_rig
 
@@ -177,6 +177,31 @@ def test_trigger_during_a_busy_cycle_is_refused_and_the_cycle_is_answered(servic
     assert reading.ok
     header = plc.read_header()
     assert header.refused_triggers == refused_before + 1 and header.trigger == cycle
+
+
+def test_plc_disconnecting_mid_cycle_reconnects_and_reads_that_result(service: Service) -> None:
+    first = PlcSimulator(service.endpoint, heartbeat_limit_s=1.5)
+    first.connect()
+    cycle = first.next_cycle_number()
+    first.trigger(cycle)
+    first.close()  # the PLC goes away while the controller measures
+    with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as again:
+        reading = again.wait_result(cycle, timeout_s=10.0)
+        assert reading.ok and reading.cycle == cycle
+        record = Journal.open(service.daemon.config.journal.state_dir, readonly=True).find(cycle)
+        assert record is not None and record.length_mm == pytest.approx(reading.length_mm, abs=1e-3)
+        assert again.run_cycle(timeout_s=10.0).ok  # and the next cycle works on the new connection
+
+
+def test_malformed_requests_are_refused_and_the_service_carries_on(service: Service, plc: PlcSimulator) -> None:
+    with pytest.raises(ModbusRequestError) as refused:
+        plc.write_register(Register.HEEL_HEIGHT_MM, 1234)  # a result register is read-only for the PLC
+    assert refused.value.exception_code == 0x02
+    with pytest.raises(ModbusRequestError) as out_of_range:
+        plc.read_registers(20000, 4)
+    assert out_of_range.value.exception_code == 0x02
+    assert plc.read_header().status & HEALTHY == HEALTHY
+    assert plc.run_cycle(timeout_s=10.0).ok
 
 
 def test_stop_finishes_the_running_cycle_and_restart_loses_no_result(tmp_path: Path) -> None:
