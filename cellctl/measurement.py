@@ -23,7 +23,7 @@ from cellctl.reconstruction import Reconstruction
 from cellctl.surface import MIN_CLOUD_POINTS, SoleSurface
 
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
-HEIGHT_RADIUS_MM = 8.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
+HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
 GLUE_OFFSET_MM = 2.0
 GLUE_SPACING_MM = 2.0

@@ -44,28 +44,51 @@ def refine_patches(
     """Fit an affine disparity to each circular patch (centre (x, y), radius) of `mask` pixels.
 
     left, right: rectified grey images (float32); mask: bool, pixels that belong to the surface;
-    start: K initial disparities (a); slopes start at zero.
+    start: K initial disparities (a), or K x 3 initial (a, b, c); slopes default to zero.
     """
-    height, width = left.shape
+    ids, pixels = disc_pixels(mask, centres, radius_px)
+    start = np.asarray(start, np.float64)
+    params = start.reshape(-1, 3) if start.ndim == 2 else np.column_stack([start, np.zeros((len(start), 2))])
+    return fit_disparity_planes(left, right, ids, pixels, centres, params)
+
+
+def disc_pixels(mask: np.ndarray, centres: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(patch id, (x, y)) of the `mask` pixels within `radius_px` of each centre."""
+    height, width = mask.shape
     offsets = _disc_offsets(radius_px)
-    patch_id, xs, ys = [], [], []
-    for k, (cx, cy) in enumerate(np.asarray(centres, np.float64)):
+    patch_id, pixels = [], []
+    for k, (cx, cy) in enumerate(np.asarray(centres, np.float64).reshape(-1, 2)):
         px = np.round(cx).astype(int) + offsets[:, 0]
         py = np.round(cy).astype(int) + offsets[:, 1]
         inside = (px >= 0) & (px < width) & (py >= 0) & (py < height)
         px, py = px[inside], py[inside]
         on = mask[py, px]
         patch_id.append(np.full(int(on.sum()), k))
-        xs.append(px[on])
-        ys.append(py[on])
-    ids = np.concatenate(patch_id).astype(np.int64)
-    x = np.concatenate(xs).astype(np.float32)
-    y = np.concatenate(ys).astype(np.float32)
+        pixels.append(np.column_stack([px[on], py[on]]))
+    return np.concatenate(patch_id).astype(np.int64), np.vstack(pixels).astype(np.float64)
+
+
+def fit_disparity_planes(
+    left: np.ndarray,
+    right: np.ndarray,
+    ids: np.ndarray,
+    pixels: np.ndarray,
+    centres: np.ndarray,
+    start: np.ndarray,
+) -> PatchFit:
+    """Fit d = a + b (x - cx) + c (y - cy) to each patch: pixels (N x 2, x y) labelled by ids (N, 0..K-1).
+
+    start: K x 3 initial (a, b, c). Patches are sorted by id in the returned pixel lists.
+    """
+    order = np.argsort(ids, kind="stable")
+    ids = np.asarray(ids, np.int64)[order]
+    x = np.asarray(pixels, np.float64)[order, 0].astype(np.float32)
+    y = np.asarray(pixels, np.float64)[order, 1].astype(np.float32)
+    centres = np.asarray(centres, np.float64).reshape(-1, 2)
     count = len(centres)
-    params = np.zeros((count, 3))
-    params[:, 0] = start
-    dx = x - np.asarray(centres, np.float64)[ids, 0]
-    dy = y - np.asarray(centres, np.float64)[ids, 1]
+    params = np.array(start, np.float64).reshape(count, 3)
+    dx = x - centres[ids, 0]
+    dy = y - centres[ids, 1]
     sizes = np.bincount(ids, minlength=count)
     last_step = np.full(count, np.inf)
     for sigma, iterations in BLUR_LEVELS:
@@ -80,17 +103,25 @@ def refine_patches(
             last_step = np.abs(step[:, 0])
     ok = (sizes >= MIN_PATCH_PIXELS) & (last_step < 0.02) & np.all(np.isfinite(params), axis=1)
     split = np.cumsum(sizes)[:-1]
-    pixels = np.split(np.column_stack([x, y]).astype(np.float64), split)
-    return PatchFit(params, ok, pixels)
+    return PatchFit(params, ok, np.split(np.column_stack([x, y]).astype(np.float64), split))
 
 
 def _gauss_newton_step(l_val: np.ndarray, r_val: np.ndarray, r_grad: np.ndarray, ids: np.ndarray,
                        dx: np.ndarray, dy: np.ndarray, count: int) -> np.ndarray:
-    """One Gauss-Newton update of (a, b, c) per patch, on zero-mean intensities (robust to exposure offsets)."""
+    """One Gauss-Newton update of (a, b, c) per patch.
+
+    Intensities are compared after removing each patch's mean and scaling the right patch to the left one's
+    contrast: the two cameras never have quite the same gain, vignetting or highlights, and an uncorrected
+    brightness ramp across a patch shifts the fitted disparity.
+    """
     sizes = np.maximum(np.bincount(ids, minlength=count), 1)
     l_mean = np.bincount(ids, weights=l_val, minlength=count) / sizes
     r_mean = np.bincount(ids, weights=r_val, minlength=count) / sizes
-    error = (l_val - l_mean[ids]) - (r_val - r_mean[ids])
+    l_dev, r_dev = l_val - l_mean[ids], r_val - r_mean[ids]
+    gain = np.sqrt(np.bincount(ids, weights=l_dev**2, minlength=count) /
+                   np.maximum(np.bincount(ids, weights=r_dev**2, minlength=count), 1e-9))
+    r_grad = r_grad * gain[ids]
+    error = l_dev - gain[ids] * r_dev
     # Down-weight pixels with large residuals (specular spots, occlusion at the edge): Huber weights, scaled
     # by the patch's mean absolute residual (sqrt(pi / 2) * mean |e| is sigma for Gaussian noise; a median
     # would be more robust but costs a sort per patch and iteration).
