@@ -41,7 +41,7 @@ _ERRORS = {
 
 # Parameters stored under the same name and unit in the C struct cc_params.
 _SAME_IN_C = ("min_disparity", "num_disparities", "lambda_census", "lambda_bt", "cost_scale", "p1", "p2",
-              "p2_gamma", "paths", "median", "fill_radius", "weighted_median", "wm_sigma_colour",
+              "p2_gamma", "paths", "median", "fill_radius", "border_fit", "weighted_median", "wm_sigma_colour",
               "wm_sigma_space", "threads")
 
 
@@ -65,6 +65,7 @@ class MatcherParams:
     fill: str                        # "weighted" (background, then colour-weighted median), "background" or "none"
     median: int                      # 0, 3 or 5
     fill_radius: int                 # window radius (px) of the weighted fill, 1..15
+    border_fit: int                  # fill: border-occluded strips follow a line fitted to this many px, 0 = off
     weighted_median: int             # window radius (px) of the final colour-weighted median, 0 = off
     wm_sigma_colour: float           # weighted medians: colour scale, summed |dB| + |dG| + |dR|
     wm_sigma_space: float            # weighted medians: distance scale, px
@@ -135,7 +136,7 @@ def make_params(**overrides: Any) -> MatcherParams:
     if not (isinstance(window, (tuple, list)) and len(window) == 2):
         raise ValueError(f"census_window must be (width, height) (got {window!r})")
     ints = ("min_disparity", "num_disparities", "cost_scale", "p1", "p2", "p2_gamma", "paths", "median",
-            "fill_radius", "weighted_median", "threads")
+            "fill_radius", "border_fit", "weighted_median", "threads")
     for name in ints:
         v[name] = _as_int(name, v[name])
     for name in ("lambda_census", "lambda_bt", "lr_max_diff", "wm_sigma_colour", "wm_sigma_space"):

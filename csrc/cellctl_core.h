@@ -49,6 +49,8 @@ typedef struct cc_params {
     int fill_mode;          /* enum cc_fill_mode */
     int median;             /* 0 (off), 3 or 5 */
     int fill_radius;        /* CC_FILL_WEIGHTED: window radius of the weighted median over filled pixels */
+    int border_fit;         /* fill: border-occluded end strips of a row follow a line fitted to the
+                               next border_fit px of measurements (0: the nearest value), 0 or 2..64 */
     int weighted_median;    /* radius of the final colour-weighted median, 0 (off)..CC_MAX_WM_RADIUS */
     float wm_sigma_colour;  /* weighted medians: colour scale (summed |dB|+|dG|+|dR|), > 0 */
     float wm_sigma_space;   /* weighted medians: distance scale in px, > 0 */
@@ -61,6 +63,7 @@ typedef struct cc_params {
 #define CC_MAX_DIM 16384
 #define CC_BT_CAP 63        /* BT costs are truncated here before the rho table */
 #define CC_MAX_WM_RADIUS 15 /* largest weighted-median window: 31 x 31 */
+#define CC_MAX_BORDER_FIT 64
 
 /* Fills *p with the defaults (tuned on Middlebury v2, see docs/benchmarks.md). */
 void cc_params_default(cc_params *p);

@@ -26,6 +26,7 @@ void cc_params_default(cc_params *p)
     p->fill_mode = CC_FILL_WEIGHTED;
     p->median = 3;
     p->fill_radius = 9;
+    p->border_fit = 24;
     p->weighted_median = 3;
     p->wm_sigma_colour = 20.0f;
     p->wm_sigma_space = 8.0f;
@@ -84,6 +85,8 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("median must be 0, 3 or 5");
     if (p->fill_radius < 1 || p->fill_radius > CC_MAX_WM_RADIUS)
         REJECT("fill_radius must be between 1 and 15 (px)");
+    if (p->border_fit != 0 && (p->border_fit < 2 || p->border_fit > CC_MAX_BORDER_FIT))
+        REJECT("border_fit must be 0 (off) or between 2 and 64 (px of measurements the line is fitted to)");
     if (p->weighted_median < 0 || p->weighted_median > CC_MAX_WM_RADIUS)
         REJECT("weighted_median must be between 0 (off) and 15 (window radius in px)");
     if (!(p->wm_sigma_colour > 0.0f) || !isfinite(p->wm_sigma_colour))

@@ -69,6 +69,94 @@ static void fill_row(const int16_t *in, int width, int16_t *out)
     }
 }
 
+/* Border-occluded strips.  Left of the first kept pixel of a row (x < the
+ * largest disparity) the right camera may not see the surface at all, and
+ * the background fill would hold the edge value at a constant level while a
+ * slanted surface keeps sloping across the strip.  The strip is instead
+ * extrapolated along a line d = a + b * u fitted to the kept pixels of the
+ * next border_fit columns, u counted from the strip's edge, pooled over rows
+ * y - BORDER_ROWS .. y + BORDER_ROWS and only from pixels within BORDER_SAME
+ * of the edge value (the same surface).  Mirrored for the right border when
+ * the range has negative disparities.  Integer arithmetic: the slope in
+ * 1/(16 * 256) px per px, clamped to BORDER_MAX_SLOPE. */
+#define BORDER_ROWS 2
+#define BORDER_SAME (2 * CC_DISP_SCALE)
+#define BORDER_FRAC 256
+#define BORDER_MAX_SLOPE (CC_DISP_SCALE * BORDER_FRAC / 4) /* 1/4 px per px */
+
+/* floor(a / b) for b > 0. */
+static inline int64_t floor_div64(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+/* Fills out[x] for the strip pixels x0 <= x < x1 of row y, whose edge is the
+ * kept pixel `edge`; side = +1 for the left border, -1 for the right.  Returns
+ * 0 (and writes nothing) when the fit has fewer than border_fit points or no
+ * spread in u. */
+static int border_strip(const cc_params *p, const int16_t *checked, int width, int height, int y,
+                        int edge, int side, int x0, int x1, int16_t *out)
+{
+    const int K = p->border_fit, d0 = checked[(size_t)y * width + edge];
+    int64_t n = 0, su = 0, suu = 0, sv = 0, suv = 0;
+    int r0 = y - BORDER_ROWS < 0 ? 0 : y - BORDER_ROWS;
+    int r1 = y + BORDER_ROWS >= height ? height - 1 : y + BORDER_ROWS;
+    for (int yy = r0; yy <= r1; yy++) {
+        const int16_t *row = checked + (size_t)yy * width;
+        for (int u = 0; u < K; u++) {
+            int x = edge + side * u;
+            if (x < 0 || x >= width)
+                break;
+            int v = row[x];
+            if (v == CC_INVALID || (v > d0 ? v - d0 : d0 - v) > BORDER_SAME)
+                continue;
+            n++;
+            su += u;
+            suu += (int64_t)u * u;
+            sv += v;
+            suv += (int64_t)u * v;
+        }
+    }
+    int64_t den = n * suu - su * su;
+    if (n < K || den <= 0)
+        return 0;
+    int64_t b = floor_div64(2 * BORDER_FRAC * (n * suv - su * sv) + den, 2 * den);
+    b = b > BORDER_MAX_SLOPE ? BORDER_MAX_SLOPE : (b < -BORDER_MAX_SLOPE ? -BORDER_MAX_SLOPE : b);
+    int64_t a = floor_div64(2 * (BORDER_FRAC * sv - b * su) + n, 2 * n);
+    const int lo = p->min_disparity * CC_DISP_SCALE;
+    const int hi = (p->min_disparity + p->num_disparities - 1) * CC_DISP_SCALE;
+    for (int x = x0; x < x1; x++) {
+        int64_t v = floor_div64(2 * (a + b * side * (x - edge)) + BORDER_FRAC, 2 * BORDER_FRAC);
+        out[x] = (int16_t)(v < lo ? lo : (v > hi ? hi : v));
+    }
+    return 1;
+}
+
+/* Extrapolates the border-occluded strips of row y into out (a full row) and
+ * returns the strips' extent: [0, *left_end) and [*right_begin, width) were
+ * written, the pixels between were not. */
+static void border_fit_row(const cc_params *p, const int16_t *checked, int width, int height, int y,
+                           int16_t *out, int *left_end, int *right_begin)
+{
+    const int16_t *row = checked + (size_t)y * width;
+    const int dmin = p->min_disparity, dmax = dmin + p->num_disparities - 1;
+    *left_end = 0;
+    *right_begin = width;
+    if (p->border_fit == 0)
+        return;
+    int first = 0, last = width - 1;
+    while (first < width && row[first] == CC_INVALID)
+        first++;
+    if (first == width)
+        return;
+    while (row[last] == CC_INVALID)
+        last--;
+    /* x can be border-occluded only if x - d < 0 (x < dmax) or x - d >= width (x >= width + dmin) */
+    int left_len = first < dmax ? first : dmax;
+    if (left_len > 0 && border_strip(p, checked, width, height, y, first, 1, 0, left_len, out))
+        *left_end = left_len;
+    int right_len = width - 1 - last < -dmin ? width - 1 - last : -dmin;
+    if (right_len > 0 && border_strip(p, checked, width, height, y, last, -1, width - right_len, width, out))
+        *right_begin = width - right_len;
+}
+
 #define SORT2(a, b)                        \
     do {                                   \
         int16_t lo_ = a < b ? a : b;       \
@@ -149,8 +237,9 @@ static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_
 }
 
 /* Stages, each over all rows before the next starts (the windows read
- * neighbouring rows): check + border + background fill; the weighted fill of
- * the pixels the check rejected; the median; the weighted median. */
+ * neighbouring rows): check + border + background fill; the border strips'
+ * line fit and the weighted fill of the other pixels the check rejected; the
+ * median; the weighted median. */
 void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int16_t *raw_right,
                          const cc_wm_image *guide, int width, int height, int16_t *checked,
                          int16_t *filled, int16_t *disp, void *scratch, int threads)
@@ -193,15 +282,20 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             if (weighted_fill || wmedian)
                 cc_wm_pack_row(&g, y, packed + o);
         }
-        if (weighted_fill) { /* weighted median of the background fill where the check failed */
+        if (p->fill_mode != CC_FILL_NONE) { /* border strips, then (weighted) the rejected pixels */
 #pragma omp for schedule(dynamic, 4)
-            for (int y = 0; y < height; y++)
-                for (int x = 0; x < width; x++) {
+            for (int y = 0; y < height; y++) {
+                int left_end, right_begin;
+                border_fit_row(p, checked, width, height, y, filled + (size_t)y * width, &left_end, &right_begin);
+                if (!weighted_fill)
+                    continue;
+                for (int x = left_end; x < right_begin; x++) {
                     size_t o = (size_t)y * width + x;
                     filled[o] = checked[o] == CC_INVALID
                                     ? cc_wm_pixel(&tables, &g, tmp, level, x, y, p->fill_radius, &h)
                                     : tmp[o];
                 }
+            }
         }
 #pragma omp for schedule(dynamic, 8)
         for (int y = 0; y < height; y++) {

@@ -161,6 +161,48 @@ def _border_occlusion(row, w):
                 ref = int(row[x])
 
 
+def _rounded_div(a: int, b: int) -> int:
+    """a / b rounded to the nearest integer, halves up (b > 0)."""
+    return (2 * a + b) // (2 * b)
+
+
+def border_strips(checked, y, p) -> dict[int, int]:
+    """Line extrapolation of the border-occluded ends of row y: {x: fixed-point disparity}.
+
+    Left strip: x < first kept pixel and x < largest disparity; right strip: x > last kept pixel and
+    x >= width + min_disparity.  The line d = a + b u (u = distance from the strip's edge pixel, inward)
+    is the least-squares fit to the kept pixels with 0 <= u < border_fit in rows y-2..y+2 that lie
+    within 2 px of the edge pixel's value; b rounded to 1/(16*256) px per px and clamped to 1/4 px per px,
+    a to 1/(16*256) px, the values to 1/16 px and then into the disparity range.  No strip is written
+    when fewer than border_fit pixels qualify or all share one u."""
+    h, w = checked.shape
+    kept = np.flatnonzero(checked[y] != INVALID)
+    if len(kept) == 0:
+        return {}
+    dmin, dmax = p["min_disparity"], p["min_disparity"] + p["num_disparities"] - 1
+    K, out = p["border_fit"], {}
+    for edge, side, xs in ((kept[0], 1, range(0, min(kept[0], dmax))),
+                           (kept[-1], -1, range(max(kept[-1] + 1, w + dmin), w))):
+        if len(xs) == 0:
+            continue
+        d0 = int(checked[y, edge])
+        pts = [(u, int(checked[yy, edge + side * u]))
+               for yy in range(max(0, y - 2), min(h, y + 3)) for u in range(K)
+               if 0 <= edge + side * u < w and checked[yy, edge + side * u] != INVALID
+               and abs(int(checked[yy, edge + side * u]) - d0) <= 32]
+        n = len(pts)
+        su, suu = sum(u for u, _ in pts), sum(u * u for u, _ in pts)
+        sv, suv = sum(v for _, v in pts), sum(u * v for u, v in pts)
+        den = n * suu - su * su
+        if n < K or den <= 0:
+            continue
+        b = min(max(_rounded_div(256 * (n * suv - su * sv), den), -1024), 1024)
+        a = _rounded_div(256 * sv - b * su, n)
+        for x in xs:
+            out[x] = min(max(_rounded_div(a + b * side * (x - edge), 256), dmin * 16), dmax * 16)
+    return out
+
+
 def wm_tables(sigma_colour: float, sigma_space: float) -> tuple[np.ndarray, np.ndarray]:
     """round(256 exp(-x / sigma)) by summed colour difference (0..765) and by squared distance (0..450)."""
     def weight(x, sigma):
@@ -226,9 +268,14 @@ def postprocess(raw_left, raw_right, p, guide=None):
                 before, after = valid[valid < x], valid[valid > x]
                 cands = ([checked[y, before[-1]]] if len(before) else []) + ([checked[y, after[0]]] if len(after) else [])
                 filled[y, x] = min(cands) if cands else INVALID
+    background = filled.copy()  # the weighted fill votes with the background fill, strips included
+    strip = np.zeros((h, w), bool)
+    if p["fill"] in ("background", "weighted") and p["border_fit"]:
+        for y in range(h):
+            for x, v in border_strips(checked, y, p).items():
+                filled[y, x], strip[y, x] = v, True
     if p["fill"] == "weighted":
-        background = filled.copy()
-        for y, x in zip(*np.nonzero(checked == INVALID)):
+        for y, x in zip(*np.nonzero((checked == INVALID) & ~strip)):
             filled[y, x] = weighted_median_at(background, guide, y, x, p["fill_radius"], p)
     final = filled.copy()
     r = p["median"] // 2

@@ -129,6 +129,67 @@ def test_weighted_stages_change_the_result_and_need_a_matching_guide():
         stereo.postprocess(raw_left, raw_right, guide[:, :-1])
 
 
+def _slanted_maps(h: int = 12, w: int = 40, dmin: int = 0, slope: float = -0.12, seed: int = 7):
+    """Raw maps of a slanted plane (d = dmin + 9 + slope * x + 0.05 y, with noise) seen by both views:
+    the right map holds what each left pixel predicts, so the check keeps the interior and the
+    border-occluded ends fail it, as in a real pair."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    truth = dmin + 9 + slope * x + 0.05 * y
+    raw_left = np.round(16 * truth + rng.integers(-4, 5, (h, w))).astype(np.int64)
+    raw_right = np.full((h, w), stereo.INVALID, np.int64)
+    for yy in range(h):
+        for xx in range(w):
+            xr = xx - (raw_left[yy, xx] + 8) // 16
+            if 0 <= xr < w:
+                raw_right[yy, xr] = raw_left[yy, xx] + rng.integers(-8, 9)
+    raw_left[rng.random((h, w)) < 0.15] = 16 * (dmin + 1)  # mismatches the check rejects
+    guide = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    return raw_left.astype(np.int16), raw_right.astype(np.int16), guide, truth
+
+
+BORDER_CASES = [
+    dict(num_disparities=16, border_fit=6),
+    dict(num_disparities=16, border_fit=2, fill="background", median=0, weighted_median=0),
+    dict(num_disparities=16, border_fit=30),  # too few points: the strip keeps the fill
+    dict(num_disparities=12, border_fit=8, fill_radius=2),  # strip limited to x < 11
+    dict(num_disparities=24, min_disparity=-20, border_fit=5, fill_radius=3),  # both borders
+    dict(num_disparities=16, border_fit=8, fill="none"),  # no fill, no strips
+]
+
+
+@pytest.mark.parametrize("slope", [-0.12, 0.3, -0.4])  # 0.3 and -0.4 are steeper than the 1/4 clamp
+@pytest.mark.parametrize("case", BORDER_CASES)
+def test_border_fit_matches_reference(case, slope):
+    dmin = case.get("min_disparity", 0)
+    raw_left, raw_right, guide, _ = _slanted_maps(dmin=dmin if dmin >= 0 else -12, slope=slope)
+    got = stereo.postprocess(raw_left, raw_right, guide, **case)
+    want = ref.postprocess(raw_left.astype(np.int64), raw_right.astype(np.int64), _params(**case), guide)
+    for g, r in zip(got, want):
+        np.testing.assert_array_equal(g, r)
+
+
+def test_border_fit_follows_a_slanted_surface_across_the_strip():
+    raw_left, raw_right, guide, truth = _slanted_maps(h=20, w=60, slope=-0.15, seed=8)
+    checked, line, _ = stereo.postprocess(raw_left, raw_right, guide, num_disparities=16, border_fit=12,
+                                          fill="background", median=0, weighted_median=0)
+    _, flat, _ = stereo.postprocess(raw_left, raw_right, guide, num_disparities=16, border_fit=0,
+                                    fill="background", median=0, weighted_median=0)
+    strip = np.zeros(checked.shape, bool)
+    for y in range(checked.shape[0]):
+        strip[y, :np.flatnonzero(checked[y] != stereo.INVALID)[0]] = True
+    assert strip.sum() > 50
+    err_line = np.abs(stereo.to_float(line) - truth)[strip]
+    err_flat = np.abs(stereo.to_float(flat) - truth)[strip]
+    assert err_line.max() < 0.5 and err_flat.max() > 1.0
+
+
+@pytest.mark.parametrize("bad", [dict(border_fit=1), dict(border_fit=65), dict(border_fit=-1)])
+def test_border_fit_is_validated(bad):
+    with pytest.raises(ValueError, match="border_fit"):
+        make_params(**bad)
+
+
 @pytest.mark.parametrize("bad", [dict(fill_radius=0), dict(fill_radius=16), dict(weighted_median=-1),
                                  dict(weighted_median=16), dict(wm_sigma_colour=0.0), dict(wm_sigma_space=-1.0),
                                  dict(fill="nearest")])
