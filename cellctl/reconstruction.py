@@ -410,7 +410,7 @@ def _find_table(points: np.ndarray, sample: int = 60000, seed: int = 0) -> Table
     return plane
 
 
-def _refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 64, radius_px: float = 20.0) -> TablePlane:
+def _refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 80, radius_px: float = 16.0) -> TablePlane:
     """The table plane fitted on the images: disparity planes of table patches (cellctl.subpixel), reprojected.
 
     Every height is measured from this plane, and the matcher's table disparities carry a bias of a few
