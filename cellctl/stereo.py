@@ -41,8 +41,8 @@ _ERRORS = {
 
 # Parameters stored under the same name and unit in the C struct cc_params.
 _SAME_IN_C = ("min_disparity", "num_disparities", "lambda_census", "lambda_bt", "cost_scale", "p1", "p2",
-              "p2_gamma", "paths", "median", "fill_radius", "border_fit", "weighted_median", "wm_sigma_colour",
-              "wm_sigma_space", "threads")
+              "p2_gamma", "paths", "uniqueness", "median", "fill_radius", "border_fit", "weighted_median",
+              "wm_sigma_colour", "wm_sigma_space", "threads")
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,7 @@ class MatcherParams:
     p2_gamma: int                    # 0: constant P2; > 0: P2 lowered across intensity edges
     paths: int                       # 4 (the paper) or 8
     subpixel: bool                   # parabola refinement
+    uniqueness: int                  # % margin of the best cost over costs > 1 level away, else invalid; 0 = off
     lr_max_diff: float               # left-right tolerance in px; negative disables the check
     fill: str                        # "weighted" (background, then colour-weighted median), "background" or "none"
     median: int                      # 0, 3 or 5
@@ -135,8 +136,8 @@ def make_params(**overrides: Any) -> MatcherParams:
     window = v["census_window"]
     if not (isinstance(window, (tuple, list)) and len(window) == 2):
         raise ValueError(f"census_window must be (width, height) (got {window!r})")
-    ints = ("min_disparity", "num_disparities", "cost_scale", "p1", "p2", "p2_gamma", "paths", "median",
-            "fill_radius", "border_fit", "weighted_median", "threads")
+    ints = ("min_disparity", "num_disparities", "cost_scale", "p1", "p2", "p2_gamma", "paths", "uniqueness",
+            "median", "fill_radius", "border_fit", "weighted_median", "threads")
     for name in ints:
         v[name] = _as_int(name, v[name])
     for name in ("lambda_census", "lambda_bt", "lr_max_diff", "wm_sigma_colour", "wm_sigma_space"):

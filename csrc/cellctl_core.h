@@ -45,6 +45,8 @@ typedef struct cc_params {
     int p2_gamma;           /* 0: constant P2; >0: P2 * g / (g + |dI|), never below p1 */
     int paths;              /* 4 or 8 */
     int subpixel;           /* parabola refinement of the left disparity */
+    int uniqueness;         /* % margin the best cost must keep below every cost > 1 level away,
+                               else the left pixel is invalid (as StereoSGBM's uniquenessRatio), 0..99 */
     int lr_max_diff;        /* left-right tolerance in 1/16 px; < 0 disables the check */
     int fill_mode;          /* enum cc_fill_mode */
     int median;             /* 0 (off), 3 or 5 */

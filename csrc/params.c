@@ -22,6 +22,7 @@ void cc_params_default(cc_params *p)
     p->p2_gamma = 32;
     p->paths = 4;
     p->subpixel = 1;
+    p->uniqueness = 30;
     p->lr_max_diff = CC_DISP_SCALE;
     p->fill_mode = CC_FILL_WEIGHTED;
     p->median = 3;
@@ -77,6 +78,8 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("paths must be 4 or 8");
     if (p->subpixel != 0 && p->subpixel != 1)
         REJECT("subpixel must be 0 or 1");
+    if (p->uniqueness < 0 || p->uniqueness > 99)
+        REJECT("uniqueness must be between 0 (off) and 99 (% margin of the best cost)");
     if (p->lr_max_diff > 16 * CC_MAX_DISPARITIES)
         REJECT("lr_max_diff is out of range");
     if (p->fill_mode < CC_FILL_NONE || p->fill_mode > CC_FILL_WEIGHTED)

@@ -1,6 +1,7 @@
 /* Winner-takes-all on an aggregated row: the left view with parabola
- * sub-pixel refinement (as OpenCV's StereoSGBM), and the right view from the
- * same volume, right pixel xr taking the best of S(xr + d, d). */
+ * sub-pixel refinement and the uniqueness check (as OpenCV's StereoSGBM), and
+ * the right view from the same volume, right pixel xr taking the best of
+ * S(xr + d, d). */
 #include "internal.h"
 
 #if CC_HAVE_X86
@@ -42,6 +43,42 @@ __attribute__((target("avx2"))) static int argmin_avx2(const uint16_t *c, int D)
     return argmin_scalar(c, full, D, best, at);
 }
 #endif
+
+/* Smallest cost more than one level away from k (0xFFFF if there is none). */
+static unsigned second_min_scalar(const uint16_t *c, int from, int D, int k, unsigned best)
+{
+    for (int j = from; j < D; j++)
+        if ((j < k - 1 || j > k + 1) && c[j] < best)
+            best = c[j];
+    return best;
+}
+
+#if CC_HAVE_X86
+__attribute__((target("avx2"))) static unsigned second_min_avx2(const uint16_t *c, int D, int k)
+{
+    const int full = D / CC_LANES * CC_LANES;
+    const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    __m256i m = _mm256_set1_epi16(-1);
+    for (int j = 0; j < full; j += CC_LANES) {
+        /* lanes k-1..k+1 are masked: (lane + j - (k - 1)) as unsigned <= 2 */
+        __m256i rel = _mm256_add_epi16(lane, _mm256_set1_epi16((short)(j - k + 1)));
+        __m256i near = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, _mm256_set1_epi16(2)), rel);
+        m = _mm256_min_epu16(m, _mm256_or_si256(_mm256_loadu_si256((const __m256i *)(c + j)), near));
+    }
+    __m128i h = _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1));
+    unsigned best = (unsigned)_mm_cvtsi128_si32(_mm_minpos_epu16(h)) & 0xFFFFu;
+    return second_min_scalar(c, full, D, k, best);
+}
+#endif
+
+static inline unsigned second_min(const cc_setup *s, const uint16_t *c, int k)
+{
+#if CC_HAVE_X86
+    if (s->use_avx2)
+        return second_min_avx2(c, s->D, k);
+#endif
+    return second_min_scalar(c, 0, s->D, k, 0xFFFFu);
+}
 
 static inline int argmin(const cc_setup *s, const uint16_t *c)
 {
@@ -114,6 +151,11 @@ void cc_select_row(const cc_setup *s, const uint16_t *row, int stride, int width
     for (int x = 0; x < width; x++) {
         const uint16_t *c = row + (size_t)x * stride;
         int k = argmin(s, c);
+        /* Not unique: a cost more than one level away comes within the margin of the best. */
+        if (s->p.uniqueness && (int64_t)second_min(s, c, k) * (100 - s->p.uniqueness) < (int64_t)c[k] * 100) {
+            left_out[x] = CC_INVALID;
+            continue;
+        }
         int d = (dmin + k) * CC_DISP_SCALE;
         if (s->p.subpixel && k > 0 && k < D - 1) {
             int a = c[k - 1], b = c[k + 1];

@@ -128,6 +128,13 @@ def select(S, p):
     dmin = p["min_disparity"]
     k = S.argmin(axis=2)
     left = (dmin + k) * 16
+    unique = np.ones((h, w), bool)
+    if p["uniqueness"]:
+        for y in range(h):
+            for x in range(w):
+                far = [int(S[y, x, j]) for j in range(D) if abs(j - k[y, x]) > 1]
+                second = min(far) if far else 0xFFFF
+                unique[y, x] = second * (100 - p["uniqueness"]) >= int(S[y, x, k[y, x]]) * 100
     if p["subpixel"]:
         for y in range(h):
             for x in range(w):
@@ -137,6 +144,7 @@ def select(S, p):
                     denom2 = max(a + b - 2 * c, 1)
                     num = (a - b) * 16 + denom2
                     left[y, x] += int(num / (denom2 * 2))  # C division truncates towards zero
+    left[~unique] = INVALID
     right = np.full((h, w), INVALID, np.int64)
     for y in range(h):
         for xr in range(w):

@@ -68,16 +68,21 @@ def test_aggregation_matches_reference(case, simd):
     np.testing.assert_array_equal(got, ref.aggregate(left, right, _params(**case)))
 
 
+@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("levels,uniqueness", [(11, 0), (11, 15), (37, 0), (37, 25), (48, 60), (3, 40)])
 @pytest.mark.parametrize("subpixel", [True, False])
 @pytest.mark.parametrize("dmin", [0, -3, 4])
-def test_selection_matches_reference(subpixel, dmin):
+def test_selection_matches_reference(subpixel, dmin, levels, uniqueness, simd):
     rng = np.random.default_rng(4)
-    volume = rng.integers(0, 400, (6, 21, 11)).astype(np.uint16)
-    volume[:, :, 3] = rng.integers(0, 400, (6, 21))  # ties and near-ties
+    volume = rng.integers(0, 400, (6, 21, levels)).astype(np.uint16)
+    volume[:, :, 3 % levels] = rng.integers(0, 400, (6, 21))  # ties and near-ties
     volume[0, 0, :] = 5  # all equal: the smallest disparity wins
-    p = _params(num_disparities=11, min_disparity=dmin, subpixel=subpixel)
-    left, right = stereo.select(volume, min_disparity=dmin, subpixel=subpixel)
+    volume[1, :, 1] = 0  # a clear winner beside random costs
+    p = _params(num_disparities=levels, min_disparity=dmin, subpixel=subpixel, uniqueness=uniqueness)
+    left, right = stereo.select(volume, min_disparity=dmin, subpixel=subpixel, uniqueness=uniqueness, simd=simd)
     ref_left, ref_right = ref.select(volume.astype(np.int64), p)
+    if uniqueness:  # the check really rejects some pixels and keeps others
+        assert 0 < np.count_nonzero(ref_left == ref.INVALID) < ref_left.size
     np.testing.assert_array_equal(left, ref_left)
     np.testing.assert_array_equal(right, ref_right)
 
@@ -182,6 +187,12 @@ def test_border_fit_follows_a_slanted_surface_across_the_strip():
     err_line = np.abs(stereo.to_float(line) - truth)[strip]
     err_flat = np.abs(stereo.to_float(flat) - truth)[strip]
     assert err_line.max() < 0.5 and err_flat.max() > 1.0
+
+
+@pytest.mark.parametrize("bad", [dict(uniqueness=-1), dict(uniqueness=100)])
+def test_uniqueness_is_validated(bad):
+    with pytest.raises(ValueError, match="uniqueness"):
+        make_params(**bad)
 
 
 @pytest.mark.parametrize("bad", [dict(border_fit=1), dict(border_fit=65), dict(border_fit=-1)])
