@@ -19,7 +19,7 @@ void cc_params_default(cc_params *p)
     p->cost_scale = 63;
     p->p1 = 32;
     p->p2 = 100;
-    p->p2_gamma = 32;
+    p->p2_gamma = 18;
     p->paths = 4;
     p->subpixel = 1;
     p->uniqueness = 30;
