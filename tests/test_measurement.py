@@ -189,7 +189,8 @@ def test_measure_command_json(tmp_path: Path, stereo_results, capsys: pytest.Cap
     out = json.loads(capsys.readouterr().out)
     assert {"length_mm", "heel_height_mm", "toe_height_mm", "glue_path", "points", "valid"} <= out.keys()
     assert out["valid"] is True
-    assert out["length_mm"] == pytest.approx(expected.length_mm, abs=1e-3)
+    # Same images, same numbers up to Open3D's parallel RANSAC and outlier removal, which are not bit-exact.
+    assert out["length_mm"] == pytest.approx(expected.length_mm, abs=0.1)
     assert len(out["glue_path"]) == len(expected.glue_path.points) and len(out["glue_path"][0]) == 3
     assert (tmp_path / "sole.ply").stat().st_size > 100_000
     overlay = cv2.imread(str(tmp_path / "overlay.png"))
