@@ -191,7 +191,7 @@ def test_measure_command_json(tmp_path: Path, stereo_results, capsys: pytest.Cap
     assert out["valid"] is True
     # Same images, same numbers up to Open3D's parallel RANSAC and outlier removal, which are not bit-exact.
     assert out["length_mm"] == pytest.approx(expected.length_mm, abs=0.1)
-    assert len(out["glue_path"]) == len(expected.glue_path.points) and len(out["glue_path"][0]) == 3
+    assert abs(len(out["glue_path"]) - len(expected.glue_path.points)) <= 1 and len(out["glue_path"][0]) == 3
     assert (tmp_path / "sole.ply").stat().st_size > 100_000
     overlay = cv2.imread(str(tmp_path / "overlay.png"))
     assert overlay.shape[0] == 1024 and overlay.shape[1] > 1280  # the left image plus the top view
