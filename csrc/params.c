@@ -30,7 +30,7 @@ void cc_params_default(cc_params *p)
     p->border_fit = 24;
     p->weighted_median = 3;
     p->wm_sigma_colour = 20.0f;
-    p->wm_sigma_space = 8.0f;
+    p->wm_sigma_space = 20.0f;
     p->threads = 0;
     p->simd = CC_SIMD_AUTO;
 }
