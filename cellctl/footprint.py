@@ -107,10 +107,6 @@ class Footprint:
         outside = cv2.distanceTransform(1 - self.mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * self.cell_mm
         return Footprint((outside <= distance_mm).astype(np.uint8), self.origin, self.cell_mm)
 
-    def distance_inside(self) -> np.ndarray:
-        """Distance (mm) from each marked cell's centre to the region's edge."""
-        return cv2.distanceTransform(self.mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * self.cell_mm
-
 
 def _disc(diameter_cells: float) -> np.ndarray:
     size = max(1, int(round(diameter_cells)))

@@ -18,7 +18,7 @@ import pytest
 
 from cellctl.cli import main
 from cellctl.measurement import SoleMeasurement, measure_sole
-from cellctl.reconstruction import Reconstruction, SoleReconstructor
+from cellctl.reconstruction import SoleReconstructor
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene, true_cloud
 from cellctl.sim.sole import SoleModel, SolePose

@@ -14,9 +14,6 @@ import numpy as np
 
 from cellctl.cli import UserError
 
-GLUE_OFFSET_MM = 2.0
-GLUE_SPACING_MM = 2.0
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -35,10 +32,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--depth-range", nargs=2, type=float, metavar=("MIN", "MAX"),
         help="working distance from the cameras in mm (default 450 650): sets the disparity search range",
     )
-    parser.add_argument("--glue-offset", type=float, default=GLUE_OFFSET_MM, metavar="MM",
-                        help=f"glue path inset from the edge (default {GLUE_OFFSET_MM:g})")
-    parser.add_argument("--glue-spacing", type=float, default=GLUE_SPACING_MM, metavar="MM",
-                        help=f"glue path point spacing (default {GLUE_SPACING_MM:g})")
+    # Defaults live in cellctl.measurement, which is imported only when the command runs (Open3D is slow to load).
+    parser.add_argument("--glue-offset", type=float, metavar="MM", help="glue path inset from the edge (default 2)")
+    parser.add_argument("--glue-spacing", type=float, metavar="MM", help="glue path point spacing (default 2)")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--ply", type=Path, metavar="out.ply", help="write the sole's point cloud (table frame, colours)")
     parser.add_argument("--png", type=Path, metavar="overlay.png", help="write the left image with edge, glue path and points")
@@ -47,9 +43,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from cellctl.calibration import Calibration
-    from cellctl.measurement import measure_sole
+    from cellctl.measurement import GLUE_OFFSET_MM, GLUE_SPACING_MM, measure_sole
     from cellctl.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
 
+    offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset
+    spacing = GLUE_SPACING_MM if args.glue_spacing is None else args.glue_spacing
+    if offset < 0 or spacing <= 0:
+        raise UserError(f"--glue-offset must be >= 0 and --glue-spacing > 0 mm, got {offset:g} and {spacing:g}")
     calib = Calibration.load(args.calib)
     left, right = _read(args.left, "LEFT"), _read(args.right, "RIGHT")
     for name, image in (("LEFT", left), ("RIGHT", right)):
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"{name} {getattr(args, name.lower())}: {exc}") from None
     depth_range = tuple(args.depth_range) if args.depth_range else DEFAULT_DEPTH_RANGE_MM
     reconstruction = SoleReconstructor(calib, depth_range).reconstruct(left, right)
-    result = measure_sole(reconstruction, args.glue_offset, args.glue_spacing)
+    result = measure_sole(reconstruction, offset, spacing)
     if args.ply:
         _write_ply(args.ply, reconstruction)
     if args.png:
