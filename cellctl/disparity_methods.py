@@ -8,6 +8,7 @@ imported only when they run so the OpenCV references work without it.
 
 from __future__ import annotations
 
+import functools
 import importlib
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -49,41 +50,55 @@ class Method:
     requires: str | None = None  # module that must import for it to run
 
 
+# Matcher objects are made once per disparity range and reused, as a running cell uses them:
+# the timings then compare computing, not allocating buffers, for every method alike.
+_cached = functools.lru_cache(maxsize=16)
+
+
+@_cached
+def _stereo_bm(min_d: int, num_d: int) -> Any:
+    bm = cv2.StereoBM_create(numDisparities=num_d, blockSize=SAD_BLOCK_SIZE)
+    bm.setMinDisparity(min_d)
+    bm.setTextureThreshold(SAD_TEXTURE_THRESHOLD)
+    bm.setUniquenessRatio(SAD_UNIQUENESS_RATIO)
+    bm.setSpeckleWindowSize(0)
+    bm.setDisp12MaxDiff(-1)
+    return bm
+
+
 def sad_block_matching(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
     """SAD block matching (OpenCV StereoBM on grey images), NaN where it finds no disparity."""
-    def create(min_d: int, num_d: int) -> Any:
-        bm = cv2.StereoBM_create(numDisparities=num_d, blockSize=SAD_BLOCK_SIZE)
-        bm.setMinDisparity(min_d)
-        bm.setTextureThreshold(SAD_TEXTURE_THRESHOLD)
-        bm.setUniquenessRatio(SAD_UNIQUENESS_RATIO)
-        bm.setSpeckleWindowSize(0)
-        bm.setDisp12MaxDiff(-1)
-        return bm
-    return _opencv_disparity(create, _grey(left), _grey(right), min_disparity, num_disparities)
+    return _opencv_disparity(_stereo_bm, _grey(left), _grey(right), min_disparity, num_disparities)
 
 
 def opencv_sgbm(mode: int) -> DisparityMethod:
     """OpenCV StereoSGBM in the given mode (MODE_HH4, MODE_SGBM_3WAY, ...) with its post-processing."""
+    @_cached
+    def create(min_d: int, num_d: int, channels: int) -> Any:
+        area = channels * SGBM_BLOCK_SIZE ** 2
+        return cv2.StereoSGBM_create(
+            minDisparity=min_d, numDisparities=num_d, blockSize=SGBM_BLOCK_SIZE,
+            P1=8 * area, P2=32 * area, disp12MaxDiff=SGBM_DISP12_MAX_DIFF,
+            preFilterCap=SGBM_PREFILTER_CAP, uniquenessRatio=SGBM_UNIQUENESS_RATIO,
+            speckleWindowSize=SGBM_SPECKLE_WINDOW, speckleRange=SGBM_SPECKLE_RANGE, mode=mode)
+
     def compute(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
         channels = 1 if left.ndim == 2 else left.shape[2]
-        area = channels * SGBM_BLOCK_SIZE ** 2
-
-        def create(min_d: int, num_d: int) -> Any:
-            return cv2.StereoSGBM_create(
-                minDisparity=min_d, numDisparities=num_d, blockSize=SGBM_BLOCK_SIZE,
-                P1=8 * area, P2=32 * area, disp12MaxDiff=SGBM_DISP12_MAX_DIFF,
-                preFilterCap=SGBM_PREFILTER_CAP, uniquenessRatio=SGBM_UNIQUENESS_RATIO,
-                speckleWindowSize=SGBM_SPECKLE_WINDOW, speckleRange=SGBM_SPECKLE_RANGE, mode=mode)
-        return _opencv_disparity(create, left, right, min_disparity, num_disparities)
+        return _opencv_disparity(lambda lo, n: create(lo, n, channels), left, right, min_disparity, num_disparities)
     return compute
 
 
 def stereo_matcher(**options: Any) -> DisparityMethod:
     """Our matcher (`cellctl.stereo.StereoMatcher`, which converts BGR to grey) with the given options."""
+    @_cached
+    def create(matcher_class: type, min_d: int, num_d: int) -> Any:
+        return matcher_class(min_d, num_d, **options)
+
     def compute(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
         from cellctl.stereo import StereoMatcher  # the C core is only needed when this runs
 
-        return StereoMatcher(min_disparity, num_disparities, **options).compute(left, right)
+        # the class is part of the key, so a replaced class (as in tests) never gets a stale object
+        return create(StereoMatcher, min_disparity, num_disparities).compute(left, right)
     return compute
 
 
