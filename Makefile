@@ -27,7 +27,7 @@ asan: $(STAMP)
 	cd asan-build && CELLCTL_CFLAGS="$(SANITIZE)" ../$(BIN)/python csrc/build_core.py >/dev/null
 	cd asan-build && CELLCTL_MIDDLEBURY=$(CURDIR)/../shared/data/middlebury/2001-2003 ASAN_OPTIONS=detect_leaks=0 UBSAN_OPTIONS=print_stacktrace=1 \
 		LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
-		../$(BIN)/python -m pytest -p no:cacheprovider -q tests/test_stereo_core.py tests/test_stereo_api.py
+		../$(BIN)/python -m pytest -p no:cacheprovider -q tests/test_stereo_core.py tests/test_stereo_api.py tests/test_core_errors.py
 
 bench: $(STAMP)
 	$(BIN)/cellctl bench
