@@ -33,6 +33,7 @@ import numpy as np
 from cellctl.calibration import Calibration
 from cellctl.cameras import CameraError, FrameSource, StereoFrame, open_frame_source
 from cellctl.config import CellConfig
+from cellctl.failures import FailureKind, MeasurementInputError
 from cellctl.journal import CycleRecord, Journal
 from cellctl.measurement import SoleMeasurement, measure_sole
 from cellctl.reconstruction import Reconstruction, SoleReconstructor
@@ -53,15 +54,19 @@ CAMERA_PROBE_PERIOD_S = 1.0
 PLAUSIBLE_LENGTH_MM = (100.0, 400.0)
 PLAUSIBLE_HEIGHT_MM = (0.5, 150.0)
 
-#: The measurement code reports why it failed in words; these phrases map the reasons to PLC codes.
-#: First match wins; unmatched reasons are MEASUREMENT_INVALID.
-_REASON_CODES: tuple[tuple[str, ErrorCode], ...] = (
-    ("too few measured points", ErrorCode.TOO_FEW_POINTS),
-    ("no measured surface", ErrorCode.TOO_FEW_POINTS),
-    ("no top surface measured", ErrorCode.TOO_FEW_POINTS),
-    ("no sole in view", ErrorCode.NO_SOLE),
-    ("cut by the image border", ErrorCode.SOLE_AT_BORDER),
-)
+#: What the PLC is told for each kind of measurement failure (the reason text goes to the journal and log).
+#: Every FailureKind has an entry (tests/test_daemon.py checks it).
+FAILURE_CODES: dict[FailureKind, ErrorCode] = {
+    FailureKind.TOO_FEW_POINTS: ErrorCode.TOO_FEW_POINTS,
+    FailureKind.SURFACE_NOT_MEASURED: ErrorCode.TOO_FEW_POINTS,  # same cause and remedy: too little measured
+    FailureKind.NO_TABLE: ErrorCode.NO_TABLE,
+    FailureKind.NO_SOLE: ErrorCode.NO_SOLE,
+    FailureKind.SOLE_AT_BORDER: ErrorCode.SOLE_AT_BORDER,
+    FailureKind.COLOURS_TOO_SIMILAR: ErrorCode.COLOURS_TOO_SIMILAR,
+    FailureKind.ENDS_TOO_CLOSE_TO_CALL: ErrorCode.ENDS_TOO_CLOSE_TO_CALL,
+    FailureKind.MEASUREMENT_INVALID: ErrorCode.MEASUREMENT_INVALID,
+    FailureKind.CALIBRATION_MISMATCH: ErrorCode.CALIBRATION_MISMATCH,
+}
 
 
 class CycleFailed(Exception):
@@ -70,6 +75,11 @@ class CycleFailed(Exception):
     def __init__(self, code: ErrorCode, reason: str) -> None:
         super().__init__(reason)
         self.code = code
+
+    @classmethod
+    def of(cls, failure: FailureKind, reason: str) -> CycleFailed:
+        """A measurement failure, answered with the code of its kind."""
+        return cls(FAILURE_CODES[failure], reason)
 
 
 class Daemon:
@@ -210,19 +220,16 @@ class Daemon:
     def _measure(self, frame: StereoFrame, timings: dict[str, float]) -> tuple[Reconstruction, SoleMeasurement]:
         if self.calib is None or self._reconstructor is None:
             raise CycleFailed(ErrorCode.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
-        size = (frame.left.shape[1], frame.left.shape[0])
-        if size != self.calib.image_size or frame.right.shape != frame.left.shape:
-            raise CycleFailed(
-                ErrorCode.CALIBRATION_MISMATCH,
-                f"cameras deliver {size[0]}x{size[1]} but the calibration is for "
-                f"{self.calib.image_size[0]}x{self.calib.image_size[1]}",
-            )
-        reconstruction = self._reconstructor.reconstruct(frame.left, frame.right)
+        try:
+            reconstruction = self._reconstructor.reconstruct(frame.left, frame.right)
+        except MeasurementInputError as exc:  # e.g. frames of another size than the calibration
+            raise CycleFailed.of(exc.kind, f"cameras deliver frames the measurement cannot use: {exc}") from exc
         measure = self.config.measure
         measurement = measure_sole(reconstruction, measure.glue_offset_mm, measure.glue_spacing_mm)
         timings.update(measurement.timings)
         if not measurement.valid:
-            raise CycleFailed(_code_for(measurement.reason or ""), measurement.reason or "not measured")
+            assert measurement.failure is not None  # every invalid measurement names its kind
+            raise CycleFailed.of(measurement.failure, measurement.reason or "not measured")
         _check_plausible(measurement)
         return reconstruction, measurement
 
@@ -329,23 +336,16 @@ def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | Non
         return None, str(exc)
 
 
-def _code_for(reason: str) -> ErrorCode:
-    for phrase, code in _REASON_CODES:
-        if phrase in reason:
-            return code
-    return ErrorCode.MEASUREMENT_INVALID
-
-
 def _check_plausible(measurement: SoleMeasurement) -> None:
     length = float(measurement.length_mm)  # type: ignore[arg-type]
     heights = (float(measurement.heel_height_mm), float(measurement.toe_height_mm))  # type: ignore[arg-type]
     low, high = PLAUSIBLE_LENGTH_MM
     if not low <= length <= high:
-        raise CycleFailed(ErrorCode.MEASUREMENT_INVALID, f"sole length {length:.1f} mm outside {low:g}..{high:g} mm")
+        raise CycleFailed.of(FailureKind.MEASUREMENT_INVALID, f"sole length {length:.1f} mm outside {low:g}..{high:g} mm")
     low, high = PLAUSIBLE_HEIGHT_MM
     for name, value in zip(("heel", "toe"), heights):
         if not math.isfinite(value) or not low <= value <= high:
-            raise CycleFailed(ErrorCode.MEASUREMENT_INVALID, f"{name} height {value:.1f} mm outside {low:g}..{high:g} mm")
+            raise CycleFailed.of(FailureKind.MEASUREMENT_INVALID, f"{name} height {value:.1f} mm outside {low:g}..{high:g} mm")
 
 
 def _published_points(points: np.ndarray) -> np.ndarray:

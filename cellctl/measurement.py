@@ -5,9 +5,10 @@
     if result.valid:
         print(result.length_mm, result.heel_height_mm, result.toe_height_mm)
     else:
-        print("not measured:", result.reason)
+        print("not measured:", result.reason, result.failure)
 
-An invalid result carries no numbers (None), only the reason: the robot must never get a silent wrong value.
+An invalid result carries no numbers (None), only the reason in words and its `FailureKind` (what a
+program acts on, e.g. the service's PLC error code): the robot must never get a silent wrong value.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from cellctl.failures import FailureKind
 from cellctl.footprint import Footprint
 from cellctl.reconstruction import Reconstruction
 from cellctl.surface import MIN_CLOUD_POINTS, SoleSurface
@@ -57,7 +59,8 @@ class SoleMeasurement:
     glue_path: GluePath | None
     points: int  # sole points the measurement rests on
     valid: bool
-    reason: str | None = None
+    reason: str | None = None  # why not measured, in words
+    failure: FailureKind | None = None  # the same, as a kind a program can act on
     timings: dict[str, float] = field(default_factory=dict)
     # Where the numbers come from (table frame), for drawings and diagnostics; None when unknown.
     axis: np.ndarray | None = None  # unit heel->toe direction (x, y)
@@ -79,6 +82,7 @@ class SoleMeasurement:
             "points": int(self.points),
             "valid": bool(self.valid),
             "reason": self.reason,
+            "failure": None if self.failure is None else self.failure.value,
             "heel_point": None if self.heel_point is None else np.round(self.heel_point, 3).tolist(),
             "toe_point": None if self.toe_point is None else np.round(self.toe_point, 3).tolist(),
             "camera_to_table": None if self.camera_to_table is None else np.round(self.camera_to_table, 6).tolist(),
@@ -102,7 +106,9 @@ def measure_sole(
     points = reconstruction.sole_points
     base = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)
     if not reconstruction.valid or reconstruction.footprint is None:
-        return _invalid(reconstruction.reason or "no sole reconstructed", **base)
+        return _invalid(
+            reconstruction.failure or FailureKind.NO_SOLE, reconstruction.reason or "no sole reconstructed", **base
+        )
     start = time.perf_counter()
     footprint = reconstruction.footprint
     outline = _smooth_closed(footprint.outline(), OUTLINE_SMOOTHING_MM)
@@ -116,6 +122,7 @@ def measure_sole(
     base.update(axis=axis, outline=outline, half_area_difference=difference)
     if difference < MIN_HALF_AREA_DIFFERENCE:
         return _invalid(
+            FailureKind.ENDS_TOO_CLOSE_TO_CALL,
             f"toe and heel too close to call: the footprint halves differ by {100 * difference:.1f} % of the area "
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
@@ -128,6 +135,7 @@ def measure_sole(
     for name, value, xy in (("heel", heights.z[0], heel_xy), ("toe", heights.z[1], toe_xy)):
         if not np.isfinite(value):
             return _invalid(
+                FailureKind.SURFACE_NOT_MEASURED,
                 f"no measured surface at the {name} point ({xy[0]:.1f}, {xy[1]:.1f}) mm: fewer than "
                 f"{MIN_CLOUD_POINTS} points within {HEIGHT_RADIUS_MM:g} mm",
                 **base,
@@ -139,14 +147,14 @@ def measure_sole(
     path, problem = glue_path(surface, outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
-        return _invalid(problem or "no glue path", **base)
+        return _invalid(FailureKind.SURFACE_NOT_MEASURED, problem or "no glue path", **base)
     return SoleMeasurement(
         length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, valid=True, **base
     )
 
 
-def _invalid(reason: str, **fields_: object) -> SoleMeasurement:
-    return SoleMeasurement(None, None, None, None, valid=False, reason=reason, **fields_)
+def _invalid(failure: FailureKind, reason: str, **fields_: object) -> SoleMeasurement:
+    return SoleMeasurement(None, None, None, None, valid=False, reason=reason, failure=failure, **fields_)
 
 
 def _principal_axis(outline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

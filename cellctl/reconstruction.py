@@ -31,6 +31,7 @@ import numpy as np
 import open3d as o3d
 
 from cellctl.calibration import Calibration
+from cellctl.failures import FailureKind, MeasurementInputError
 from cellctl.footprint import Footprint
 from cellctl.subpixel import refine_patches
 
@@ -116,7 +117,8 @@ class Reconstruction:
     colour_separation: float  # sole/table colour distance in standard deviations
     measured_points: int
     measured_fraction: float
-    reason: str | None = None
+    reason: str | None = None  # why there is no sole, in words (None: valid)
+    failure: FailureKind | None = None  # the same, as a kind a program can act on
     timings: dict[str, float] = field(default_factory=dict)
     calibration: Calibration | None = None
     rectified: tuple[np.ndarray, np.ndarray] | None = None  # grey float32 rectified pair
@@ -175,8 +177,11 @@ class SoleReconstructor:
 
     def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
         """Rectify, match and reproject: every really measured pixel as a 3-D point."""
-        self.calib.check_image(left)
-        self.calib.check_image(right)
+        for image in (left, right):
+            try:
+                self.calib.check_image(image)
+            except ValueError as exc:
+                raise MeasurementInputError(FailureKind.CALIBRATION_MISMATCH, str(exc)) from None
         timings: dict[str, float] = {}
         start = time.perf_counter()
         rect_left, rect_right = self.calib.rectify(left, right)
@@ -252,6 +257,7 @@ class _Segmentation:
     def run(self) -> Reconstruction:
         if self.fraction < MIN_VALID_FRACTION:
             return self._fail(
+                FailureKind.TOO_FEW_POINTS,
                 f"too few measured points: {self.measured} ({100 * self.fraction:.1f} % of the image, need "
                 f"{100 * MIN_VALID_FRACTION:.0f} %); check lighting, focus, the calibration and the depth range"
             )
@@ -262,11 +268,14 @@ class _Segmentation:
                 self.plane = _refine_table(self.cloud, self.plane)
         self.timings["table_plane"] = time.perf_counter() - start
         if self.plane is None:
-            return self._fail("no table plane found: the table must fill most of the view, below the sole")
+            return self._fail(
+                FailureKind.NO_TABLE, "no table plane found: the table must fill most of the view, below the sole"
+            )
         heights = self.plane.heights(self.cloud.points)
         below = float(np.mean(heights < -5.0 * TABLE_INLIER_MM))
         if below > 0.05:
             return self._fail(
+                FailureKind.NO_TABLE,
                 f"{100 * below:.0f} % of the points lie below the table plane: the plane found is not the table"
             )
         self.transform = self.plane.camera_to_table()
@@ -279,18 +288,21 @@ class _Segmentation:
         high = (z > self.min_height) & (z < MAX_HEIGHT_MM)
         footprint = _footprint(points[:, :2], high)
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
-            return self._fail(f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table")
+            return self._fail(
+                FailureKind.NO_SOLE, f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table"
+            )
         keep = high & self._colour_filter(points, footprint, np.abs(z) < TABLE_INLIER_MM, high)
         if not self.colour_filter:
             # Without the colour edge, matching halos widen the sole by 1-5 mm (simulated soles): no length.
             return self._fail(
+                FailureKind.COLOURS_TOO_SIMILAR,
                 f"sole and table colours too similar to find the sole's edge (they differ by "
                 f"{self.separation:.1f} standard deviations, need {MIN_COLOUR_SEPARATION:g}): use a table "
                 "surface that contrasts with the sole"
             )
         footprint = _footprint(points[:, :2], keep)
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
-            return self._fail("no sole in view: the region above the table has the table's colour")
+            return self._fail(FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour")
         keep &= footprint.contains(points[:, :2])
         self.timings["background"] = time.perf_counter() - start
         start = time.perf_counter()
@@ -299,7 +311,7 @@ class _Segmentation:
         _, inliers = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
         index = index[np.asarray(inliers, dtype=np.int64)]
         self.timings["outliers"] = time.perf_counter() - start
-        cut = self._cut_by_border(index)
+        failure, reason = self._cut_by_border(index)
         result = Reconstruction(
             sole_points=points[index],
             sole_colors=self.cloud.colors[index],
@@ -311,7 +323,8 @@ class _Segmentation:
             colour_separation=self.separation,
             measured_points=self.measured,
             measured_fraction=self.fraction,
-            reason=cut,
+            reason=reason,
+            failure=failure,
             timings=self.timings,
             calibration=self.cloud.calibration,
             rectified=self.cloud.rectified,
@@ -353,10 +366,10 @@ class _Segmentation:
         threshold = direction @ (0.5 * (sole_c.mean(axis=0) + table_c.mean(axis=0)))
         return colours @ direction > threshold
 
-    def _cut_by_border(self, index: np.ndarray) -> str | None:
-        """Reason text if the sole reaches the edge of what both cameras see."""
+    def _cut_by_border(self, index: np.ndarray) -> tuple[FailureKind | None, str | None]:
+        """Failure kind and reason if the sole reaches the edge of what both cameras see (else None, None)."""
         if index.size == 0:
-            return "no sole in view: no sole points left after outlier removal"
+            return FailureKind.NO_SOLE, "no sole in view: no sole points left after outlier removal"
         width, height = self.cloud.image_size
         x, y = self.cloud.pixels[index].T
         d = self.cloud.disparity[index]
@@ -364,13 +377,13 @@ class _Segmentation:
         # x - d < m: the right camera does not see the point (it left the right image on the left).
         at_edge = (x < m) | (x > width - 1 - m) | (y < m) | (y > height - 1 - m) | (x - d < m)
         if np.any(at_edge):
-            return (
+            return FailureKind.SOLE_AT_BORDER, (
                 "sole cut by the image border: move the sole towards the middle of the table "
                 f"({int(at_edge.sum())} sole points within {m} px of the edge of the common view)"
             )
-        return None
+        return None, None
 
-    def _fail(self, reason: str) -> Reconstruction:
+    def _fail(self, failure: FailureKind, reason: str) -> Reconstruction:
         return Reconstruction(
             sole_points=np.zeros((0, 3)),
             sole_colors=np.zeros((0, 3)),
@@ -383,6 +396,7 @@ class _Segmentation:
             measured_points=self.measured,
             measured_fraction=self.fraction,
             reason=reason,
+            failure=failure,
             timings=self.timings,
             calibration=self.cloud.calibration,
         )

@@ -96,6 +96,9 @@ class ErrorCode(enum.IntEnum):
     SOLE_AT_BORDER = 31
     TOO_FEW_POINTS = 32
     MEASUREMENT_INVALID = 33
+    COLOURS_TOO_SIMILAR = 34
+    ENDS_TOO_CLOSE_TO_CALL = 35
+    NO_TABLE = 36
     CYCLE_ABORTED = 90
     INTERNAL_ERROR = 99
 
@@ -147,6 +150,19 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ErrorCode.MEASUREMENT_INVALID: (
         "The measurement is outside plausible limits.",
         "Re-trigger; if it repeats, check the sole and the calibration.",
+    ),
+    ErrorCode.COLOURS_TOO_SIMILAR: (
+        "The sole's colour does not stand out from the table's, so its edge cannot be found.",
+        "Use a table cover that contrasts with the sole (dark for light soles, light for dark ones) and re-trigger.",
+    ),
+    ErrorCode.ENDS_TOO_CLOSE_TO_CALL: (
+        "Toe and heel cannot be told apart: both ends of the sole's outline are about equally wide.",
+        "Check that one whole sole lies flat on the table with nothing next to it; if it repeats for this sole "
+        "model, it cannot be oriented automatically: call the line engineer.",
+    ),
+    ErrorCode.NO_TABLE: (
+        "The table was not found below the sole (view blocked, or the table is not at the configured distance).",
+        "Clear the table and the camera view of other objects; if it repeats, check the camera mount and depth range.",
     ),
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",

@@ -20,8 +20,10 @@ import pytest
 
 from cellctl.cameras.simulated import FRAME_PERIOD_S, SimulatedCameras
 from cellctl.config import CellConfig
-from cellctl.daemon import Daemon
+from cellctl.daemon import FAILURE_CODES, Daemon
+from cellctl.failures import FailureKind
 from cellctl.journal import Journal
+from cellctl.reconstruction import Reconstruction, SoleReconstructor
 from cellctl.sdnotify import SystemdNotifier
 from cellctl.sim.scene import SoleScene
 from firmware_io.endpoints import TcpEndpoint
@@ -237,6 +239,63 @@ def test_stop_finishes_the_running_cycle_and_restart_loses_no_result(tmp_path: P
     ]
     assert records[1].length_mm == pytest.approx(finished.length_mm, rel=1e-6)
     listener.close()
+
+
+# What the PLC must read for each kind of measurement failure (docs/service.md), written out here rather
+# than taken from the daemon's table, so a changed mapping fails this test.
+EXPECTED_CODES = {
+    FailureKind.TOO_FEW_POINTS: ErrorCode.TOO_FEW_POINTS,
+    FailureKind.SURFACE_NOT_MEASURED: ErrorCode.TOO_FEW_POINTS,
+    FailureKind.NO_TABLE: ErrorCode.NO_TABLE,
+    FailureKind.NO_SOLE: ErrorCode.NO_SOLE,
+    FailureKind.SOLE_AT_BORDER: ErrorCode.SOLE_AT_BORDER,
+    FailureKind.COLOURS_TOO_SIMILAR: ErrorCode.COLOURS_TOO_SIMILAR,
+    FailureKind.ENDS_TOO_CLOSE_TO_CALL: ErrorCode.ENDS_TOO_CLOSE_TO_CALL,
+    FailureKind.MEASUREMENT_INVALID: ErrorCode.MEASUREMENT_INVALID,
+    FailureKind.CALIBRATION_MISMATCH: ErrorCode.CALIBRATION_MISMATCH,
+}
+
+
+class FailingReconstructor:
+    """In place of the service's reconstructor: every cycle fails with one kind.
+
+    A calibration mismatch goes through the real reconstructor, fed half-size frames; the other kinds are
+    reconstructions flagged as the segmentation and measurement flag them (tests/test_measurement.py
+    checks that each is detected where it should be).
+    """
+
+    def __init__(self, kind: FailureKind, real: SoleReconstructor) -> None:
+        self.kind, self.real = kind, real
+        self.reason = f"simulated failure: {kind.value}"
+
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+        if self.kind is FailureKind.CALIBRATION_MISMATCH:
+            return self.real.reconstruct(left[::2, ::2], right[::2, ::2])
+        return Reconstruction(
+            sole_points=np.zeros((0, 3)), sole_colors=np.zeros((0, 3)), sole_pixels=np.zeros((0, 2)),
+            footprint=None, camera_to_table=None, table_plane=None, colour_filter=False, colour_separation=0.0,
+            measured_points=0, measured_fraction=0.0, reason=self.reason, failure=self.kind,
+        )
+
+
+def test_every_failure_kind_has_its_plc_code() -> None:
+    assert set(FAILURE_CODES) == set(FailureKind)
+
+
+@pytest.mark.parametrize("kind", list(FailureKind), ids=lambda kind: kind.value)
+def test_each_failure_kind_reaches_the_plc_as_its_error_code(
+    service: Service, plc: PlcSimulator, monkeypatch: pytest.MonkeyPatch, kind: FailureKind
+) -> None:
+    failing = FailingReconstructor(kind, service.daemon._reconstructor)
+    monkeypatch.setattr(service.daemon, "_reconstructor", failing)
+    reading = plc.run_cycle()
+    assert reading.error_code == EXPECTED_CODES[kind], ErrorCode(reading.error_code).name
+    assert reading.status & StatusBit.ERROR and not reading.status & StatusBit.RESULT_VALID
+    assert np.isnan(reading.length_mm) and len(reading.glue_points) == 0
+    record = Journal.open(service.daemon.config.journal.state_dir, readonly=True).find(reading.cycle)
+    assert record is not None and record.error_code == EXPECTED_CODES[kind]
+    expected_text = "calibration is for" if kind is FailureKind.CALIBRATION_MISMATCH else failing.reason
+    assert expected_text in record.reason  # the words go to the journal with the code
 
 
 def test_run_refuses_a_bad_config_with_one_clear_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

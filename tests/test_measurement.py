@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 from cellctl.cli import main
+from cellctl.failures import FailureKind, MeasurementInputError
 from cellctl.measurement import SoleMeasurement, measure_sole
-from cellctl.reconstruction import SoleReconstructor
+from cellctl.reconstruction import SoleReconstructor, StereoCloud
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene, true_cloud
 from cellctl.sim.sole import SoleModel, SolePose
@@ -122,6 +123,7 @@ def test_no_sole_in_view(rig, reconstructor) -> None:  # noqa: ANN001
     pair = empty.render()
     result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
     assert not result.valid and "no sole in view" in result.reason
+    assert result.failure is FailureKind.NO_SOLE
     assert result.length_mm is None and result.heel_height_mm is None and result.glue_path is None
 
 
@@ -134,14 +136,17 @@ def test_sole_cut_by_the_image_border(rig, reconstructor) -> None:  # noqa: ANN0
     pair = cut.render()
     result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
     assert not result.valid and "cut by the image border" in result.reason
+    assert result.failure is FailureKind.SOLE_AT_BORDER
     assert result.length_mm is None
 
 
 def test_calibration_not_matching_the_images(reconstructor, stereo_results) -> None:  # noqa: ANN001
     _, pair, _, _ = stereo_results[0]
     half = cv2.resize(pair.left, (640, 512)), cv2.resize(pair.right, (640, 512))
-    with pytest.raises(ValueError, match="calibrat"):
+    with pytest.raises(MeasurementInputError, match="calibrat") as error:
         reconstructor.reconstruct(*half)
+    assert error.value.kind is FailureKind.CALIBRATION_MISMATCH
+    assert isinstance(error.value, ValueError)  # an error of the call, as the CLI reports bad input
 
 
 def test_sole_coloured_like_the_table_is_not_measured(rig, reconstructor, stereo_results) -> None:  # noqa: ANN001
@@ -151,7 +156,33 @@ def test_sole_coloured_like_the_table_is_not_measured(rig, reconstructor, stereo
     grey = np.clip(40 + 4 * rng.standard_normal(pair.left.shape[:2]), 0, 255).astype(np.uint8)
     result = measure_sole(reconstructor.segment(true_cloud(rig, pair.depth_left, cv2.merge([grey] * 3))))
     assert not result.valid and "colours too similar" in result.reason
+    assert result.failure is FailureKind.COLOURS_TOO_SIMILAR
     assert result.length_mm is None
+
+
+def test_no_table_plane(rig, reconstructor) -> None:  # noqa: ANN001
+    # Enough measured points, but scattered through the working volume: nothing is a plane.
+    width, height = rig.image_size
+    count = width * height // 4
+    rng = np.random.default_rng(0)
+    points = rng.uniform([-200.0, -150.0, 450.0], [200.0, 150.0, 650.0], size=(count, 3))
+    cloud = StereoCloud(points, np.zeros((count, 3), np.float32), np.zeros((count, 2)), np.ones(count), rig.image_size)
+    result = measure_sole(reconstructor.segment(cloud))
+    assert not result.valid and "no table plane" in result.reason
+    assert result.failure is FailureKind.NO_TABLE
+
+
+def test_no_surface_measured_at_the_heel_point(rig, reconstructor) -> None:  # noqa: ANN001
+    scene = SoleScene.random(2, "white", rig)
+    pair = scene.render()
+    reconstruction = reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left))
+    heel = measure_sole(reconstruction).heel_point
+    # The same footprint, but no measured points around the heel point (a glossy spot, say).
+    far = np.linalg.norm(reconstruction.sole_points[:, :2] - heel[:2], axis=1) > 15.0
+    holed = dataclasses.replace(reconstruction, sole_points=reconstruction.sole_points[far])
+    result = measure_sole(holed)
+    assert not result.valid and "no measured surface at the heel point" in result.reason
+    assert result.failure is FailureKind.SURFACE_NOT_MEASURED and result.heel_height_mm is None
 
 
 def test_too_few_measured_points(rig, reconstructor) -> None:  # noqa: ANN001
@@ -159,6 +190,7 @@ def test_too_few_measured_points(rig, reconstructor) -> None:  # noqa: ANN001
     blank = np.full((height, width, 3), 40, np.uint8)  # a covered lens: nothing to match
     result = measure_sole(reconstructor.reconstruct(blank, blank.copy()))
     assert not result.valid and "too few measured points" in result.reason
+    assert result.failure is FailureKind.TOO_FEW_POINTS
 
 
 def test_toe_and_heel_too_close_to_call(rig, reconstructor) -> None:  # noqa: ANN001
@@ -174,6 +206,7 @@ def test_toe_and_heel_too_close_to_call(rig, reconstructor) -> None:  # noqa: AN
     pair = scene.render()
     result = measure_sole(reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left)))
     assert not result.valid and "too close to call" in result.reason
+    assert result.failure is FailureKind.ENDS_TOO_CLOSE_TO_CALL
     assert result.heel_height_mm is None and result.toe_height_mm is None
 
 
@@ -188,7 +221,7 @@ def test_measure_command_json(tmp_path: Path, stereo_results, capsys: pytest.Cap
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert {"length_mm", "heel_height_mm", "toe_height_mm", "glue_path", "points", "valid"} <= out.keys()
-    assert out["valid"] is True
+    assert out["valid"] is True and out["failure"] is None
     # Same images, same numbers up to Open3D's parallel RANSAC and outlier removal, which are not bit-exact.
     assert out["length_mm"] == pytest.approx(expected.length_mm, abs=0.1)
     assert abs(len(out["glue_path"]) - len(expected.glue_path.points)) <= 1 and len(out["glue_path"][0]) == 3
