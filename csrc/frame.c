@@ -41,7 +41,7 @@ void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw
                    int y, uint64_t *out, uint8_t *scratch)
 {
     int nbytes = (cw * ch - 1 + 7) / 8;
-    nbytes = nbytes > 0 ? nbytes : 1;
+    nbytes = nbytes < 1 ? 1 : (nbytes > 8 ? 8 : nbytes); /* callers check the window (<= 9x7) */
     uint8_t *planes[8];
     for (int b = 0; b < nbytes; b++)
         planes[b] = scratch + (size_t)b * width;

@@ -210,8 +210,9 @@ int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
 {
     if (!m || !disp)
         return CC_ERR_NULL;
-    cc_wm_image g = {guide ? guide : left, width, height, guide ? guide_channels : 1,
-                     (size_t)(guide ? stride_guide : stride_left)};
+    cc_wm_image g = {.data = guide ? guide : left, .width = width, .height = height,
+                     .channels = guide ? guide_channels : 1,
+                     .stride = (size_t)(guide ? stride_guide : stride_left)};
     if (g.channels != 1 && g.channels != 3)
         return CC_ERR_PARAM;
     if (g.stride < (size_t)width * g.channels)
@@ -332,7 +333,8 @@ int cc_postprocess(const cc_params *p, const int16_t *raw_left, const int16_t *r
         return CC_ERR_PARAM;
     if (guide && stride_guide < width * guide_channels)
         return CC_ERR_SIZE;
-    cc_wm_image g = {guide, width, height, guide_channels, (size_t)stride_guide};
+    cc_wm_image g = {.data = guide, .width = width, .height = height, .channels = guide_channels,
+                     .stride = (size_t)stride_guide};
     int threads = cc_thread_count(p);
     void *scratch = cc_alloc(cc_postprocess_scratch_bytes(p, width, height, threads));
     if (!scratch)
