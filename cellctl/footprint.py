@@ -26,7 +26,8 @@ class Footprint:
 
     @classmethod
     def empty_like(cls, xy: np.ndarray, cell_mm: float = DEFAULT_CELL_MM, margin_mm: float = 10.0) -> Footprint:
-        """An empty raster covering the points (N x 2) with a margin."""
+        """An empty raster covering the points (N x 2) with a margin; cell corners lie on multiples of cell_mm,
+        so rasters of the same cell size share their cells whatever they cover."""
         lo = np.floor((xy.min(axis=0) - margin_mm) / cell_mm) * cell_mm
         hi = xy.max(axis=0) + margin_mm
         cols, rows = (np.ceil((hi - lo) / cell_mm).astype(int) + 1).tolist()

@@ -284,14 +284,20 @@ class _Segmentation:
 
     def _sole(self, points: np.ndarray) -> Reconstruction:
         start = time.perf_counter()
-        z = points[:, 2]
-        high = (z > self.min_height) & (z < MAX_HEIGHT_MM)
-        footprint = _footprint(points[:, :2], high)
+        xy, z = points[:, :2], points[:, 2]
+        # Indices rather than masks: most points are table, and only the high ones can be sole.
+        high = np.flatnonzero((z > self.min_height) & (z < MAX_HEIGHT_MM))
+        no_sole = f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table"
+        if high.size == 0:
+            return self._fail(FailureKind.NO_SOLE, no_sole)
+        # One raster for both footprints, over the high points only (cells elsewhere cannot be sole); its
+        # cells lie on the same lattice whatever it covers (Footprint.empty_like).
+        raster = Footprint.empty_like(xy[high], FOOTPRINT_CELL_MM)
+        every = raster.counts(xy)  # all measured points per cell: "most of a cell's points" needs them
+        footprint = _footprint(raster, every, xy[high])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
-            return self._fail(
-                FailureKind.NO_SOLE, f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table"
-            )
-        keep = high & self._colour_filter(points, footprint, np.abs(z) < TABLE_INLIER_MM, high)
+            return self._fail(FailureKind.NO_SOLE, no_sole)
+        keep = high[self._colour_filter(points, footprint, high)]
         if not self.colour_filter:
             # Without the colour edge, matching halos widen the sole by 1-5 mm (simulated soles): no length.
             return self._fail(
@@ -300,13 +306,12 @@ class _Segmentation:
                 f"{self.separation:.1f} standard deviations, need {MIN_COLOUR_SEPARATION:g}): use a table "
                 "surface that contrasts with the sole"
             )
-        footprint = _footprint(points[:, :2], keep)
+        footprint = _footprint(raster, every, xy[keep])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour")
-        keep &= footprint.contains(points[:, :2])
+        index = keep[footprint.contains(xy[keep])]
         self.timings["background"] = time.perf_counter() - start
         start = time.perf_counter()
-        index = np.flatnonzero(keep)
         cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[index]))
         _, inliers = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
         index = index[np.asarray(inliers, dtype=np.int64)]
@@ -343,28 +348,29 @@ class _Segmentation:
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
         return cv2.erode(mask, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
 
-    def _colour_filter(self, points: np.ndarray, footprint: Footprint, table: np.ndarray, high: np.ndarray) -> np.ndarray:
-        """Sole-coloured points (all True when the colours do not separate).
+    def _colour_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray:
+        """Which of the `high` points (indices) are sole-coloured (all when the colours do not separate).
 
         Linear discriminant between the table's colour (plane inliers outside the sole) and the sole's
         (points well inside the footprint), thresholded half way between the two means, which is where a
         pixel half covered by the sole lies: the edge stays where it is.
         """
-        colours = self.cloud.colors.astype(np.float64)
-        interior = high & footprint.eroded(5.0).contains(points[:, :2])
-        outside = table & ~footprint.dilated(10.0).contains(points[:, :2])
-        if interior.sum() < 100 or outside.sum() < 100:
-            return np.ones(len(points), bool)
-        sole_c, table_c = colours[interior], colours[outside]
+        colours = self.cloud.colors
+        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)
+        interior = high[footprint.eroded(5.0).contains(points[high, :2])]
+        outside = table[~footprint.dilated(10.0).contains(points[table, :2])]
+        if interior.size < 100 or outside.size < 100:
+            return np.ones(len(high), bool)
+        sole_c, table_c = colours[interior].astype(np.float64), colours[outside].astype(np.float64)
         pooled = 0.5 * (np.cov(sole_c.T) + np.cov(table_c.T)) + np.eye(3) * 1e-3
         difference = sole_c.mean(axis=0) - table_c.mean(axis=0)
         direction = np.linalg.solve(pooled, difference)
         self.separation = float(np.sqrt(direction @ difference))
         if self.separation < MIN_COLOUR_SEPARATION:
-            return np.ones(len(points), bool)
+            return np.ones(len(high), bool)
         self.colour_filter = True
         threshold = direction @ (0.5 * (sole_c.mean(axis=0) + table_c.mean(axis=0)))
-        return colours @ direction > threshold
+        return colours[high].astype(np.float64) @ direction > threshold
 
     def _cut_by_border(self, index: np.ndarray) -> tuple[FailureKind | None, str | None]:
         """Failure kind and reason if the sole reaches the edge of what both cameras see (else None, None)."""
@@ -469,10 +475,10 @@ def _refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 80, r
     return TablePlane.fit(np.vstack([p for p, k in zip(points, keep) if k]))
 
 
-def _footprint(xy: np.ndarray, high: np.ndarray) -> Footprint:
-    """Largest region where most measured points of a cell are sole points, closed and hole-free."""
-    raster = Footprint.empty_like(xy, FOOTPRINT_CELL_MM)
-    every, sole = raster.counts(xy), raster.counts(xy[high])
+def _footprint(raster: Footprint, every: np.ndarray, sole_xy: np.ndarray) -> Footprint:
+    """Largest region of `raster` where most measured points of a cell (`every`, per cell) are sole points
+    (`sole_xy`), closed and hole-free."""
+    sole = raster.counts(sole_xy)
     # A cell is sole if most of its own points are; cells without points are decided by the closing.
-    raster.mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
-    return raster.morphology(close_mm=2.0, open_mm=2.0).largest_region()
+    mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
+    return Footprint(mask, raster.origin, raster.cell_mm).morphology(close_mm=2.0, open_mm=2.0).largest_region()

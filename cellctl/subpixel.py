@@ -31,6 +31,39 @@ class PatchFit:
     params: np.ndarray  # K x 3 (a, b, c)
     ok: np.ndarray  # K bool: converged with enough textured pixels
     pixels: list[np.ndarray]  # per patch, the (x, y) pixels used (M_k x 2)
+    ids: np.ndarray  # the same pixels stacked: patch of each (N, sorted)...
+    xy: np.ndarray  # ... and its (x, y) (N x 2)
+
+    def disparities(self, centres: np.ndarray) -> np.ndarray:
+        """The fitted disparity at every pixel of `xy` (N), for patch centres K x 2."""
+        a, b, c = self.params[self.ids].T
+        offset = self.xy - np.asarray(centres, np.float64)[self.ids]
+        return a + b * offset[:, 0] + c * offset[:, 1]
+
+
+class PatchSums:
+    """Per-patch sums over pixels stored patch after patch (ids sorted), by np.add.reduceat.
+
+    One reduceat over a (m, N) array does m sums at once; bincount with weights does one sum per call
+    over scattered ids, several times slower for the ~10^5 pixels of a cycle's patches.
+    """
+
+    def __init__(self, ids: np.ndarray, count: int) -> None:
+        self.ids = ids
+        self.sizes = np.bincount(ids, minlength=count)
+        self._filled = np.flatnonzero(self.sizes > 0)
+        self._starts = (np.cumsum(self.sizes) - self.sizes)[self._filled]  # strictly increasing
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        """Sums of values (N,) or (m, N) per patch: (K,) or (m, K); 0 for empty patches."""
+        out = np.zeros(values.shape[:-1] + (len(self.sizes),))
+        if self._filled.size:
+            out[..., self._filled] = np.add.reduceat(values, self._starts, axis=-1)
+        return out
+
+    def means_at_pixels(self, values: np.ndarray) -> np.ndarray:
+        """Each pixel's patch mean of values (N)."""
+        return (self(values) / np.maximum(self.sizes, 1))[self.ids]
 
 
 def refine_patches(
@@ -53,19 +86,16 @@ def refine_patches(
 
 
 def disc_pixels(mask: np.ndarray, centres: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """(patch id, (x, y)) of the `mask` pixels within `radius_px` of each centre."""
+    """(patch id, (x, y)) of the `mask` pixels within `radius_px` of each centre, ordered by patch."""
     height, width = mask.shape
     offsets = _disc_offsets(radius_px)
-    patch_id, pixels = [], []
-    for k, (cx, cy) in enumerate(np.asarray(centres, np.float64).reshape(-1, 2)):
-        px = np.round(cx).astype(int) + offsets[:, 0]
-        py = np.round(cy).astype(int) + offsets[:, 1]
-        inside = (px >= 0) & (px < width) & (py >= 0) & (py < height)
-        px, py = px[inside], py[inside]
-        on = mask[py, px]
-        patch_id.append(np.full(int(on.sum()), k))
-        pixels.append(np.column_stack([px[on], py[on]]))
-    return np.concatenate(patch_id).astype(np.int64), np.vstack(pixels).astype(np.float64)
+    centres = np.round(np.asarray(centres, np.float64).reshape(-1, 2)).astype(np.int64)
+    px = (centres[:, 0:1] + offsets[:, 0]).ravel()  # K x M candidates, patch after patch
+    py = (centres[:, 1:2] + offsets[:, 1]).ravel()
+    ids = np.repeat(np.arange(len(centres)), len(offsets))
+    inside = np.flatnonzero((px >= 0) & (px < width) & (py >= 0) & (py < height))
+    on = inside[mask[py[inside], px[inside]]]
+    return ids[on], np.column_stack([px[on], py[on]]).astype(np.float64)
 
 
 def fit_disparity_planes(
@@ -89,53 +119,56 @@ def fit_disparity_planes(
     params = np.array(start, np.float64).reshape(count, 3)
     dx = x - centres[ids, 0]
     dy = y - centres[ids, 1]
-    sizes = np.bincount(ids, minlength=count)
+    sums = PatchSums(ids, count)
+    sizes = sums.sizes
+    # Products of the Jacobian's columns (1, dx, dy) that the normal equations need: fixed per fit.
+    basis = np.vstack([np.ones_like(dx), dx, dy, dx * dx, dx * dy, dy * dy])
     last_step = np.full(count, np.inf)
     for sigma, iterations in BLUR_LEVELS:
         l_img = cv2.GaussianBlur(left, (0, 0), sigma) if sigma > 0 else left
         r_img = cv2.GaussianBlur(right, (0, 0), sigma) if sigma > 0 else right
         r_grad = cv2.Sobel(r_img, cv2.CV_32F, 1, 0, ksize=3) / 8.0
         l_val = _sample(l_img, x, y)
+        l_dev = l_val - sums.means_at_pixels(l_val)  # the left patch does not move: its statistics are fixed per level
+        l_energy = sums(l_dev**2)
         for _ in range(iterations):
             d = params[ids, 0] + params[ids, 1] * dx + params[ids, 2] * dy
-            step = _gauss_newton_step(l_val, _sample(r_img, x - d, y), _sample(r_grad, x - d, y), ids, dx, dy, count)
+            r_val = _sample(r_img, x - d, y)
+            r_dev = r_val - sums.means_at_pixels(r_val)
+            step = _gauss_newton_step(l_dev, l_energy, r_dev, _sample(r_grad, x - d, y), basis, sums)
             params += np.clip(step, -MAX_STEP_PX, MAX_STEP_PX)
             last_step = np.abs(step[:, 0])
     ok = (sizes >= MIN_PATCH_PIXELS) & (last_step < 0.02) & np.all(np.isfinite(params), axis=1)
-    split = np.cumsum(sizes)[:-1]
-    return PatchFit(params, ok, np.split(np.column_stack([x, y]).astype(np.float64), split))
+    xy = np.column_stack([x, y]).astype(np.float64)
+    return PatchFit(params, ok, np.split(xy, np.cumsum(sizes)[:-1]), ids, xy)
 
 
-def _gauss_newton_step(l_val: np.ndarray, r_val: np.ndarray, r_grad: np.ndarray, ids: np.ndarray,
-                       dx: np.ndarray, dy: np.ndarray, count: int) -> np.ndarray:
+def _gauss_newton_step(l_dev: np.ndarray, l_energy: np.ndarray, r_dev: np.ndarray, r_grad: np.ndarray,
+                       basis: np.ndarray, sums: PatchSums) -> np.ndarray:
     """One Gauss-Newton update of (a, b, c) per patch.
 
-    Intensities are compared after removing each patch's mean and scaling the right patch to the left one's
-    contrast: the two cameras never have quite the same gain, vignetting or highlights, and an uncorrected
-    brightness ramp across a patch shifts the fitted disparity.
+    Intensities are compared after removing each patch's mean (l_dev, r_dev) and scaling the right patch to
+    the left one's contrast: the two cameras never have quite the same gain, vignetting or highlights, and
+    an uncorrected brightness ramp across a patch shifts the fitted disparity.
     """
-    sizes = np.maximum(np.bincount(ids, minlength=count), 1)
-    l_mean = np.bincount(ids, weights=l_val, minlength=count) / sizes
-    r_mean = np.bincount(ids, weights=r_val, minlength=count) / sizes
-    l_dev, r_dev = l_val - l_mean[ids], r_val - r_mean[ids]
-    gain = np.sqrt(np.bincount(ids, weights=l_dev**2, minlength=count) /
-                   np.maximum(np.bincount(ids, weights=r_dev**2, minlength=count), 1e-9))
-    r_grad = r_grad * gain[ids]
-    error = l_dev - gain[ids] * r_dev
+    gain = np.sqrt(l_energy / np.maximum(sums(r_dev**2), 1e-9))[sums.ids]
+    r_grad = r_grad * gain
+    error = l_dev - gain * r_dev
     # Down-weight pixels with large residuals (specular spots, occlusion at the edge): Huber weights, scaled
     # by the patch's mean absolute residual (sqrt(pi / 2) * mean |e| is sigma for Gaussian noise; a median
     # would be more robust but costs a sort per patch and iteration).
-    scale = 1.2533 * np.bincount(ids, weights=np.abs(error), minlength=count) / sizes + 1e-3
-    weight = np.minimum(1.0, 2.0 * scale[ids] / np.maximum(np.abs(error), 1e-9))
-    # d R(x - d) / d params = -grad * (1, dx, dy); the step solves sum w (e - J step)^2 -> min.
-    jac = -r_grad[:, None] * np.column_stack([np.ones_like(dx), dx, dy])
-    normal = np.zeros((count, 3, 3))
-    rhs = np.zeros((count, 3))
-    for i in range(3):
-        rhs[:, i] = np.bincount(ids, weights=weight * jac[:, i] * error, minlength=count)
-        for j in range(i, 3):
-            normal[:, i, j] = normal[:, j, i] = np.bincount(ids, weights=weight * jac[:, i] * jac[:, j], minlength=count)
+    magnitude = np.abs(error)
+    scale = 1.2533 * sums(magnitude) / np.maximum(sums.sizes, 1) + 1e-3
+    weight = np.minimum(1.0, 2.0 * scale[sums.ids] / np.maximum(magnitude, 1e-9))
+    # d R(x - d) / d params = J = -grad * (1, dx, dy); the step solves sum w (e - J step)^2 -> min, so
+    # J^T W J = sum w grad^2 (1, dx, dy)^T (1, dx, dy) and J^T W e = -sum w grad e (1, dx, dy).
+    weighted_grad = weight * r_grad
+    moments = sums(np.vstack([basis * (weighted_grad * r_grad), basis[:3] * (-weighted_grad * error)]))
+    s1, sx, sy, sxx, sxy, syy = moments[:6]
+    rows = [np.stack(row, -1) for row in ((s1, sx, sy), (sx, sxx, sxy), (sy, sxy, syy))]
+    normal = np.stack(rows, -2)
     normal += np.eye(3) * 1e-6
+    rhs = moments[6:].T
     # R(x - d - s) ~ R(x - d) - grad * s, so the residual becomes e - J step: step = (J^T W J)^-1 J^T W e.
     return np.linalg.solve(normal, rhs[..., None])[..., 0]
 
