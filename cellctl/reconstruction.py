@@ -76,8 +76,11 @@ class TablePlane:
     def fit(cls, points: np.ndarray) -> TablePlane:
         """Least-squares plane through points (N x 3), oriented towards the camera at the origin."""
         centre = points.mean(axis=0)
-        _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
-        normal = vt[2]
+        centred = points - centre
+        # The normal is the scatter matrix's eigenvector of least spread: the same as the SVD's last right
+        # singular vector, from a 3 x 3 problem instead of an N x 3 one (N ~ 10^6).
+        _, vectors = np.linalg.eigh(centred.T @ centred)
+        normal = vectors[:, 0]
         offset = -float(normal @ centre)
         if offset < 0:  # the camera (origin) must be on the positive side
             normal, offset = -normal, -offset
@@ -356,7 +359,8 @@ class _Segmentation:
         pixel half covered by the sole lies: the edge stays where it is.
         """
         colours = self.cloud.colors
-        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)
+        # The table's colour statistics from every 4th table point (~150000): as exact, at a quarter the time.
+        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
         interior = high[footprint.eroded(5.0).contains(points[high, :2])]
         outside = table[~footprint.dilated(10.0).contains(points[table, :2])]
         if interior.size < 100 or outside.size < 100:
@@ -408,11 +412,12 @@ class _Segmentation:
         )
 
 
-def _find_table(points: np.ndarray, sample: int = 60000, seed: int = 0) -> TablePlane | None:
-    """RANSAC (Open3D) on a subsample, then a least-squares refit to all inliers of the full cloud.
+def _find_table(points: np.ndarray, sample: int = 60000, seed: int = 0, refit_stride: int = 4) -> TablePlane | None:
+    """RANSAC (Open3D) on a subsample, then a least-squares refit to the inliers of every `refit_stride`-th point.
 
     The refit matters: heights are measured from this plane, and RANSAC's three-point hypothesis on a
-    subsample is only good to about the inlier distance.
+    subsample is only good to about the inlier distance. A quarter of the points (~200000 table points)
+    fixes the plane to about a micrometre of statistical error; all of them only cost more time.
     """
     rng = np.random.default_rng(seed)
     subset = points[rng.choice(len(points), size=min(sample, len(points)), replace=False)]
@@ -424,9 +429,10 @@ def _find_table(points: np.ndarray, sample: int = 60000, seed: int = 0) -> Table
     plane = TablePlane(np.asarray(model[:3], np.float64), float(model[3]))
     scale = np.linalg.norm(plane.normal)
     plane = TablePlane(plane.normal / scale, plane.offset / scale)
+    spread = points[::refit_stride]  # measured pixels in image order: a stride samples the whole view
     for _ in range(2):  # refit, then refit once more on the refined inliers
-        near = np.abs(plane.heights(points)) < TABLE_INLIER_MM
-        plane = TablePlane.fit(points[near])
+        near = np.abs(plane.heights(spread)) < TABLE_INLIER_MM
+        plane = TablePlane.fit(spread[near])
     return plane
 
 
@@ -459,20 +465,18 @@ def _refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 80, r
     ])
     left, right = cloud.rectified
     fit = refine_patches(left, right, mask, centres, radius_px, start)
-    points = []
-    for k in np.flatnonzero(fit.ok):
-        used = fit.pixels[k]
-        a, b, c = fit.params[k]
-        disparity = a + b * (used[:, 0] - centres[k, 0]) + c * (used[:, 1] - centres[k, 1])
-        homogeneous = np.column_stack([used, disparity, np.ones(len(used))]) @ calib.Q.T
-        points.append(homogeneous[:, :3] / homogeneous[:, 3:4])
-    if len(points) < 10:
+    if np.count_nonzero(fit.ok) < 10:
         return plane
-    refined = TablePlane.fit(np.vstack(points))
+    used = fit.ok[fit.ids]
+    homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))])[used] @ calib.Q.T
+    points, ids = homogeneous[:, :3] / homogeneous[:, 3:4], fit.ids[used]
+    refined = TablePlane.fit(points)
     # Patches that do not lie on the table (a missed object, a mismatch) are dropped and the plane refitted.
-    residual = np.array([np.abs(np.median(refined.heights(p))) for p in points])
-    keep = residual < max(3.0 * np.median(residual), 0.05)
-    return TablePlane.fit(np.vstack([p for p, k in zip(points, keep) if k]))
+    starts = np.flatnonzero(np.diff(ids)) + 1  # ids are sorted: one run per patch
+    residual = np.array([abs(np.median(h)) for h in np.split(refined.heights(points), starts)])
+    patches = ids[np.concatenate([[0], starts])]
+    keep = np.isin(ids, patches[residual < max(3.0 * np.median(residual), 0.05)])
+    return TablePlane.fit(points[keep])
 
 
 def _footprint(raster: Footprint, every: np.ndarray, sole_xy: np.ndarray) -> Footprint:

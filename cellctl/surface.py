@@ -14,7 +14,7 @@ import numpy as np
 import open3d as o3d
 
 from cellctl.reconstruction import Reconstruction
-from cellctl.subpixel import refine_patches
+from cellctl.subpixel import PatchSums, refine_patches
 
 MIN_CLOUD_POINTS = 12
 TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
@@ -89,17 +89,30 @@ class SoleSurface:
         start = focal * calib.baseline_mm / guess[:, 2]
         radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
         fit = refine_patches(left, right, rec.sole_mask, centres, radius_px, start)
-        for j, k in enumerate(known):
-            if not fit.ok[j]:
-                continue
-            pixels = fit.pixels[j]
-            a, b, c = fit.params[j]
-            d = a + b * (pixels[:, 0] - centres[j, 0]) + c * (pixels[:, 1] - centres[j, 1])
-            homogeneous = np.column_stack([pixels, d, np.ones(len(d))]) @ calib.Q.T
-            camera = homogeneous[:, :3] / homogeneous[:, 3:4]
-            table = camera @ rec.camera_to_table[:3, :3].T + rec.camera_to_table[:3, 3]
-            z[k], normals[k] = _plane_at(table, xy[k])
-            refined[k] = True
+        homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
+        camera = homogeneous[:, :3] / homogeneous[:, 3:4]
+        table = camera @ rec.camera_to_table[:3, :3].T + rec.camera_to_table[:3, 3]
+        patch_z, patch_normals = _planes_at(table, fit.ids, xy[known])
+        done = fit.ok & np.isfinite(patch_z)
+        z[known[done]], normals[known[done]], refined[known[done]] = patch_z[done], patch_normals[done], True
+
+
+def _planes_at(points: np.ndarray, ids: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """_plane_at for many patches at once: points (N x 3) of patch ids (sorted), evaluated at xy (K x 2).
+
+    Least squares by per-patch normal equations (sums of products), all patches in one pass.
+    """
+    u, v = (points[:, :2] - xy[ids]).T
+    w = points[:, 2]
+    moments = PatchSums(ids, len(xy))(np.vstack([np.ones_like(u), u, v, u * u, u * v, v * v, w, w * u, w * v]))
+    s1, su, sv, suu, suv, svv, sw, swu, swv = moments
+    normal = np.stack([np.stack(row, -1) for row in ((s1, su, sv), (su, suu, suv), (sv, suv, svv))], -2)
+    rhs = np.stack([sw, swu, swv], -1)
+    solvable = np.abs(np.linalg.det(normal)) > 1e-9 * np.maximum(s1, 1.0) ** 3
+    coef = np.full((len(xy), 3), np.nan)
+    coef[solvable] = np.linalg.solve(normal[solvable], rhs[solvable][..., None])[..., 0]
+    normals = np.column_stack([-coef[:, 1], -coef[:, 2], np.ones(len(xy))])
+    return coef[:, 0], normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
 def _plane_at(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray]:
