@@ -17,13 +17,12 @@
 #include <immintrin.h>
 #endif
 
-int cc_p2_for_step(const cc_params *p, int intensity, int prev_intensity)
+void cc_p2_table(const cc_params *p, uint16_t table[256])
 {
-    if (p->p2_gamma == 0)
-        return p->p2;
-    int step = intensity > prev_intensity ? intensity - prev_intensity : prev_intensity - intensity;
-    int p2 = p->p2 * p->p2_gamma / (p->p2_gamma + step);
-    return p2 > p->p1 ? p2 : p->p1;
+    for (int step = 0; step < 256; step++) {
+        int p2 = p->p2_gamma == 0 ? p->p2 : p->p2 * p->p2_gamma / (p->p2_gamma + step);
+        table[step] = (uint16_t)(p2 > p->p1 ? p2 : p->p1);
+    }
 }
 
 /* One step along a path: L(p, d) = C(p, d) + min(L(p-r, d), L(p-r, d+-1) + P1,

@@ -36,6 +36,7 @@ typedef struct cc_setup {
     int use_avx2;
     uint8_t lut_census[CC_LUT];
     uint8_t lut_bt[CC_LUT];
+    uint16_t p2_by_step[256];
 } cc_setup;
 
 int cc_setup_init(cc_setup *s, const cc_params *p);
@@ -62,7 +63,13 @@ void cc_cost_segment(const cc_setup *s, const cc_frame *f, int x0, int x1, int y
 uint16_t cc_path_step(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
                       uint16_t prev_min, int p2, uint16_t *out,
                       const uint16_t *acc_in, uint16_t *acc_out);
-int cc_p2_for_step(const cc_params *p, int intensity, int prev_intensity);
+/* P2 for every intensity step |I(p) - I(p-r)|: P2 * g / (g + step), never below P1
+ * (constant P2 when g = 0); a table so the hot loops do no division. */
+void cc_p2_table(const cc_params *p, uint16_t table[256]);
+static inline int cc_p2_for_step(const cc_setup *s, int intensity, int prev_intensity)
+{
+    return s->p2_by_step[intensity > prev_intensity ? intensity - prev_intensity : prev_intensity - intensity];
+}
 
 /* Buffers of one matcher for one image size; see cc_workspace_* in matcher.c. */
 typedef struct cc_workspace {

@@ -135,6 +135,7 @@ int cc_setup_init(cc_setup *s, const cc_params *p)
     if (p->cost_mode != CC_COST_CENSUS)
         fill_rho_table(s->lut_bt, p->lambda_bt, p->cost_scale);
     s->cmax = s->lut_census[CC_LUT - 1] + s->lut_bt[CC_LUT - 1];
+    cc_p2_table(p, s->p2_by_step);
     return CC_OK;
 }
 

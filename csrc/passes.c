@@ -32,7 +32,7 @@ static void vertical_row(const cc_setup *s, const cc_frame *f, cc_workspace *ws,
             if (!first && px >= 0 && px < w) {
                 prev = prow + (size_t)px * vs + CC_GUARD;
                 prev_min = pmin[px];
-                p2 = cc_p2_for_step(&s->p, intensity(f, x, y), intensity(f, px, py));
+                p2 = cc_p2_for_step(s, intensity(f, x, y), intensity(f, px, py));
             }
             const uint16_t *acc_in = (downward && j == 0) ? NULL : acc;
             cmin[x] = cc_path_step(s, cost, prev, prev_min, p2, crow + (size_t)x * vs + CC_GUARD, acc_in, acc);
@@ -82,14 +82,14 @@ static void horizontal_paths(const cc_setup *s, const cc_frame *f, const cc_thre
     uint16_t prev_min = 0;
     for (int x = 0; x < w; x++) { /* left to right: S = volume + L */
         const uint16_t *prev = x > 0 ? t->hpath[(x - 1) & 1] + CC_GUARD : NULL;
-        int p2 = x > 0 ? cc_p2_for_step(&s->p, intensity(f, x, y), intensity(f, x - 1, y)) : s->p.p2;
+        int p2 = x > 0 ? cc_p2_for_step(s, intensity(f, x, y), intensity(f, x - 1, y)) : s->p.p2;
         prev_min = cc_path_step(s, t->cost_row + (size_t)x * Dp, prev, prev_min, p2,
                                 t->hpath[x & 1] + CC_GUARD, volume_row + (size_t)x * Dp,
                                 t->sum_row + (size_t)x * Dp);
     }
     for (int x = w - 1; x >= 0; x--) { /* right to left: S += L */
         const uint16_t *prev = x < w - 1 ? t->hpath[(x + 1) & 1] + CC_GUARD : NULL;
-        int p2 = x < w - 1 ? cc_p2_for_step(&s->p, intensity(f, x, y), intensity(f, x + 1, y)) : s->p.p2;
+        int p2 = x < w - 1 ? cc_p2_for_step(s, intensity(f, x, y), intensity(f, x + 1, y)) : s->p.p2;
         prev_min = cc_path_step(s, t->cost_row + (size_t)x * Dp, prev, prev_min, p2,
                                 t->hpath[x & 1] + CC_GUARD, t->sum_row + (size_t)x * Dp,
                                 t->sum_row + (size_t)x * Dp);
