@@ -190,21 +190,28 @@ class SoleReconstructor:
         rect_left, rect_right = self.calib.rectify(left, right)
         timings["rectify"] = time.perf_counter() - start
         start = time.perf_counter()
-        result = self._stereo_matcher().compute_detailed(rect_left, rect_right)
+        # The final map alone (int16, x DISP_SCALE): without fill ("none") the medians keep unmeasured pixels
+        # invalid, so a valid pixel of it is one that passed the left-right check. compute_detailed would
+        # convert five maps to float for nothing.
+        fixed = self._stereo_matcher().compute_fixed(rect_left, rect_right)
         timings["match"] = time.perf_counter() - start
         start = time.perf_counter()
-        disparity = result.disparity
+        from cellctl.stereo import DISP_SCALE, INVALID
+
         grey_left, grey_right = _grey(rect_left), _grey(rect_right)
         # A flat patch (clipped highlight, covered lens) matches at any disparity and can still pass the
         # left-right check: such pixels are not measurements.
-        measured = result.valid & np.isfinite(disparity) & (_local_std(grey_left) >= MIN_TEXTURE_DN)
-        xyz = cv2.reprojectImageTo3D(np.where(measured, disparity, 0.0).astype(np.float32), self.calib.Q)
+        measured = (fixed != INVALID) & (_local_std(grey_left) >= MIN_TEXTURE_DN)
         ys, xs = np.nonzero(measured)
+        disparity = fixed[ys, xs] / float(DISP_SCALE)
+        # Only the measured pixels through Q ([X Y Z W] = Q [x y d 1], cv2.reprojectImageTo3D's formula), as
+        # a perspective transform of (x, y, d): no H x W x 3 map to build and gather from.
+        pixel_disparity = np.column_stack([xs, ys, disparity]).reshape(-1, 1, 3)
         cloud = StereoCloud(
-            points=xyz[ys, xs].astype(np.float64),
+            points=cv2.perspectiveTransform(pixel_disparity, self.calib.Q).reshape(-1, 3),
             colors=_smoothed_colours(rect_left)[ys, xs],
             pixels=np.column_stack([xs, ys]).astype(np.float64),
-            disparity=disparity[ys, xs].astype(np.float64),
+            disparity=disparity,
             image_size=self.calib.image_size,
             timings=timings,
             rectified=(grey_left, grey_right),
@@ -239,7 +246,7 @@ def _smoothed_colours(image: np.ndarray) -> np.ndarray:
     """Per-pixel colour for the colour filter: a 3 x 3 mean tames sensor noise but keeps the edge position."""
     if image.ndim == 2:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    return cv2.blur(image.astype(np.float32), (3, 3))
+    return cv2.boxFilter(image, cv2.CV_32F, (3, 3))  # float output straight from uint8: no rounding
 
 
 class _Segmentation:
