@@ -31,7 +31,9 @@ def run_cell_demo(config: Path | None, port: int, cycles: int, out: Path) -> int
     command = [sys.executable, "-m", "cellctl", "run", "--config", str(config), "--state-dir", str(state),
                "--port", str(port)]
     print(f"starting the service: {' '.join(command[2:])}", flush=True)
-    service = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
+    # As deploy/cellctl.service runs it: numpy's BLAS single-threaded (why: in the unit file).
+    environment = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    service = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=environment)
     try:
         readings = _drive(service, port, cycles)
     finally:
