@@ -133,8 +133,10 @@ class Reconstruction:
 
     def point_cloud(self) -> o3d.geometry.PointCloud:
         """The sole as an Open3D cloud with RGB colours (for PLY output and viewing)."""
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.sole_points))
-        cloud.colors = o3d.utility.Vector3dVector(np.clip(self.sole_colors[:, ::-1] / 255.0, 0.0, 1.0))
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(self.sole_points, np.float64)))
+        # Contiguous float64: Open3D copies that in one go, anything else element by element (~50 ms per cycle).
+        rgb = np.ascontiguousarray(np.clip(self.sole_colors[:, ::-1] / 255.0, 0.0, 1.0), np.float64)
+        cloud.colors = o3d.utility.Vector3dVector(rgb)
         return cloud
 
 
