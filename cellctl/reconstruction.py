@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -332,25 +333,11 @@ class _Segmentation:
         index = self._without_outliers(index, points)
         self.timings["outliers"] = time.perf_counter() - start
         failure, reason = self._cut_by_border(index)
-        result = Reconstruction(
-            sole_points=points[index],
-            sole_colors=self.cloud.colors[index],
-            sole_pixels=self.cloud.pixels[index],
-            footprint=footprint,
-            camera_to_table=self.transform,
-            table_plane=self.plane,
-            colour_filter=self.colour_filter,
-            colour_separation=self.separation,
-            measured_points=self.measured,
-            measured_fraction=self.fraction,
-            reason=reason,
-            failure=failure,
-            timings=self.timings,
-            calibration=self.cloud.calibration,
-            rectified=self.cloud.rectified,
+        return self._result(
+            failure, reason, sole_points=points[index], sole_colors=self.cloud.colors[index],
+            sole_pixels=self.cloud.pixels[index], footprint=footprint, rectified=self.cloud.rectified,
             sole_mask=self._sole_mask(index),
         )
-        return result
 
     def _without_outliers(self, index: np.ndarray, points: np.ndarray) -> np.ndarray:
         """The points (indices) that statistical outlier removal keeps."""
@@ -416,21 +403,15 @@ class _Segmentation:
         return None, None
 
     def _fail(self, failure: FailureKind, reason: str) -> Reconstruction:
+        return self._result(failure, reason, sole_points=np.zeros((0, 3)), sole_colors=np.zeros((0, 3)),
+                            sole_pixels=np.zeros((0, 2)), footprint=None)
+
+    def _result(self, failure: FailureKind | None, reason: str | None, **sole: Any) -> Reconstruction:
+        """A Reconstruction with what this reconstructor found about the table and the cloud, plus `sole`."""
         return Reconstruction(
-            sole_points=np.zeros((0, 3)),
-            sole_colors=np.zeros((0, 3)),
-            sole_pixels=np.zeros((0, 2)),
-            footprint=None,
-            camera_to_table=self.transform,
-            table_plane=self.plane,
-            colour_filter=self.colour_filter,
-            colour_separation=self.separation,
-            measured_points=self.measured,
-            measured_fraction=self.fraction,
-            reason=reason,
-            failure=failure,
-            timings=self.timings,
-            calibration=self.cloud.calibration,
+            camera_to_table=self.transform, table_plane=self.plane, colour_filter=self.colour_filter,
+            colour_separation=self.separation, measured_points=self.measured, measured_fraction=self.fraction,
+            reason=reason, failure=failure, timings=self.timings, calibration=self.cloud.calibration, **sole,
         )
 
 
