@@ -109,6 +109,14 @@ def test_replay_serves_pairs_in_turn(tmp_path: Path) -> None:
         ReplayCameras(tmp_path / "empty").grab_pair()
 
 
+def test_replay_takes_numbers_in_natural_order_as_calibrate_does(tmp_path: Path) -> None:
+    for n, value in (("2", 20), ("10", 100), ("9", 90)):  # unpadded numbers: "10" sorts before "2" as text
+        cv2.imwrite(str(tmp_path / f"left_{n}.png"), np.full((8, 8, 3), value, np.uint8))
+        cv2.imwrite(str(tmp_path / f"right_{n}.png"), np.full((8, 8, 3), value + 1, np.uint8))
+    replay = ReplayCameras(tmp_path)
+    assert [int(replay.grab_pair().right[0, 0, 0]) for _ in range(3)] == [21, 91, 101]
+
+
 class FakeCapture:
     """Stands in for cv2.VideoCapture on a V4L2 device: frames every 1/30 s from `start`."""
 

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import re
 import time
 from pathlib import Path
 
 import cv2
 
+from cellctl.calibrate import find_pairs
 from cellctl.cameras.base import CameraMissing, StereoFrame
-
-_LEFT = re.compile(r"left_(\w+)\.png$")
 
 
 class ReplayCameras:
@@ -21,15 +19,14 @@ class ReplayCameras:
         self._next = 0
 
     def pairs(self) -> list[tuple[Path, Path]]:
-        """The (left, right) files of the directory, sorted by their NN."""
+        """The (left, right) files of the directory, in natural order of their NN (as `cellctl calibrate` reads them)."""
         if not self.directory.is_dir():
             raise CameraMissing(f"replay directory {self.directory} does not exist")
-        found = []
-        for left in sorted(self.directory.glob("left_*.png")):
-            match = _LEFT.search(left.name)
-            right = left.with_name(f"right_{match.group(1)}.png") if match else None
-            if right is not None and right.is_file():
-                found.append((left, right))
+        try:
+            files = find_pairs(self.directory)
+        except ValueError:
+            files = []
+        found = [(f.left, f.right) for f in files if f.left is not None and f.right is not None]
         if not found:
             raise CameraMissing(f"replay directory {self.directory} holds no left_NN.png/right_NN.png pair")
         return found
