@@ -36,6 +36,7 @@ from cellctl.config import CellConfig
 from cellctl.failures import FailureKind, MeasurementInputError
 from cellctl.journal import CycleRecord, Journal
 from cellctl.measurement import SoleMeasurement, measure_sole
+from cellctl.overlay import project_to_left
 from cellctl.reconstruction import Reconstruction, SoleReconstructor
 from cellctl.sdnotify import SystemdNotifier
 from firmware_io.handshake import Trigger
@@ -316,13 +317,10 @@ class Daemon:
         if measurement is None or measurement.glue_path is None or measurement.camera_to_table is None:
             return image
         assert self.calib is not None
-        table_to_rectified = np.linalg.inv(measurement.camera_to_table)
+        calib, transform = self.calib, measurement.camera_to_table
 
         def pixels(points: np.ndarray) -> np.ndarray:
-            rect = points @ table_to_rectified[:3, :3].T + table_to_rectified[:3, 3]
-            raw = rect @ self.calib.R1  # rectified = R1 @ raw, so raw = R1^T @ rectified
-            px, _ = cv2.projectPoints(raw.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.calib.K1, self.calib.D1)
-            return np.round(px.reshape(-1, 2)).astype(np.int32)
+            return np.round(project_to_left(calib, transform, points)).astype(np.int32)
 
         cv2.polylines(image, [pixels(measurement.glue_path.points)], True, (0, 200, 255), 2, cv2.LINE_AA)
         for point, colour in ((measurement.heel_point, (255, 80, 0)), (measurement.toe_point, (0, 80, 255))):
