@@ -15,6 +15,16 @@
 #define CC_HAVE_X86 0
 #endif
 
+/* A fixed-point disparity (x16) rounded to the nearest whole pixel, halves up, for any sign. */
+static inline int cc_whole_px(int d16)
+{
+    int v = d16 + CC_DISP_SCALE / 2;
+    return v >= 0 ? v / CC_DISP_SCALE : -((-v + CC_DISP_SCALE - 1) / CC_DISP_SCALE);
+}
+
+/* v rounded up to a multiple of a. */
+static inline size_t cc_round_up(size_t v, size_t a) { return (v + a - 1) / a * a; }
+
 /* The two images prepared for the cost: census bytes and BT bounds.  The right
  * image is stored mirrored and padded per row so that, for a left pixel x, the
  * right pixels x - d of consecutive d are consecutive in memory. */

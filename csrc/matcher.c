@@ -43,17 +43,16 @@ struct cc_matcher {
     size_t bytes;
 };
 
-static size_t round_up(size_t v, size_t a) { return (v + a - 1) / a * a; }
 
 size_t cc_thread_scratch_bytes(const cc_setup *s, int width)
 {
     size_t dp = (size_t)s->Dp, w = (size_t)width;
-    size_t n = round_up(w * dp + 64, CC_ALIGN);                /* cost row */
-    n += round_up(w * dp * 2, CC_ALIGN);                       /* sum row */
-    n += 2 * round_up((dp + 2 * CC_GUARD) * 2, CC_ALIGN);      /* horizontal paths */
-    n += round_up(cc_select_tmp_bytes(s, width), CC_ALIGN);    /* selection */
+    size_t n = cc_round_up(w * dp + 64, CC_ALIGN);                /* cost row */
+    n += cc_round_up(w * dp * 2, CC_ALIGN);                       /* sum row */
+    n += 2 * cc_round_up((dp + 2 * CC_GUARD) * 2, CC_ALIGN);      /* horizontal paths */
+    n += cc_round_up(cc_select_tmp_bytes(s, width), CC_ALIGN);    /* selection */
     /* The frame preparation runs before the passes and borrows the same slices. */
-    size_t frame = round_up(cc_frame_scratch_bytes(width), CC_ALIGN);
+    size_t frame = cc_round_up(cc_frame_scratch_bytes(width), CC_ALIGN);
     return n > frame ? n : frame;
 }
 
@@ -63,12 +62,12 @@ cc_thread_scratch cc_thread_scratch_at(const cc_setup *s, const cc_workspace *ws
     uint8_t *p = ws->scratch + ws->scratch_stride * (size_t)thread;
     cc_thread_scratch t;
     t.cost_row = p;
-    p += round_up(w * dp + 64, CC_ALIGN);
+    p += cc_round_up(w * dp + 64, CC_ALIGN);
     t.sum_row = (uint16_t *)p;
-    p += round_up(w * dp * 2, CC_ALIGN);
+    p += cc_round_up(w * dp * 2, CC_ALIGN);
     for (int i = 0; i < 2; i++) {
         t.hpath[i] = (uint16_t *)p;
-        p += round_up((dp + 2 * CC_GUARD) * 2, CC_ALIGN);
+        p += cc_round_up((dp + 2 * CC_GUARD) * 2, CC_ALIGN);
     }
     t.select_tmp = (uint16_t *)p;
     return t;

@@ -4,8 +4,6 @@
 
 #include "internal.h"
 
-static inline int floor_div16(int v) { return v >= 0 ? v / 16 : -((-v + 15) / 16); }
-
 static void lr_check_row(const cc_params *p, const int16_t *left, const int16_t *right, int width,
                          int16_t *out)
 {
@@ -15,7 +13,7 @@ static void lr_check_row(const cc_params *p, const int16_t *left, const int16_t 
             out[x] = (int16_t)d;
             continue;
         }
-        int xr = x - floor_div16(d + CC_DISP_SCALE / 2);
+        int xr = x - cc_whole_px(d);
         int ok = xr >= 0 && xr < width && right[xr] != CC_INVALID &&
                  (right[xr] > d ? right[xr] - d : d - right[xr]) <= p->lr_max_diff;
         out[x] = ok ? (int16_t)d : (int16_t)CC_INVALID;
@@ -32,7 +30,7 @@ static void border_occlusion_row(int16_t *row, int width)
     for (int x = width - 1; x >= 0; x--) { /* left border: x - d < 0 */
         if (row[x] == CC_INVALID)
             continue;
-        if (ref != CC_INVALID && x - floor_div16(ref + CC_DISP_SCALE / 2) < 0)
+        if (ref != CC_INVALID && x - cc_whole_px(ref) < 0)
             row[x] = CC_INVALID;
         else
             ref = row[x];
@@ -41,7 +39,7 @@ static void border_occlusion_row(int16_t *row, int width)
     for (int x = 0; x < width; x++) { /* right border: x - d >= width */
         if (row[x] == CC_INVALID)
             continue;
-        if (ref != CC_INVALID && x - floor_div16(ref + CC_DISP_SCALE / 2) >= width)
+        if (ref != CC_INVALID && x - cc_whole_px(ref) >= width)
             row[x] = CC_INVALID;
         else
             ref = row[x];
@@ -220,14 +218,14 @@ static void median_row(const int16_t *in, int width, int height, int y, int size
     }
 }
 
-static size_t round64(size_t v) { return (v + 63) / 64 * 64; }
 
 size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, int threads)
 {
     size_t n = (size_t)width * height;
     /* map, levels and packed guide, each with 8 pixels of slack for the vector loads */
-    return round64(n * sizeof(int16_t)) + round64((n + 8) * sizeof(uint16_t)) +
-           round64((n + 8) * sizeof(uint32_t)) + round64(cc_wm_hist_bytes(p->num_disparities)) * (size_t)threads;
+    return cc_round_up(n * sizeof(int16_t), 64) + cc_round_up((n + 8) * sizeof(uint16_t), 64) +
+           cc_round_up((n + 8) * sizeof(uint32_t), 64) +
+           cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64) * (size_t)threads;
 }
 
 static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out)
@@ -245,12 +243,12 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                          int16_t *filled, int16_t *disp, void *scratch, int threads)
 {
     const int weighted_fill = p->fill_mode == CC_FILL_WEIGHTED, wmedian = p->weighted_median > 0;
-    const size_t n = (size_t)width * height, map_bytes = round64(n * sizeof(int16_t));
-    const size_t hist_stride = round64(cc_wm_hist_bytes(p->num_disparities));
+    const size_t n = (size_t)width * height, map_bytes = cc_round_up(n * sizeof(int16_t), 64);
+    const size_t hist_stride = cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64);
     int16_t *tmp = scratch;
     uint16_t *level = (uint16_t *)((uint8_t *)scratch + map_bytes);
-    uint32_t *packed = (uint32_t *)((uint8_t *)level + round64((n + 8) * sizeof(uint16_t)));
-    uint8_t *hist_base = (uint8_t *)packed + round64((n + 8) * sizeof(uint32_t));
+    uint32_t *packed = (uint32_t *)((uint8_t *)level + cc_round_up((n + 8) * sizeof(uint16_t), 64));
+    uint8_t *hist_base = (uint8_t *)packed + cc_round_up((n + 8) * sizeof(uint32_t), 64);
     cc_wm_image g = *guide;
     g.packed = packed;
     g.use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();

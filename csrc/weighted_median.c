@@ -48,7 +48,6 @@ cc_wm_hist cc_wm_hist_at(void *base, int levels)
     return h;
 }
 
-static inline int floor_div16(int v) { return v >= 0 ? v / 16 : -((-v + 15) / 16); }
 
 /* floor(a / b) for b > 0. */
 static inline int64_t floor_div64(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
@@ -57,7 +56,7 @@ int cc_wm_level(int v, int dmin, int levels)
 {
     if (v == CC_INVALID)
         return CC_WM_NO_LEVEL;
-    int b = floor_div16(v + CC_DISP_SCALE / 2) - dmin;
+    int b = cc_whole_px(v) - dmin;
     return b < 0 ? 0 : (b >= levels ? levels - 1 : b);
 }
 
