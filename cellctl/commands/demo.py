@@ -30,14 +30,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def colourise(disparity: np.ndarray, max_disparity: float) -> np.ndarray:
-    """Colour-mapped disparity (OpenCV's TURBO map), invalid pixels black."""
-    scaled = np.nan_to_num(disparity / max_disparity * 255.0, nan=0.0).clip(0, 255).astype(np.uint8)
-    image = cv2.applyColorMap(scaled, cv2.COLORMAP_TURBO)
-    image[~np.isfinite(disparity)] = 0
-    return image
-
-
 def run(args: argparse.Namespace) -> int:
     if args.teddy:
         return run_teddy(args)
@@ -46,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
 def run_teddy(args: argparse.Namespace) -> int:
     from cellctl.middlebury import bad_pixel_percent, load_scene
+    from cellctl.middlebury_pictures import disparity_colour
     from cellctl.stereo import StereoMatcher
 
     scene = load_scene("teddy", args.data)
@@ -56,8 +49,9 @@ def run_teddy(args: argparse.Namespace) -> int:
     ms = (time.perf_counter() - t0) * 1e3
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    top = scene.info.num_disparities - 1
-    picture = np.hstack([scene.left, colourise(scene.ground_truth, top), colourise(result.disparity, top)])
+    lo, n = scene.info.min_disparity, scene.info.num_disparities
+    truth, ours = (disparity_colour(d, lo, n) for d in (scene.ground_truth, result.disparity))
+    picture = np.hstack([scene.left, truth, ours])
     path = out / "teddy-disparity.png"
     cv2.imwrite(str(path), picture)
     bad = bad_pixel_percent(result.disparity, scene.ground_truth, scene.regions["nonocc"])
