@@ -82,10 +82,9 @@ def _sgbm(mode: int, num_disparities: int) -> cv2.StereoSGBM:
                                  speckleRange=SGBM_SPECKLE_RANGE, mode=mode)
 
 
-def methods(case: Case, threads: int) -> dict[str, Callable[[], object]]:
+def methods(case: Case, ours: StereoMatcher) -> dict[str, Callable[[], object]]:
     """Each method's compute bound to the case; OpenCV's SGBM needs a multiple of 16 disparities."""
     nd = -(-case.num_disparities // 16) * 16
-    ours = StereoMatcher(0, case.num_disparities, threads=threads)
     hh4, three_way = _sgbm(cv2.StereoSGBM_MODE_HH4, nd), _sgbm(cv2.StereoSGBM_MODE_SGBM_3WAY, nd)
     return {
         "ours": lambda: ours.compute(case.left, case.right),
@@ -127,16 +126,20 @@ def time_method(case: Case, name: str, run: Callable[[], object]) -> Timing:
 
 
 def run_benchmark(cases: list[Case], threads: int = 2,
-                  progress: Callable[[str], None] | None = None) -> list[Timing]:
-    """Times every method on every case with `threads` threads for everyone."""
+                  progress: Callable[[str], None] | None = None) -> tuple[list[Timing], dict[str, str]]:
+    """Times every method on every case with `threads` threads for everyone; also returns, per case,
+    the core's own buffers after our timed runs."""
     cv2.setNumThreads(threads)
-    results = []
+    results, buffers = [], {}
     for case in cases:
-        for name, run in methods(case, threads).items():
+        ours = StereoMatcher(0, case.num_disparities, threads=threads)
+        for name, run in methods(case, ours).items():
             if progress:
                 progress(f"{case.name}: {name}")
             results.append(time_method(case, name, run))
-    return results
+        total = ours.buffer_bytes
+        buffers[case.name] = f"{total / 2**20:.0f} MiB = {total / case.cells:.2f} B/cell"
+    return results, buffers
 
 
 def ratios(results: list[Timing]) -> dict[str, dict[str, float]]:
@@ -159,14 +162,6 @@ def to_markdown(results: list[Timing], threads: int, core_bytes: dict[str, int])
     for case, rs in ratios(results).items():
         lines.append(f"| {case} | {rs['ours/opencv-hh4']:.2f} | {rs['ours/opencv-3way']:.2f} | {core_bytes.get(case, '')} |")
     return "\n".join(lines)
-
-
-def core_buffer_summary(case: Case) -> str:
-    """The core's own buffers for the case, and what they are per cost-volume cell."""
-    m = StereoMatcher(0, case.num_disparities)
-    m.compute(case.left, case.right)
-    total = m.buffer_bytes
-    return f"{total / 2**20:.0f} MiB = {total / case.cells:.2f} B/cell"
 
 
 def as_json(results: list[Timing], threads: int, summaries: dict[str, str]) -> dict:

@@ -26,9 +26,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--runs must be at least 1")
     teddy = benchmark.teddy_case(args.data, runs=args.runs or 9)
     synthetic = benchmark.synthetic_case(runs=args.runs or 5)
-    cases = [teddy, synthetic]
-    summaries = {c.name: benchmark.core_buffer_summary(c) for c in cases}
-    results = benchmark.run_benchmark(cases, args.threads, progress=lambda s: print(f"  {s}", file=sys.stderr))
+    results, summaries = benchmark.run_benchmark([teddy, synthetic], args.threads,
+                                                 progress=lambda s: print(f"  {s}", file=sys.stderr))
     if args.json:
         print(json.dumps(benchmark.as_json(results, args.threads, summaries), indent=2))
     else:
