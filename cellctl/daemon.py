@@ -52,8 +52,6 @@ STOP_LINGER_S = 0.5
 #: Cameras that failed are probed this often between cycles so READY comes back without a trigger.
 CAMERA_PROBE_PERIOD_S = 1.0
 #: Plausible sole measurements (mm); anything outside is MEASUREMENT_INVALID, never sent as a result.
-PLAUSIBLE_LENGTH_MM = (100.0, 400.0)
-PLAUSIBLE_HEIGHT_MM = (0.5, 150.0)
 
 #: What the PLC is told for each kind of measurement failure (the reason text goes to the journal and log).
 #: Every FailureKind has an entry (tests/test_daemon.py checks it).
@@ -231,7 +229,6 @@ class Daemon:
         if not measurement.valid:
             assert measurement.failure is not None  # every invalid measurement names its kind
             raise CycleFailed.of(measurement.failure, measurement.reason or "not measured")
-        _check_plausible(measurement)
         return reconstruction, measurement
 
     def _publish(self, cycle: int, code: ErrorCode, cycle_time_ms: float, measurement: SoleMeasurement | None) -> None:
@@ -335,18 +332,6 @@ def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | Non
     except (OSError, ValueError) as exc:
         log.error("calibration %s not usable: %s", config.calibration.path, exc)
         return None, str(exc)
-
-
-def _check_plausible(measurement: SoleMeasurement) -> None:
-    length = float(measurement.length_mm)  # type: ignore[arg-type]
-    heights = (float(measurement.heel_height_mm), float(measurement.toe_height_mm))  # type: ignore[arg-type]
-    low, high = PLAUSIBLE_LENGTH_MM
-    if not low <= length <= high:
-        raise CycleFailed.of(FailureKind.MEASUREMENT_INVALID, f"sole length {length:.1f} mm outside {low:g}..{high:g} mm")
-    low, high = PLAUSIBLE_HEIGHT_MM
-    for name, value in zip(("heel", "toe"), heights):
-        if not math.isfinite(value) or not low <= value <= high:
-            raise CycleFailed.of(FailureKind.MEASUREMENT_INVALID, f"{name} height {value:.1f} mm outside {low:g}..{high:g} mm")
 
 
 def _published_points(points: np.ndarray) -> np.ndarray:

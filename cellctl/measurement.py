@@ -25,6 +25,9 @@ from cellctl.reconstruction import Reconstruction
 from cellctl.surface import MIN_CLOUD_POINTS, SoleSurface
 
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
+# Results outside these ranges are no sole on this cell: refused, never published.
+PLAUSIBLE_LENGTH_MM = (100.0, 400.0)
+PLAUSIBLE_HEIGHT_MM = (0.5, 150.0)
 HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
 GLUE_OFFSET_MM = 2.0
@@ -148,9 +151,24 @@ def measure_sole(
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, problem or "no glue path", **base)
+    implausible = _implausible(length, heel_z, toe_z)
+    if implausible:
+        return _invalid(FailureKind.MEASUREMENT_INVALID, implausible, **base)
     return SoleMeasurement(
         length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, valid=True, **base
     )
+
+
+def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
+    """Why values outside what a sole can be are refused, or None: better no number than a wrong one."""
+    low, high = PLAUSIBLE_LENGTH_MM
+    if not low <= length <= high:
+        return f"sole length {length:.1f} mm outside {low:g}..{high:g} mm"
+    low, high = PLAUSIBLE_HEIGHT_MM
+    for name, value in (("heel", heel_z), ("toe", toe_z)):
+        if not low <= value <= high:
+            return f"{name} height {value:.1f} mm outside {low:g}..{high:g} mm"
+    return None
 
 
 def _invalid(failure: FailureKind, reason: str, **fields_: object) -> SoleMeasurement:

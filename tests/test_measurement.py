@@ -213,6 +213,22 @@ def test_toe_and_heel_too_close_to_call(rig, reconstructor) -> None:  # noqa: AN
 # ---- the command ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize(("bound", "limits", "named"), [
+    ("PLAUSIBLE_LENGTH_MM", (100.0, 200.0), "sole length"),  # the simulated soles are 240-300 mm
+    ("PLAUSIBLE_HEIGHT_MM", (0.5, 5.0), "heel height"),
+])
+def test_implausible_results_are_refused_not_reported(stereo_results, monkeypatch: pytest.MonkeyPatch,  # noqa: ANN001
+                                                      bound: str, limits: tuple[float, float], named: str) -> None:
+    import cellctl.measurement as measurement
+
+    reconstruction = stereo_results[0][2]
+    assert measure_sole(reconstruction).valid
+    monkeypatch.setattr(measurement, bound, limits)
+    result = measure_sole(reconstruction)
+    assert not result.valid and result.failure is FailureKind.MEASUREMENT_INVALID
+    assert named in result.reason and result.length_mm is None and result.glue_path is None
+
+
 def test_measure_command_json(tmp_path: Path, stereo_results, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001
     scene, pair, _, expected = stereo_results[2]
     scene.write(tmp_path, pair)
