@@ -10,24 +10,36 @@ APT_PACKAGES := python3-venv python3-dev gcc libc6-dev libgomp1 libusb-1.0-0
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 SANITIZE := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
-.PHONY: demo test asan bench eval sysdeps clean
+.PHONY: demo test quick check asan bench eval sysdeps clean
 
 demo: $(STAMP)
 	$(BIN)/cellctl demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
+	$(MAKE) check
 	$(MAKE) asan
+
+# The tests without those marked slow, for the edit-test loop (make test runs them all).
+quick: $(STAMP)
+	$(BIN)/python -m pytest -m "not slow"
+
+# Lint, format, types and the import layers (configured in pyproject.toml).
+check: $(STAMP)
+	$(BIN)/ruff check cellctl firmware_io tests csrc
+	$(BIN)/ruff format --check cellctl firmware_io tests csrc
+	$(BIN)/mypy
+	$(BIN)/lint-imports
 
 # The core's tests again, against a build with AddressSanitizer and UBSan.
 asan: $(STAMP)
 	rm -rf asan-build && mkdir -p asan-build
 	cp -r cellctl csrc tests asan-build/
-	rm -f asan-build/cellctl/_core*.so
+	rm -f asan-build/cellctl/stereo/_core*.so
 	cd asan-build && CELLCTL_CFLAGS="$(SANITIZE)" ../$(BIN)/python csrc/build_core.py >/dev/null
 	cd asan-build && CELLCTL_MIDDLEBURY=$(CURDIR)/../shared/data/middlebury/2001-2003 ASAN_OPTIONS=detect_leaks=0 UBSAN_OPTIONS=print_stacktrace=1 \
 		LD_PRELOAD="$$(gcc -print-file-name=libasan.so) $$(gcc -print-file-name=libubsan.so)" \
-		../$(BIN)/python -m pytest -p no:cacheprovider -q tests/test_stereo_core.py tests/test_stereo_api.py tests/test_core_errors.py
+		../$(BIN)/python -m pytest -p no:cacheprovider -q tests/stereo
 
 bench: $(STAMP)
 	$(BIN)/cellctl bench
@@ -51,4 +63,4 @@ $(STAMP): pyproject.toml setup.py $(wildcard csrc/*.c csrc/*.h csrc/*.py)
 	touch $@
 
 clean:
-	rm -rf build asan-build *.egg-info cellctl/_core*.so cellctl/_core.c out demo-out
+	rm -rf build asan-build *.egg-info cellctl/stereo/_core*.so cellctl/stereo/_core.c out demo-out

@@ -1,7 +1,7 @@
 """cffi build script of the matching core (API mode).
 
 setup.py names this file in `cffi_modules`, so `pip install .` compiles csrc/*.c
-into the extension module `cellctl._core`.
+into the extension module `cellctl.stereo._core`.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ ffibuilder.cdef(_cdef_from_header((HERE / "cellctl_core.h").read_text()))
 _sources = sorted(str(p.relative_to(HERE.parent)) for p in HERE.glob("*.c"))
 _extra = os.environ.get("CELLCTL_CFLAGS", "").split()
 ffibuilder.set_source(
-    "cellctl._core",
+    "cellctl.stereo._core",
     '#include "cellctl_core.h"',
     sources=_sources,
     include_dirs=[str(HERE.relative_to(HERE.parent))],

@@ -162,9 +162,7 @@ class PlcHandshake:
         }
         for name, value in values.items():
             if not math.isfinite(float(value)):
-                raise ValueError(
-                    f"{name} is {value}: publish_error(cycle, ErrorCode.MEASUREMENT_INVALID) instead"
-                )
+                raise ValueError(f"{name} is {value}: publish_error(cycle, ErrorCode.MEASUREMENT_INVALID) instead")
         # Encode before taking the lock: a refused value leaves the map untouched.
         measurement = self._map.encode_floats(list(values.values()), what="measurement")
         points = self._map.encode_points(glue_points)

@@ -126,6 +126,7 @@ class CycleReading:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly view (NaN becomes None)."""
+
         def number(value: float) -> float | None:
             return None if np.isnan(value) else round(float(value), 4)
 

@@ -206,9 +206,7 @@ class RegisterMap:
         checked = [_float32(v, f"{what}[{i}]") for i, v in enumerate(values)]
         if not checked:
             return []
-        return ModbusClientMixin.convert_to_registers(
-            checked, _FLOAT32, word_order=self.word_order.pymodbus_name
-        )
+        return ModbusClientMixin.convert_to_registers(checked, _FLOAT32, word_order=self.word_order.pymodbus_name)
 
     def decode_floats(self, registers: Sequence[int]) -> list[float]:
         """float32 values from registers (2 per value)."""

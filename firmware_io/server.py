@@ -85,9 +85,7 @@ class PlcLink:
         if not 0 < heartbeat_period_s < 0.5:
             raise ValueError(f"heartbeat period {heartbeat_period_s} s must be above 0 and below 0.5 s")
         if liveness_timeout_s is not None and liveness_timeout_s <= heartbeat_period_s:
-            raise ValueError(
-                f"liveness timeout {liveness_timeout_s} s must be longer than the heartbeat period"
-            )
+            raise ValueError(f"liveness timeout {liveness_timeout_s} s must be longer than the heartbeat period")
         self._endpoint = endpoint
         self._unit_id = check_unit_id(unit_id, endpoint)
         self._map = RegisterMap(word_order)
@@ -244,7 +242,7 @@ class PlcLink:
             try:
                 await asyncio.wait_for(self._stop_requested.wait(), SERIAL_REOPEN_PERIOD_S)
                 return None
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 pass
             self._line_lost.clear()
             try:

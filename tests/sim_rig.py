@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cellctl.calibration import Calibration
 from cellctl.sim.rig import default_rig
+from cellctl.vision.calibration import Calibration
 
 
 def half_size_rig() -> Calibration:
@@ -15,7 +15,9 @@ def half_size_rig() -> Calibration:
     rig = default_rig()
     scale = np.diag([0.5, 0.5, 1.0])
     width, height = rig.image_size
-    return Calibration.from_extrinsics((width // 2, height // 2), scale @ rig.K1, rig.D1, scale @ rig.K2, rig.D2, rig.R, rig.T)
+    return Calibration.from_extrinsics(
+        (width // 2, height // 2), scale @ rig.K1, rig.D1, scale @ rig.K2, rig.D2, rig.R, rig.T
+    )
 
 
 def write_half_size_rig(directory: Path) -> Path:

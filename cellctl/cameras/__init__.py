@@ -1,14 +1,14 @@
 """Camera backends behind one interface: FrameSource.grab_pair() -> StereoFrame, or a CameraError.
 
-    source = open_frame_source(config.cameras, calib)
-    frame = source.grab_pair()          # CameraMissing / FrameTimeout / OutOfSync on failure
+source = open_frame_source(config.cameras, calib)
+frame = source.grab_pair()          # CameraMissing / FrameTimeout / OutOfSync on failure
 """
 
 from __future__ import annotations
 
-from cellctl.calibration import Calibration
 from cellctl.cameras.base import CameraError, CameraMissing, FrameSource, FrameTimeout, OutOfSync, StereoFrame
-from cellctl.config import CameraConfig
+from cellctl.cameras.config import CameraConfig
+from cellctl.vision.calibration import Calibration
 
 __all__ = [
     "CameraError",
@@ -29,8 +29,12 @@ def open_frame_source(config: CameraConfig, calib: Calibration) -> FrameSource:
 
         sim = config.simulated
         return SimulatedCameras(
-            calib, sim.seeds, sim.color, skew_s=sim.skew_ms / 1000.0,
-            sync_tolerance_s=tolerance_s, max_regrabs=config.max_regrabs,
+            calib,
+            sim.seeds,
+            sim.color,
+            skew_s=sim.skew_ms / 1000.0,
+            sync_tolerance_s=tolerance_s,
+            max_regrabs=config.max_regrabs,
         )
     if config.backend == "replay":
         from cellctl.cameras.replay import ReplayCameras
@@ -41,8 +45,14 @@ def open_frame_source(config: CameraConfig, calib: Calibration) -> FrameSource:
 
     assert config.left is not None and config.right is not None
     cameras = [
-        V4l2Camera(device, size=config.size, pixel_format=config.pixel_format, exposure=config.exposure,
-                   gain=config.gain, timeout_s=config.timeout_ms / 1000.0)
+        V4l2Camera(
+            device,
+            size=config.size,
+            pixel_format=config.pixel_format,
+            exposure=config.exposure,
+            gain=config.gain,
+            timeout_s=config.timeout_ms / 1000.0,
+        )
         for device in (config.left, config.right)
     ]
     return V4l2Cameras(cameras[0], cameras[1], sync_tolerance_s=tolerance_s, max_regrabs=config.max_regrabs)

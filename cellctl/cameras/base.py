@@ -7,31 +7,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from firmware_io.registers import ErrorCode
+from cellctl.errors import CameraError, CameraMissing, FrameTimeout, OutOfSync
 
-
-class CameraError(Exception):
-    """A pair could not be delivered; `code` is what the PLC is told."""
-
-    code: ErrorCode = ErrorCode.CAMERA_MISSING
-
-
-class CameraMissing(CameraError):
-    """A camera is not connected or cannot be opened."""
-
-    code = ErrorCode.CAMERA_MISSING
-
-
-class FrameTimeout(CameraError):
-    """A camera delivered no frame in time."""
-
-    code = ErrorCode.FRAME_TIMEOUT
-
-
-class OutOfSync(CameraError):
-    """The two frames were taken too far apart, even after re-grabbing."""
-
-    code = ErrorCode.CAMERAS_OUT_OF_SYNC
+__all__ = ["CameraError", "CameraMissing", "FrameSource", "FrameTimeout", "OutOfSync", "StereoFrame"]
 
 
 @dataclass

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import cv2
 
-from cellctl.calibrate import find_pairs
+from cellctl.calib.zhang import find_pairs
 from cellctl.cameras.base import CameraMissing, StereoFrame
 
 
@@ -42,7 +42,9 @@ class ReplayCameras:
         if left is None or right is None:
             raise CameraMissing(f"replay pair {left_path.name}/{right_path.name} cannot be read as images")
         now = time.monotonic()
-        return StereoFrame(left, right, now, now, {"backend": "replay", "left": str(left_path), "right": str(right_path)})
+        return StereoFrame(
+            left, right, now, now, {"backend": "replay", "left": str(left_path), "right": str(right_path)}
+        )
 
     def close(self) -> None:
         pass

@@ -13,11 +13,11 @@ from __future__ import annotations
 import threading
 import time
 
-from cellctl.calibration import Calibration
 from cellctl.cameras.base import CameraMissing, FrameTimeout, StereoFrame
 from cellctl.cameras.sync import TimedFrame, grab_synchronised
 from cellctl.sim.render import RenderedPair
 from cellctl.sim.scene import SoleScene
+from cellctl.vision.calibration import Calibration
 
 FRAME_PERIOD_S = 1.0 / 30.0
 

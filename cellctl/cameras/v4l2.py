@@ -143,7 +143,10 @@ class V4l2Cameras:
             self.close()  # reopen both next time: a replugged camera restarts its stream
             raise
         return StereoFrame(
-            images[0], images[1], left.timestamp, right.timestamp,
+            images[0],
+            images[1],
+            left.timestamp,
+            right.timestamp,
             {"backend": "v4l2", "left": self.left.device, "right": self.right.device},
         )
 

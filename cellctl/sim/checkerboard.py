@@ -22,8 +22,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cellctl.calibrate import Checkerboard
-from cellctl.calibration import Calibration
+from cellctl.calib.zhang import Checkerboard
+from cellctl.vision.calibration import Calibration
 
 BAD_KINDS: tuple[str, ...] = ("outside", "blur")
 _BACKGROUND = 70  # grey level of the table around the board

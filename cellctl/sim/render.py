@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 import open3d as o3d
 
-from cellctl.calibration import Calibration
 from cellctl.sim.sole import SoleModel
+from cellctl.vision.calibration import Calibration
 
 RIG_HEIGHT_MM = 550.0  # rig (baseline mid-point) above the table
 RIG_TILT_DEG = (2.0, -1.0)  # a rig is never mounted perfectly level: about its x and y axes
@@ -107,8 +107,9 @@ class RenderedPair:
 class SceneRenderer:
     """Renders one scene (table and optional sole) through a calibrated rig."""
 
-    def __init__(self, calib: Calibration, camera_pose: np.ndarray, sole: SoleModel | None,
-                 color: str = "white", seed: int = 0) -> None:
+    def __init__(
+        self, calib: Calibration, camera_pose: np.ndarray, sole: SoleModel | None, color: str = "white", seed: int = 0
+    ) -> None:
         if color not in SOLE_MATERIALS:
             raise ValueError(f"sole colour must be one of {', '.join(SOLE_MATERIALS)}, got {color!r}")
         self.calib = calib
@@ -207,8 +208,9 @@ class SceneRenderer:
         radiance[hits["geometry"] < 0] = 0.0
         return radiance * EXPOSURE_DN
 
-    def _shade_sole(self, hits: dict[str, np.ndarray], sole: np.ndarray, normals: np.ndarray,
-                    texture: np.ndarray) -> None:
+    def _shade_sole(
+        self, hits: dict[str, np.ndarray], sole: np.ndarray, normals: np.ndarray, texture: np.ndarray
+    ) -> None:
         shape, pose = self.sole.shape, self.sole.pose
         uv = pose.to_sole(hits["points"][sole, :2], shape.length)
         z = hits["points"][sole, 2]
@@ -249,8 +251,9 @@ class SceneRenderer:
         return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
-def _lighting(points: np.ndarray, normals: np.ndarray, eye: np.ndarray, shininess: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+def _lighting(
+    points: np.ndarray, normals: np.ndarray, eye: np.ndarray, shininess: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Diffuse and Blinn-Phong specular terms of the light bars, normalised to 1 - AMBIENT at the table origin."""
     points = points.astype(np.float32)
     normals = normals.astype(np.float32)
@@ -312,8 +315,14 @@ class _Texture:
     texel_mm: float
 
     @classmethod
-    def fractal(cls, rng: np.random.Generator, origin: tuple[float, float], size_mm: tuple[float, float],
-                texel_mm: float, octaves: tuple[tuple[float, float], ...]) -> _Texture:
+    def fractal(
+        cls,
+        rng: np.random.Generator,
+        origin: tuple[float, float],
+        size_mm: tuple[float, float],
+        texel_mm: float,
+        octaves: tuple[tuple[float, float], ...],
+    ) -> _Texture:
         """Sum of smooth noise octaves (band-limited noise upsampled with bicubic interpolation)."""
         width, height = int(size_mm[0] / texel_mm), int(size_mm[1] / texel_mm)
         image = np.ones((height, width), np.float32)
@@ -339,6 +348,7 @@ class _Texture:
         my = np.zeros(rows * 1024, np.float32)
         mx[:n] = (np.asarray(x_mm) - self.origin[0]) / self.texel_mm
         my[:n] = (np.asarray(y_mm) - self.origin[1]) / self.texel_mm
-        out = cv2.remap(self.image, mx.reshape(rows, 1024), my.reshape(rows, 1024), cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_REFLECT)
+        out = cv2.remap(
+            self.image, mx.reshape(rows, 1024), my.reshape(rows, 1024), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
+        )
         return out.ravel()[:n]

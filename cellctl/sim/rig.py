@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from cellctl.calibration import Calibration
+from cellctl.vision.calibration import Calibration
 
 IMAGE_SIZE: tuple[int, int] = (1280, 1024)  # (width, height) px
 BASELINE_MM: float = 60.0

@@ -17,10 +17,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cellctl.calibration import Calibration
-from cellctl.reconstruction import StereoCloud
 from cellctl.sim.render import SOLE_MATERIALS, RenderedPair, SceneRenderer, project, rig_pose
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
+from cellctl.vision.calibration import Calibration
+from cellctl.vision.reconstruction import StereoCloud
 
 VIEW_MARGIN_PX = 40  # a random sole keeps this far from the edges of both images
 PLACEMENT_ATTEMPTS = 200
@@ -69,7 +69,11 @@ class SoleScene:
         width, height = self.calib.image_size
         for side in ("left", "right"):
             px = project(self.calib, self.camera_pose, side, corners)
-            if np.any(px < margin_px) or np.any(px[:, 0] > width - 1 - margin_px) or np.any(px[:, 1] > height - 1 - margin_px):
+            if (
+                np.any(px < margin_px)
+                or np.any(px[:, 0] > width - 1 - margin_px)
+                or np.any(px[:, 1] > height - 1 - margin_px)
+            ):
                 return False
         return True
 

@@ -135,7 +135,9 @@ class SoleShape:
         v = np.asarray(v, dtype=np.float64)
         t = u / self.length
         lo, hi = self.thickness_blend
-        thickness = self.heel_thickness + (self.forefoot_thickness - self.heel_thickness) * _smoothstep((t - lo) / (hi - lo))
+        thickness = self.heel_thickness + (self.forefoot_thickness - self.heel_thickness) * _smoothstep(
+            (t - lo) / (hi - lo)
+        )
         # A quadratic in the absolute lateral offset keeps the surface smooth at the narrow tips.
         across = (v - self.centre_line(u)) / (1.05 * self.ball_half_width)
         return self.underside(u) + thickness + self.cross_curvature * (1.0 - across**2)
@@ -258,7 +260,9 @@ class SoleModel:
         medial, lateral = shape.half_width(u, True), shape.half_width(u, False)
         uu = np.repeat(u, s.size)
         ss = np.tile(s, u.size)
-        vv = np.repeat(centre, s.size) + np.where(ss >= 0, ss * np.repeat(medial, s.size), ss * np.repeat(lateral, s.size))
+        vv = np.repeat(centre, s.size) + np.where(
+            ss >= 0, ss * np.repeat(medial, s.size), ss * np.repeat(lateral, s.size)
+        )
         xy = self.pose.to_table(np.column_stack([uu, vv]), shape.length)
         top = np.column_stack([xy, shape.top_height(uu, vv)])
         bottom = np.column_stack([xy, shape.underside(uu)])
@@ -275,7 +279,11 @@ class SoleModel:
         vertices = np.vstack([top, bottom])
         triangles = np.vstack([grid, *walls, grid[:, ::-1] + n_grid])
         parts = np.concatenate(
-            [np.zeros(len(grid), np.int32), np.ones(sum(len(w) for w in walls), np.int32), np.full(len(grid), 2, np.int32)]
+            [
+                np.zeros(len(grid), np.int32),
+                np.ones(sum(len(w) for w in walls), np.int32),
+                np.full(len(grid), 2, np.int32),
+            ]
         )
         if self.pose.mirrored:
             # Mirroring reverses the winding; keep triangle normals pointing out of the sole.

@@ -1,0 +1,58 @@
+"""`cellctl calibrate DIR --board COLSxROWS --square MM -o calib.yaml`: stereo calibration from board pairs."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import cv2
+
+from cellctl.calib.zhang import MIN_PAIRS, Checkerboard, calibrate_views, detect_views, find_pairs
+from cellctl.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="calibrate the stereo cameras from checkerboard image pairs",
+        description="Calibrate both cameras and their relative pose from checkerboard pairs left_NN.png / "
+        "right_NN.png (Zhang's method), rejecting pairs whose reprojection error stands out.",
+    )
+    parser.add_argument("directory", metavar="DIR", type=Path, help="directory with left_NN.png / right_NN.png pairs")
+    parser.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners of the board, e.g. 9x6")
+    parser.add_argument("--square", required=True, type=float, metavar="MM", help="side of one square, mm")
+    parser.add_argument(
+        "-o", "--output", required=True, type=Path, metavar="calib.yaml", help="calibration file to write"
+    )
+    parser.add_argument(
+        "--chart", type=Path, metavar="PNG", help="per-pair error chart (default: NAME-errors.png next to the output)"
+    )
+    parser.add_argument(
+        "--min-pairs", type=int, default=MIN_PAIRS, metavar="N", help=f"never keep fewer pairs (default {MIN_PAIRS})"
+    )
+    parser.add_argument(
+        "--fit-k3", action="store_true", help="also fit the third radial distortion term (wide-angle lenses)"
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        board = Checkerboard.from_spec(args.board, args.square)
+    except ValueError as exc:
+        raise UserError(f"--board/--square: {exc}") from None
+    pairs = find_pairs(args.directory)
+    board_text = f"{board.cols}x{board.rows} inner corners of {board.square_mm:g} mm"
+    print(f"{len(pairs)} pairs in {args.directory}, board {board_text}")
+    views = detect_views(pairs, board)
+    for view in views:
+        if not view.usable:
+            print(f"skipping pair {view.name}: {view.problem}")
+    result = calibrate_views(views, board, min_pairs=args.min_pairs, fit_k3=args.fit_k3)
+    print(result.table())
+    result.calibration.save(args.output)
+    chart = args.chart or args.output.with_name(f"{args.output.stem}-errors.png")
+    if not cv2.imwrite(str(chart), result.error_chart()):
+        raise UserError(f"cannot write the error chart {chart}: check the directory exists and is writable")
+    print(f"wrote {args.output} and {chart}")
+    return 0

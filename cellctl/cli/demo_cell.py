@@ -1,0 +1,126 @@
+"""The cell demo: `cellctl run` on simulated cameras in a child process, driven by the PLC simulator.
+
+Kept apart from the `demo` command module so it can be reused (and because demo.py is the CLI wiring).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from cellctl.service.journal import Journal
+from firmware_io.endpoints import TcpEndpoint
+from firmware_io.plc_sim import CycleReading, PlcSimError, PlcSimulator
+
+DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "deploy" / "cell-sim.toml"
+START_TIMEOUT_S = 120.0  # the simulated cameras render all scenes (a few s each) before READY
+
+
+def run_cell_demo(config: Path | None, port: int, cycles: int, out: Path) -> int:
+    if cycles < 1:
+        raise ValueError(f"--cycles {cycles} must be at least 1")
+    config = DEFAULT_CONFIG if config is None else config
+    state = (out / "cell-state").resolve()
+    shutil.rmtree(state, ignore_errors=True)  # a fresh journal, so the table below is this run's
+    command = [
+        sys.executable,
+        "-m",
+        "cellctl",
+        "run",
+        "--config",
+        str(config),
+        "--state-dir",
+        str(state),
+        "--port",
+        str(port),
+    ]
+    print(f"starting the service: {' '.join(command[2:])}", flush=True)
+    # As deploy/cellctl.service runs it: numpy's BLAS single-threaded (why: in the unit file).
+    environment = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    service = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=environment)
+    try:
+        readings = _drive(service, port, cycles)
+    finally:
+        service.send_signal(signal.SIGTERM)
+        try:
+            _, log = service.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            service.kill()
+            _, log = service.communicate()
+    if readings is None:
+        print(log, file=sys.stderr)
+        return 1
+    _report(readings, state)
+    return 0 if all(r.ok for r in readings) else 1
+
+
+def _drive(service: subprocess.Popen[str], port: int, cycles: int) -> list[CycleReading] | None:
+    plc = PlcSimulator(TcpEndpoint("127.0.0.1", port), heartbeat_limit_s=1.5)
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not _listening(port):  # the port opens once the scenes are rendered
+        if service.poll() is not None:
+            print(f"the service exited with status {service.returncode} before serving:", file=sys.stderr)
+            return None
+        if time.monotonic() > deadline:
+            print(f"the service did not serve Modbus on port {port} within {START_TIMEOUT_S:.0f} s", file=sys.stderr)
+            return None
+        time.sleep(0.5)
+    try:
+        plc.connect()
+        readings = []
+        for _ in range(cycles):
+            reading = plc.run_cycle(timeout_s=15.0)
+            print(f"  PLC: cycle {reading.cycle} answered in {reading.latency_s * 1000:.0f} ms", flush=True)
+            readings.append(reading)
+        return readings
+    except PlcSimError as exc:
+        print(f"PLC simulator: {exc}", file=sys.stderr)
+        return None
+    finally:
+        plc.close()
+
+
+def _listening(port: int) -> bool:
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+        return True
+    except OSError:
+        return False
+
+
+def _report(readings: list[CycleReading], state: Path) -> None:
+    journal = Journal.open(state, readonly=True)
+    print()
+    print("cycle  scene  what        PLC received   simulated truth   error")
+    worst = 0.0
+    for reading in readings:
+        record = journal.find(reading.cycle)
+        if not reading.ok or record is None:
+            print(f"{reading.cycle:5d}  error {reading.error_code}: {record.reason if record else 'not journaled'}")
+            continue
+        truth = record.source.get("truth", {})
+        for i, (name, label) in enumerate(
+            (("length_mm", "length"), ("heel_height_mm", "heel height"), ("toe_height_mm", "toe height"))
+        ):
+            got, true = getattr(reading, name), truth.get(name)
+            error = "" if true is None else f"{got - true:+6.2f} mm"
+            worst = max(worst, 0.0 if true is None else abs(got - true))
+            head = f"{reading.cycle:5d}  {record.source.get('seed', '-'):>5}" if i == 0 else " " * 12
+            true_text = "-" if true is None else f"{true:8.2f} mm"
+            print(f"{head}  {label:<11} {got:8.2f} mm   {true_text:>15}   {error}")
+        print(f"{'':12}  glue path   {len(reading.glue_points)} points, cycle time {reading.cycle_time_ms:.0f} ms")
+    ok = [r for r in readings if r.ok]
+    if ok:
+        times = sorted(r.cycle_time_ms for r in ok)
+        print(
+            f"\n{len(ok)}/{len(readings)} cycles measured; largest error {worst:.2f} mm; cycle time (trigger to "
+            f"result) median {times[len(times) // 2]:.0f} ms, max {times[-1]:.0f} ms on {os.cpu_count()} cores"
+        )
+    print(f"journal, PLY and overlay PNGs: {state}  (cellctl results --state-dir {state})")
+    journal.close()

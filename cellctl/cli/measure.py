@@ -1,0 +1,116 @@
+"""`cellctl measure`: measure one sole from a stereo pair (length, heel and toe height, glue path).
+
+Exit status: 0 measured, 1 not measured (the reason is printed, and in the JSON), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from cellctl.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "measure",
+        help="measure a sole from a stereo pair (length, heel/toe height, glue path)",
+        description=(
+            "Reconstruct the sole from a raw (unrectified) left/right pair and print its length, heel and toe "
+            "height and glue path as defined in docs/measurements.md. Exit status 1 if the sole could not be "
+            "measured (the reason is printed)."
+        ),
+    )
+    parser.add_argument("--calib", required=True, type=Path, metavar="calib.yaml", help="stereo calibration")
+    parser.add_argument("left", type=Path, metavar="LEFT", help="left image")
+    parser.add_argument("right", type=Path, metavar="RIGHT", help="right image")
+    parser.add_argument(
+        "--depth-range",
+        nargs=2,
+        type=float,
+        metavar=("MIN", "MAX"),
+        help="working distance from the cameras in mm (default 450 650): sets the disparity search range",
+    )
+    # Defaults live in cellctl.vision.measurement, which is imported only when the command runs (Open3D is slow to load).
+    parser.add_argument("--glue-offset", type=float, metavar="MM", help="glue path inset from the edge (default 2)")
+    parser.add_argument("--glue-spacing", type=float, metavar="MM", help="glue path point spacing (default 2)")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument(
+        "--ply", type=Path, metavar="out.ply", help="write the sole's point cloud (table frame, colours)"
+    )
+    parser.add_argument(
+        "--png", type=Path, metavar="overlay.png", help="write the left image with edge, glue path and points"
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cellctl.vision.calibration import Calibration
+    from cellctl.vision.measurement import GLUE_OFFSET_MM, GLUE_SPACING_MM, measure_sole
+    from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
+
+    offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset
+    spacing = GLUE_SPACING_MM if args.glue_spacing is None else args.glue_spacing
+    if offset < 0 or spacing <= 0:
+        raise UserError(f"--glue-offset must be >= 0 and --glue-spacing > 0 mm, got {offset:g} and {spacing:g}")
+    calib = Calibration.load(args.calib)
+    left, right = _read(args.left, "LEFT"), _read(args.right, "RIGHT")
+    for name, image in (("LEFT", left), ("RIGHT", right)):
+        try:
+            calib.check_image(image)
+        except ValueError as exc:
+            raise UserError(f"{name} {getattr(args, name.lower())}: {exc}") from None
+    depth_range = tuple(args.depth_range) if args.depth_range else DEFAULT_DEPTH_RANGE_MM
+    reconstruction = SoleReconstructor(calib, depth_range).reconstruct(left, right)
+    result = measure_sole(reconstruction, offset, spacing)
+    if args.ply:
+        _write_ply(args.ply, reconstruction)
+    if args.png:
+        from cellctl.vision.overlay import draw_overlay
+
+        if not cv2.imwrite(str(args.png), draw_overlay(left, calib, reconstruction, result)):
+            raise UserError(f"cannot write {args.png}: check the directory exists and is writable")
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        print(_summary(result))
+    return 0 if result.valid else 1
+
+
+def _read(path: Path, name: str) -> np.ndarray:
+    if not path.is_file():
+        raise UserError(f"{name} image {path} does not exist")
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise UserError(f"{name} image {path} cannot be read as an image (PNG, BMP, JPEG, TIFF...)")
+    return image
+
+
+def _write_ply(path: Path, reconstruction) -> None:  # noqa: ANN001 - Reconstruction, imported lazily
+    import open3d as o3d
+
+    if len(reconstruction.sole_points) == 0:
+        raise UserError(f"no sole points to write to {path}: {reconstruction.reason}")
+    if not o3d.io.write_point_cloud(str(path), reconstruction.point_cloud()):
+        raise UserError(f"cannot write {path}: check the directory exists and is writable")
+
+
+def _summary(result) -> str:  # noqa: ANN001 - SoleMeasurement
+    if not result.valid:
+        return f"not measured: {result.reason}"
+    path = result.glue_path
+    total = sum(result.timings.values())
+    return "\n".join(
+        [
+            f"length_mm       {result.length_mm:8.2f}",
+            f"heel_height_mm  {result.heel_height_mm:8.2f}",
+            f"toe_height_mm   {result.toe_height_mm:8.2f}",
+            f"glue_path       {len(path.points)} points, {path.length_mm:.0f} mm, closed, from the heel end",
+            f"points          {result.points}",
+            f"time            {total:.2f} s",
+        ]
+    )

@@ -1,1 +1,0 @@
-"""Sub-commands of the `cellctl` command line, one module each (see cellctl.cli)."""

@@ -1,0 +1,201 @@
+"""Named disparity methods compared by the Middlebury evaluation (the rows of the paper's Table 3).
+
+Every method is a callable `(left, right, min_disparity, num_disparities) -> disparity` taking
+8-bit BGR images and returning a float32 map of the left image with NaN where it gives no
+disparity.  Our own methods come from `cellctl.stereo.matcher.StereoMatcher` (the compiled C core),
+imported only when they run so the OpenCV references work without it.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from cellctl.eval.middlebury import DisparityMethod
+
+# OpenCV's block matchers work in 1/16 px and need a multiple of 16 disparities.
+_CV_DISP_SCALE = 16
+
+# The SAD reference (paper's [16]: local block matching, no aggregation).  OpenCV StereoBM sums
+# absolute differences of x-Sobel prefiltered grey images over the block and takes the
+# winner; its texture and uniqueness checks leave ambiguous pixels invalid, as the paper
+# describes for [16] ("many missing and empty areas").  No speckle filter, no left-right check.
+SAD_BLOCK_SIZE = 9  # of 5, 7, 9, 11, 15 the lowest average (9 and 11 tie), one size for all scenes
+SAD_TEXTURE_THRESHOLD = 10  # OpenCV default
+SAD_UNIQUENESS_RATIO = 15  # OpenCV default
+
+# OpenCV StereoSGBM with its usual settings (OpenCV's stereo_match sample, speckle range in px).
+SGBM_BLOCK_SIZE = 3  # the sample's window; of 3, 5, 7 the lowest 12-number average in both modes
+SGBM_UNIQUENESS_RATIO = 10
+SGBM_SPECKLE_WINDOW = 100
+SGBM_SPECKLE_RANGE = 2  # px; OpenCV multiplies it by 16 internally
+SGBM_DISP12_MAX_DIFF = 1
+SGBM_PREFILTER_CAP = 63
+
+
+@dataclass(frozen=True)
+class Method:
+    """A disparity method as listed by `cellctl eval middlebury --methods`."""
+
+    name: str
+    summary: str
+    compute: DisparityMethod
+    paper_column: str | None = None  # the paper's Table 3 column it corresponds to
+    requires: str | None = None  # module that must import for it to run
+
+
+# Matcher objects are made once per disparity range and reused, as a running cell uses them:
+# the timings then compare computing, not allocating buffers, for every method alike.
+_cached = functools.lru_cache(maxsize=16)
+
+
+@_cached
+def _stereo_bm(min_d: int, num_d: int) -> Any:
+    bm = cv2.StereoBM_create(numDisparities=num_d, blockSize=SAD_BLOCK_SIZE)
+    bm.setMinDisparity(min_d)
+    bm.setTextureThreshold(SAD_TEXTURE_THRESHOLD)
+    bm.setUniquenessRatio(SAD_UNIQUENESS_RATIO)
+    bm.setSpeckleWindowSize(0)
+    bm.setDisp12MaxDiff(-1)
+    return bm
+
+
+def sad_block_matching(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
+    """SAD block matching (OpenCV StereoBM on grey images), NaN where it finds no disparity."""
+    return _opencv_disparity(_stereo_bm, _grey(left), _grey(right), min_disparity, num_disparities)
+
+
+def opencv_sgbm(mode: int) -> DisparityMethod:
+    """OpenCV StereoSGBM in the given mode (MODE_HH4, MODE_SGBM_3WAY, ...) with its post-processing."""
+
+    @_cached
+    def create(min_d: int, num_d: int, channels: int) -> Any:
+        area = channels * SGBM_BLOCK_SIZE**2
+        return cv2.StereoSGBM_create(
+            minDisparity=min_d,
+            numDisparities=num_d,
+            blockSize=SGBM_BLOCK_SIZE,
+            P1=8 * area,
+            P2=32 * area,
+            disp12MaxDiff=SGBM_DISP12_MAX_DIFF,
+            preFilterCap=SGBM_PREFILTER_CAP,
+            uniquenessRatio=SGBM_UNIQUENESS_RATIO,
+            speckleWindowSize=SGBM_SPECKLE_WINDOW,
+            speckleRange=SGBM_SPECKLE_RANGE,
+            mode=mode,
+        )
+
+    def compute(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
+        channels = 1 if left.ndim == 2 else left.shape[2]
+        return _opencv_disparity(lambda lo, n: create(lo, n, channels), left, right, min_disparity, num_disparities)
+
+    return compute
+
+
+def stereo_matcher(**options: Any) -> DisparityMethod:
+    """Our matcher (`cellctl.stereo.matcher.StereoMatcher`, which converts BGR to grey) with the given options."""
+
+    @_cached
+    def create(matcher_class: type, min_d: int, num_d: int) -> Any:
+        return matcher_class(min_d, num_d, **options)
+
+    def compute(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
+        from cellctl.stereo.matcher import StereoMatcher  # the C core is only needed when this runs
+
+        # the class is part of the key, so a replaced class (as in tests) never gets a stale object
+        return create(StereoMatcher, min_disparity, num_disparities).compute(left, right)
+
+    return compute
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    return image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+
+
+def _opencv_disparity(
+    create: Any, left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int
+) -> np.ndarray:
+    """Run an OpenCV block matcher on exactly [min, min + num - 1] and return float px, NaN = invalid.
+
+    OpenCV needs a multiple of 16 disparities and leaves the first min + num columns
+    without a disparity.  Rounding the count up would widen that strip and allow
+    disparities outside the range, so both images get the extra columns as replicated
+    border on the left (disparities are unchanged by padding both), the padding is cut
+    off again, and disparities won at a level outside the range become invalid.
+    """
+    if num_disparities < 1:
+        raise ValueError(f"num_disparities must be >= 1, got {num_disparities}")
+    rounded = -(-num_disparities // _CV_DISP_SCALE) * _CV_DISP_SCALE
+    extra = rounded - num_disparities
+    if extra:
+        left = cv2.copyMakeBorder(left, 0, 0, extra, 0, cv2.BORDER_REPLICATE)
+        right = cv2.copyMakeBorder(right, 0, 0, extra, 0, cv2.BORDER_REPLICATE)
+    raw = create(min_disparity, rounded).compute(left, right)[:, extra:]
+    disparity = raw.astype(np.float32) / _CV_DISP_SCALE
+    max_disparity = min_disparity + num_disparities - 1
+    # OpenCV marks invalid pixels with (min - 1) * 16.  Its sub-pixel step moves a winner by at
+    # most half a pixel, so anything above max + 0.5 won at a level outside the range.
+    invalid = (raw <= (min_disparity - 1) * _CV_DISP_SCALE) | (disparity > max_disparity + 0.5)
+    disparity[invalid] = np.nan
+    return disparity
+
+
+METHODS: dict[str, Method] = {
+    method.name: method
+    for method in (
+        Method(
+            "sad-bm",
+            "SAD block matching, local, no aggregation (OpenCV StereoBM)",
+            sad_block_matching,
+            paper_column="Reference [16] SAD",
+        ),
+        Method(
+            "census-8path",
+            "Census cost + 8-path semi-global aggregation (StereoMatcher)",
+            stereo_matcher(cost="census", paths=8),
+            paper_column="Census + 8-path",
+            requires="cellctl.stereo.matcher",
+        ),
+        Method(
+            "proposed",
+            "Census+BT cost, 4-path aggregation, LR check, fill, median (StereoMatcher defaults)",
+            stereo_matcher(),
+            paper_column="Proposed",
+            requires="cellctl.stereo.matcher",
+        ),
+        Method(
+            "opencv-hh4", "OpenCV StereoSGBM MODE_HH4 with its post-processing", opencv_sgbm(cv2.StereoSGBM_MODE_HH4)
+        ),
+        Method(
+            "opencv-3way",
+            "OpenCV StereoSGBM MODE_SGBM_3WAY with its post-processing",
+            opencv_sgbm(cv2.StereoSGBM_MODE_SGBM_3WAY),
+        ),
+    )
+}
+
+
+def select_methods(names: Iterable[str] | None = None) -> list[Method]:
+    """The named methods (all by default), checked to exist and to be runnable here."""
+    chosen = list(names) if names is not None else list(METHODS)
+    unknown = [name for name in chosen if name not in METHODS]
+    if unknown:
+        raise ValueError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
+    for name in chosen:
+        requires = METHODS[name].requires
+        if requires is None:
+            continue
+        try:
+            importlib.import_module(requires)
+        except ImportError as exc:
+            raise ValueError(
+                f"method {name!r} needs {requires}, which does not import ({exc}); build the C core "
+                "with `pip install .`, or leave the method out with --methods"
+            ) from exc
+    return [METHODS[name] for name in dict.fromkeys(chosen)]

@@ -1,0 +1,155 @@
+"""Accuracy and time of the sole measurement on simulated soles of known geometry (Table 4 of the paper).
+
+Each sole is rendered (not timed), then reconstructed and measured exactly as `cellctl measure` does
+(timed: rectify, match, segment, measure). Errors are measured minus true, in mm. The glue path is
+checked in the simulator's frame: how far inside the true outline it runs (nominal 2 mm), how far its
+points are from the true top surface, and the angle of its normals to the true ones.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import cv2
+import numpy as np
+
+from cellctl.sim.scene import SoleScene
+from cellctl.vision.calibration import Calibration
+from cellctl.vision.measurement import GLUE_OFFSET_MM, measure_sole
+from cellctl.vision.reconstruction import SoleReconstructor
+
+
+@dataclass
+class SoleBenchRow:
+    seed: int
+    color: str
+    length_true_mm: float
+    valid: bool
+    reason: str | None
+    length_error_mm: float | None
+    heel_error_mm: float | None
+    toe_error_mm: float | None
+    glue_inset_error_max_mm: float | None  # |distance inside the true outline - nominal offset|, max over the path
+    glue_height_error_max_mm: float | None
+    glue_normal_error_max_deg: float | None
+    seconds: float
+
+
+def bench_soles(
+    calib: Calibration, soles: list[tuple[int, str]], progress: Callable[[str], None] | None = None
+) -> list[SoleBenchRow]:
+    """Measure each (seed, colour) sole once and compare with its truth."""
+    reconstructor = SoleReconstructor(calib)
+    rows = []
+    for seed, color in soles:
+        scene = SoleScene.random(seed, color, calib)
+        pair = scene.render()
+        start = time.perf_counter()
+        reconstruction = reconstructor.reconstruct(pair.left, pair.right)
+        result = measure_sole(reconstruction)
+        seconds = time.perf_counter() - start
+        truth = scene.sole.truth()
+        row = SoleBenchRow(
+            seed, color, truth.length_mm, result.valid, result.reason, None, None, None, None, None, None, seconds
+        )
+        if result.valid:
+            row.length_error_mm = result.length_mm - truth.length_mm
+            row.heel_error_mm = result.heel_height_mm - truth.heel_height_mm
+            row.toe_error_mm = result.toe_height_mm - truth.toe_height_mm
+            transform = scene.table_from_measured(result.camera_to_table)
+            points = result.glue_path.points @ transform[:3, :3].T + transform[:3, 3]
+            normals = result.glue_path.normals @ transform[:3, :3].T
+            outline = scene.sole.outline_table(4000).astype(np.float32).reshape(-1, 1, 2)
+            inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in points[:, :2]])
+            row.glue_inset_error_max_mm = float(np.abs(inset - GLUE_OFFSET_MM).max())
+            row.glue_height_error_max_mm = float(np.abs(points[:, 2] - scene.sole.top_height_at(points[:, :2])).max())
+            cosines = np.clip(np.sum(normals * scene.sole.top_normal_at(points[:, :2]), axis=1), -1.0, 1.0)
+            row.glue_normal_error_max_deg = float(np.degrees(np.arccos(cosines)).max())
+        rows.append(row)
+        if progress:
+            progress(_row_text(row))
+    return rows
+
+
+def _row_text(row: SoleBenchRow) -> str:
+    if not row.valid:
+        return f"sole {row.seed} {row.color}: NOT MEASURED: {row.reason}"
+    return (
+        f"sole {row.seed} {row.color}: length {row.length_error_mm:+.2f}, heel {row.heel_error_mm:+.2f}, "
+        f"toe {row.toe_error_mm:+.2f} mm, {row.seconds:.2f} s"
+    )
+
+
+def summary(rows: list[SoleBenchRow]) -> dict[str, dict[str, float]]:
+    """Mean |error|, max |error| (and mean signed error) per quantity over the measured soles."""
+    measured = [r for r in rows if r.valid]
+    out: dict[str, dict[str, float]] = {}
+    for name in (
+        "length_error_mm",
+        "heel_error_mm",
+        "toe_error_mm",
+        "glue_inset_error_max_mm",
+        "glue_height_error_max_mm",
+        "glue_normal_error_max_deg",
+    ):
+        values = np.array([getattr(r, name) for r in measured], dtype=np.float64)
+        if values.size:
+            out[name] = {
+                "mean_abs": float(np.abs(values).mean()),
+                "max_abs": float(np.abs(values).max()),
+                "mean": float(values.mean()),
+            }
+    times = np.array([r.seconds for r in rows])
+    out["seconds"] = {"mean": float(times.mean()), "max": float(times.max()), "min": float(times.min())}
+    return out
+
+
+def to_markdown(rows: list[SoleBenchRow], command: str) -> str:
+    stats = summary(rows)
+    measured = sum(r.valid for r in rows)
+    lines = [
+        f"{measured} of {len(rows)} simulated soles measured "
+        f"({sum(r.color == 'white' for r in rows)} white, {sum(r.color == 'black' for r in rows)} black). Command: `{command}`",
+        "",
+        "| Error (measured - true) | mean abs | max abs | mean (signed) |",
+        "| :-- | --: | --: | --: |",
+    ]
+    labels = {
+        "length_error_mm": "length_mm (toe-heel distance), mm",
+        "heel_error_mm": "heel_height_mm, mm",
+        "toe_error_mm": "toe_height_mm, mm",
+        "glue_inset_error_max_mm": "glue path inset (2 mm nominal), worst point per sole, mm",
+        "glue_height_error_max_mm": "glue path height, worst point per sole, mm",
+        "glue_normal_error_max_deg": "glue path normal, worst point per sole, degrees",
+    }
+    for key, label in labels.items():
+        if key in stats:
+            s = stats[key]
+            lines.append(f"| {label} | {s['mean_abs']:.2f} | {s['max_abs']:.2f} | {s['mean']:+.2f} |")
+    t = stats["seconds"]
+    lines += [
+        "",
+        f"Time per measurement (rectify, match, segment, measure; 1280x1024): mean {t['mean']:.2f} s, "
+        f"min {t['min']:.2f} s, max {t['max']:.2f} s.",
+        "",
+        "| sole | colour | true length | length err | heel err | toe err | glue inset | glue z | glue normal | time |",
+        "| --: | :-- | --: | --: | --: | --: | --: | --: | --: | --: |",
+    ]
+    for r in rows:
+        if r.valid:
+            lines.append(
+                f"| {r.seed} | {r.color} | {r.length_true_mm:.1f} | {r.length_error_mm:+.2f} | {r.heel_error_mm:+.2f} | "
+                f"{r.toe_error_mm:+.2f} | {r.glue_inset_error_max_mm:.2f} | {r.glue_height_error_max_mm:.2f} | "
+                f"{r.glue_normal_error_max_deg:.1f} | {r.seconds:.2f} s |"
+            )
+        else:
+            lines.append(
+                f"| {r.seed} | {r.color} | {r.length_true_mm:.1f} | not measured: {r.reason} | | | | | | {r.seconds:.2f} s |"
+            )
+    return "\n".join(lines)
+
+
+def as_json(rows: list[SoleBenchRow]) -> dict[str, object]:
+    return {"soles": [asdict(r) for r in rows], "summary": summary(rows)}

@@ -1,0 +1,26 @@
+"""The service's edge to the PLC: what the PLC is told for each kind of failure.
+
+Every FailureKind has an entry (tests/service/test_daemon.py checks it); the reason text goes to the journal
+and the log, never to the PLC, so rewording a reason cannot change what the robot does.
+"""
+
+from __future__ import annotations
+
+from cellctl.errors import FailureKind
+from firmware_io.registers import ErrorCode
+
+FAILURE_CODES: dict[FailureKind, ErrorCode] = {
+    FailureKind.TOO_FEW_POINTS: ErrorCode.TOO_FEW_POINTS,
+    FailureKind.SURFACE_NOT_MEASURED: ErrorCode.TOO_FEW_POINTS,  # same cause and remedy: too little measured
+    FailureKind.NO_TABLE: ErrorCode.NO_TABLE,
+    FailureKind.NO_SOLE: ErrorCode.NO_SOLE,
+    FailureKind.SOLE_AT_BORDER: ErrorCode.SOLE_AT_BORDER,
+    FailureKind.COLOURS_TOO_SIMILAR: ErrorCode.COLOURS_TOO_SIMILAR,
+    FailureKind.ENDS_TOO_CLOSE_TO_CALL: ErrorCode.ENDS_TOO_CLOSE_TO_CALL,
+    FailureKind.MEASUREMENT_INVALID: ErrorCode.MEASUREMENT_INVALID,
+    FailureKind.CALIBRATION_MISMATCH: ErrorCode.CALIBRATION_MISMATCH,
+    FailureKind.CALIBRATION_MISSING: ErrorCode.CALIBRATION_MISSING,
+    FailureKind.CAMERA_MISSING: ErrorCode.CAMERA_MISSING,
+    FailureKind.FRAME_TIMEOUT: ErrorCode.FRAME_TIMEOUT,
+    FailureKind.CAMERAS_OUT_OF_SYNC: ErrorCode.CAMERAS_OUT_OF_SYNC,
+}

@@ -1,0 +1,312 @@
+"""The cell configuration file (TOML), read and checked once at service start.
+
+    config = CellConfig.load("deploy/cell-sim.toml")
+    config.plc.endpoint()           # firmware_io TcpEndpoint or SerialEndpoint
+    config.calibration.path         # absolute Path
+
+Every problem is a ConfigError naming the file, the section and key, what is wrong and what to write
+instead: unknown keys (a typo must not silently fall back to a default), wrong types, impossible values and
+files that do not exist. Relative paths are taken relative to the config file, so a config and its
+calibration can be moved together.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cellctl.cameras.config import CameraConfig, SimulatedCameraConfig
+from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
+from firmware_io.registers import WordOrder
+
+BACKENDS = ("simulated", "replay", "v4l2")
+PIXEL_FORMATS = ("MJPEG", "YUYV")
+SOLE_COLOURS = ("white", "black")  # cellctl.sim.render.SOLE_MATERIALS (not imported: it pulls in Open3D)
+
+
+class ConfigError(ValueError):
+    """The configuration file is missing, malformed or asks for something impossible."""
+
+
+class _Table:
+    """One TOML table being read: hands out keys and complains about the ones nobody asked for."""
+
+    def __init__(self, data: dict[str, Any], name: str, source: Path) -> None:
+        self.data, self.name, self.source = data, name, source
+        self._taken: set[str] = set()
+
+    def fail(self, key: str, problem: str) -> ConfigError:
+        return ConfigError(f"{self.source}: [{self.name}] {key}: {problem}")
+
+    def get(self, key: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
+        self._taken.add(key)
+        if key not in self.data:
+            if default is ...:
+                raise ConfigError(f"{self.source}: [{self.name}] is missing the required key {key!r}")
+            return default
+        value = self.data[key]
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        # bool is an int in Python; a number key given `true` is a mistake, not 1.
+        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
+            names = " or ".join(k.__name__ for k in kinds)
+            raise self.fail(key, f"expected {names}, got {type(value).__name__} {value!r}")
+        return float(value) if float in kinds and isinstance(value, int) and not isinstance(value, bool) else value
+
+    def number(
+        self,
+        key: str,
+        default: Any = ...,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        above: float | None = None,
+    ) -> float:
+        value = self.get(key, (int, float), default)
+        if value is None:
+            return value
+        value = float(value)
+        if (
+            (low is not None and value < low)
+            or (high is not None and value > high)
+            or (above is not None and value <= above)
+        ):
+            bounds = (
+                f"above {above:g}"
+                if above is not None
+                else f"in {low:g}..{high:g}"
+                if high is not None
+                else f">= {low:g}"
+            )
+            raise self.fail(key, f"{value:g} is impossible: must be {bounds}")
+        return value
+
+    def choice(self, key: str, choices: tuple[str, ...], default: Any = ...) -> str:
+        value = self.get(key, str, default)
+        if value not in choices:
+            raise self.fail(key, f"{value!r} is not one of {', '.join(repr(c) for c in choices)}")
+        return value
+
+    def path(self, key: str, default: Any = ...) -> Path | None:
+        value = self.get(key, str, default)
+        if value is None:
+            return None
+        if not value:
+            raise self.fail(key, "empty path")
+        path = Path(value).expanduser()
+        return path if path.is_absolute() else (self.source.parent / path).resolve()
+
+    def table(self, key: str) -> _Table:
+        value = self.get(key, dict, {})
+        return _Table(value, f"{self.name}.{key}", self.source)
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.data) - self._taken)
+        if unknown:
+            known = ", ".join(sorted(self._taken))
+            raise ConfigError(
+                f"{self.source}: [{self.name}] has unknown key(s) {', '.join(unknown)} (known keys: {known})"
+            )
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    path: Path
+
+
+@dataclass(frozen=True)
+class MeasureConfig:
+    depth_range_mm: tuple[float, float] = (450.0, 650.0)
+    glue_offset_mm: float = 2.0
+    glue_spacing_mm: float = 2.0
+
+
+@dataclass(frozen=True)
+class PlcConfig:
+    transport: str = "tcp"
+    host: str = "127.0.0.1"
+    port: int = DEFAULT_TCP_PORT
+    serial_port: str | None = None
+    baudrate: int = 19200
+    parity: str = "E"
+    stopbits: int = 1
+    bytesize: int = 8
+    unit_id: int = 1
+    word_order: WordOrder = WordOrder.HIGH_FIRST
+    heartbeat_period_s: float = 0.25
+    liveness_timeout_s: float = 5.0
+
+    def endpoint(self) -> Endpoint:
+        """Where PlcLink serves."""
+        if self.transport == "rtu":
+            assert self.serial_port is not None
+            return SerialEndpoint(self.serial_port, self.baudrate, self.parity, self.stopbits, self.bytesize)  # type: ignore[arg-type]
+        return TcpEndpoint(self.host, self.port)
+
+
+@dataclass(frozen=True)
+class JournalConfig:
+    state_dir: Path
+    keep_artifacts: int = 500  # cycles whose PLY and overlay PNG are kept; the SQLite rows are all kept
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    source: Path
+    cameras: CameraConfig
+    calibration: CalibrationConfig
+    measure: MeasureConfig
+    plc: PlcConfig
+    journal: JournalConfig
+
+    @classmethod
+    def load(cls, path: str | Path) -> CellConfig:
+        """Read and check a config file; ConfigError names every problem's key and what to do."""
+        source = Path(path).expanduser().resolve()
+        if not source.is_file():
+            raise ConfigError(f"config file {source} does not exist (see deploy/cell-line.example.toml)")
+        try:
+            data = tomllib.loads(source.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{source} is not valid TOML: {exc}") from None
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{source} is not UTF-8 text: {exc}") from None
+        return cls.from_dict(data, source)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: Path) -> CellConfig:
+        root = _Table(data, "top level", source)
+        sections = {name: root.table(name) for name in ("cameras", "calibration", "measure", "plc", "journal")}
+        for name in ("cameras", "calibration", "journal"):
+            if name not in data:
+                raise ConfigError(f"{source}: the [{name}] section is missing")
+        for table in sections.values():
+            table.name = table.name.removeprefix("top level.")
+        root.finish()
+        config = cls(
+            source=source,
+            cameras=_cameras(sections["cameras"]),
+            calibration=_calibration(sections["calibration"]),
+            measure=_measure(sections["measure"]),
+            plc=_plc(sections["plc"]),
+            journal=_journal(sections["journal"]),
+        )
+        return config
+
+
+def _cameras(t: _Table) -> CameraConfig:
+    backend = t.choice("backend", BACKENDS)
+    left = t.get("left", str, None)
+    right = t.get("right", str, None)
+    replay_dir = t.path("replay_dir", None)
+    size = t.get("size", list, None)
+    if size is not None:
+        if len(size) != 2 or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size):
+            raise t.fail("size", f"expected [width, height] in pixels, got {size!r}")
+        size = (size[0], size[1])
+    simulated = _simulated(t.table("simulated"))
+    config = CameraConfig(
+        backend=backend,
+        left=left,
+        right=right,
+        replay_dir=replay_dir,
+        size=size,
+        pixel_format=t.choice("pixel_format", PIXEL_FORMATS, "MJPEG"),
+        exposure=t.number("exposure", None, low=0),
+        gain=t.number("gain", None, low=0),
+        sync_tolerance_ms=t.number("sync_tolerance_ms", 8.0, above=0, high=1000),
+        timeout_ms=t.number("timeout_ms", 1000.0, above=0, high=60000),
+        max_regrabs=int(t.number("max_regrabs", 4, low=0, high=100)),
+        simulated=simulated,
+    )
+    t.finish()
+    if backend == "v4l2":
+        for key, value in (("left", left), ("right", right)):
+            if value is None:
+                raise t.fail(
+                    key, "required for backend 'v4l2': the camera's device, e.g. /dev/v4l/by-id/usb-...-video-index0"
+                )
+            if not value.startswith("/dev/"):
+                raise t.fail(key, f"{value!r} is not a device path under /dev/")
+        if left == right:
+            raise t.fail("right", "left and right name the same device")
+    if backend == "replay":
+        if replay_dir is None:
+            raise t.fail("replay_dir", "required for backend 'replay': a directory of left_NN.png/right_NN.png pairs")
+        if not replay_dir.is_dir():
+            raise t.fail("replay_dir", f"directory {replay_dir} does not exist")
+    return config
+
+
+def _simulated(t: _Table) -> SimulatedCameraConfig:
+    seeds = t.get("seeds", list, [1, 2, 3, 4, 5])
+    if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
+        raise t.fail("seeds", f"expected a non-empty list of scene numbers >= 0, got {seeds!r}")
+    config = SimulatedCameraConfig(
+        seeds=tuple(seeds),
+        color=t.choice("color", SOLE_COLOURS, "white"),
+        skew_ms=t.number("skew_ms", 0.0, low=0, high=10000),
+    )
+    t.finish()
+    return config
+
+
+def _calibration(t: _Table) -> CalibrationConfig:
+    path = t.path("path")
+    t.finish()
+    assert path is not None
+    if not path.is_file():
+        raise t.fail("path", f"calibration file {path} does not exist: run `cellctl calibrate` and point here")
+    return CalibrationConfig(path)
+
+
+def _measure(t: _Table) -> MeasureConfig:
+    depth = t.get("depth_range_mm", list, [450.0, 650.0])
+    if len(depth) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in depth):
+        raise t.fail("depth_range_mm", f"expected [near, far] in mm, got {depth!r}")
+    if not 0 < depth[0] < depth[1]:
+        raise t.fail("depth_range_mm", f"{depth!r} is impossible: need 0 < near < far")
+    config = MeasureConfig(
+        depth_range_mm=(float(depth[0]), float(depth[1])),
+        glue_offset_mm=t.number("glue_offset_mm", 2.0, low=0, high=50),
+        glue_spacing_mm=t.number("glue_spacing_mm", 2.0, above=0, high=50),
+    )
+    t.finish()
+    return config
+
+
+def _plc(t: _Table) -> PlcConfig:
+    transport = t.choice("transport", ("tcp", "rtu"), "tcp")
+    config = PlcConfig(
+        transport=transport,
+        host=t.get("host", str, "127.0.0.1"),
+        port=int(t.number("port", DEFAULT_TCP_PORT, low=0, high=65535)),
+        serial_port=t.get("serial_port", str, None),
+        baudrate=int(t.number("baudrate", 19200, above=0)),
+        parity=t.choice("parity", ("N", "E", "O"), "E"),
+        stopbits=int(t.number("stopbits", 1, low=1, high=2)),
+        bytesize=int(t.number("bytesize", 8, low=7, high=8)),
+        unit_id=int(t.number("unit_id", 1, low=0, high=255)),
+        word_order=WordOrder(t.choice("word_order", tuple(w.value for w in WordOrder), "high_first")),
+        heartbeat_period_s=t.number("heartbeat_period_s", 0.25, above=0, high=0.49),
+        liveness_timeout_s=t.number("liveness_timeout_s", 5.0, above=0.5, high=600),
+    )
+    t.finish()
+    if transport == "rtu" and not config.serial_port:
+        raise t.fail("serial_port", "required for transport 'rtu', e.g. /dev/serial/by-id/usb-FTDI_...-if00-port0")
+    try:
+        check_unit_id(config.unit_id, config.endpoint())
+    except ValueError as exc:
+        raise t.fail("unit_id", str(exc)) from None
+    return config
+
+
+def _journal(t: _Table) -> JournalConfig:
+    state_dir = t.path("state_dir")
+    assert state_dir is not None
+    config = JournalConfig(state_dir=state_dir, keep_artifacts=int(t.number("keep_artifacts", 500, low=0)))
+    t.finish()
+    if state_dir.exists() and not state_dir.is_dir():
+        raise t.fail("state_dir", f"{state_dir} exists and is not a directory")
+    return config

@@ -1,0 +1,58 @@
+"""One cycle as a pure function: a stereo frame in, a result out.
+
+No sockets, no journal, no PLC: `measure_frame` is what the daemon calls between grabbing a pair and
+publishing the answer, and what tests call directly. The result is a success (`Measured`) or a failure
+(`Refused`, with its kind and reason) by type.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from cellctl.cameras.base import StereoFrame
+from cellctl.errors import FailureKind, MeasurementInputError
+from cellctl.vision.measurement import SoleMeasurement, measure_sole
+from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor
+
+
+@dataclass(frozen=True)
+class MeasureSettings:
+    """What a cycle needs to know beyond the frame: glue path offset and spacing (mm)."""
+
+    glue_offset_mm: float
+    glue_spacing_mm: float
+
+
+@dataclass(frozen=True)
+class Measured:
+    """A valid measurement of the sole in the frame."""
+
+    reconstruction: Reconstruction
+    measurement: SoleMeasurement
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Refused:
+    """No valid result: why (kind for programs, reason for people)."""
+
+    failure: FailureKind
+    reason: str
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+CycleResult = Measured | Refused
+
+
+def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings: MeasureSettings) -> CycleResult:
+    """Reconstruct and measure the sole in one synchronised pair."""
+    try:
+        reconstruction = reconstructor.reconstruct(frame.left, frame.right)
+    except MeasurementInputError as exc:  # e.g. frames of another size than the calibration
+        return Refused(exc.kind, f"cameras deliver frames the measurement cannot use: {exc}")
+    measurement = measure_sole(reconstruction, settings.glue_offset_mm, settings.glue_spacing_mm)
+    timings = dict(measurement.timings)
+    if not measurement.valid:
+        failure = measurement.failure or FailureKind.MEASUREMENT_INVALID
+        return Refused(failure, measurement.reason or "not measured", timings)
+    return Measured(reconstruction, measurement, timings)

@@ -1,0 +1,332 @@
+"""The cell controller service: PLC trigger -> stereo pair -> measurement -> journal -> PLC.
+
+    daemon = Daemon(CellConfig.load("deploy/cell-sim.toml"))
+    daemon.run()                 # until daemon.request_stop() (SIGTERM in `cellctl run`)
+
+One cycle, in this order (docs/modbus.md, handshake):
+  1. wait for a trigger (PlcLink sets BUSY before it acknowledges the PLC's write);
+  2. grab a synchronised pair; a CameraError clears CAMERAS_OK and answers with its error code;
+  3. reconstruct and measure; an invalid measurement answers with the matching scene error code;
+  4. journal the outcome durably (SQLite commit) - only then
+  5. publish it to the PLC (result or error, one atomic update);
+  6. write the PLY and overlay PNG and prune old ones (after publishing: the robot does not wait for them).
+
+Every accepted trigger gets exactly one answer. While the cameras are failing the service probes them
+between cycles, so CAMERAS_OK and READY come back by themselves when a camera is plugged in again.
+
+Stopping (request_stop, e.g. SIGTERM): a cycle triggered before the stop request is finished and published
+(it takes a second or two, far below systemd's stop timeout, and the PLC gets its answer); a trigger that
+arrives once stopping has begun is answered with CYCLE_ABORTED. The link then keeps serving for
+STOP_LINGER_S, so the PLC can read that last answer, and closes.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+
+import numpy as np
+
+from cellctl.cameras import CameraError, FrameSource, StereoFrame, open_frame_source
+from cellctl.errors import FailureKind
+from cellctl.service.artifacts import keep_artifacts
+from cellctl.service.codes import FAILURE_CODES
+from cellctl.service.config import CellConfig
+from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
+from cellctl.service.journal import CycleRecord, Journal
+from cellctl.service.sdnotify import SystemdNotifier
+from cellctl.vision.calibration import Calibration
+from cellctl.vision.measurement import SoleMeasurement
+from cellctl.vision.reconstruction import SoleReconstructor
+from firmware_io.handshake import Trigger
+from firmware_io.registers import MAX_GLUE_POINTS, ErrorCode
+from firmware_io.server import PlcLink
+
+log = logging.getLogger(__name__)
+
+#: How long one wait for a trigger lasts: the loop's tick for stop requests, watchdog pings and probes.
+TICK_S = 0.25
+#: After a stop request, how long the Modbus link still serves so the PLC can read the last answer.
+STOP_LINGER_S = 0.5
+#: Cameras that failed are probed this often between cycles so READY comes back without a trigger.
+CAMERA_PROBE_PERIOD_S = 1.0
+
+
+class CycleFailed(Exception):
+    """A cycle ends with an error code for the PLC."""
+
+    def __init__(self, code: ErrorCode, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+
+    @classmethod
+    def of(cls, failure: FailureKind, reason: str) -> CycleFailed:
+        """A failure of a kind, answered with the code the table at the service edge gives it."""
+        return cls(FAILURE_CODES[failure], reason)
+
+
+class Daemon:
+    """The service; construct, then run() in one thread and request_stop() from any thread."""
+
+    def __init__(
+        self,
+        config: CellConfig,
+        *,
+        source: FrameSource | None = None,
+        notifier: SystemdNotifier | None = None,
+    ) -> None:
+        self.config = config
+        self.calib, self._calibration_problem = _load_calibration(config)
+        if source is None and self.calib is None and config.cameras.backend == "simulated":
+            raise ValueError(
+                f"simulated cameras render through the calibration, which cannot be used: {self._calibration_problem}"
+            )
+        self.source = source if source is not None else open_frame_source(config.cameras, self.calib)  # type: ignore[arg-type]
+        self.notifier = notifier if notifier is not None else SystemdNotifier()
+        plc = config.plc
+        self.link = PlcLink(
+            plc.endpoint(),
+            unit_id=plc.unit_id,
+            word_order=plc.word_order,
+            heartbeat_period_s=plc.heartbeat_period_s,
+            liveness_timeout_s=plc.liveness_timeout_s,
+        )
+        self._reconstructor = (
+            None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
+        )
+        self._stop = threading.Event()
+        self._stop_at = math.inf  # time.monotonic() of the stop request
+        self._started = threading.Event()
+        self._cameras_ok = False
+        self._last_probe = 0.0
+        self._journal: Journal | None = None
+        self.cycles_done = 0
+
+    # ---- lifetime ------------------------------------------------------------------------------
+
+    def request_stop(self) -> None:
+        """Finish the running cycle, answer later triggers with CYCLE_ABORTED, then stop (thread-safe)."""
+        self._stop_at = min(self._stop_at, time.monotonic())
+        self._stop.set()
+
+    def wait_started(self, timeout_s: float) -> bool:
+        """True once the Modbus link serves and the service waits for triggers."""
+        return self._started.wait(timeout_s)
+
+    def run(self) -> None:
+        """Serve until request_stop(); raises if the journal or the Modbus port cannot be opened."""
+        self._journal = Journal.open(self.config.journal.state_dir)
+        try:
+            # Cameras first: preparing them may take long (the simulator renders its scenes), and the
+            # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
+            self._probe_cameras(force=True)
+            self.link.start()
+            try:
+                self._report_health()
+                self.notifier.notify(READY=1, STATUS=self._status_text())
+                log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self._cameras_ok else "NOT ok")
+                self._started.set()
+                self._serve()
+            finally:
+                self.notifier.notify(STOPPING=1, STATUS="stopping")
+                self.link.stop()
+        finally:
+            self.source.close()
+            self._journal.close()
+            log.info("stopped after %d cycles", self.cycles_done)
+
+    def _serve(self) -> None:
+        while not self._stop.is_set():
+            self.notifier.notify(WATCHDOG=1)
+            trigger = self.link.wait_trigger(timeout_s=TICK_S)
+            if trigger is None:
+                self._probe_cameras()
+                continue
+            self._answer(trigger)
+        # Serve a little longer: the PLC reads the last answer, and a trigger arriving now is answered.
+        deadline = time.monotonic() + STOP_LINGER_S
+        while (left := deadline - time.monotonic()) > 0:
+            late = self.link.wait_trigger(timeout_s=left)
+            if late is not None:
+                self._answer(late)
+
+    def _answer(self, trigger: Trigger) -> None:
+        """Measure a trigger accepted before any stop request; abort one accepted after it."""
+        if trigger.received_at >= self._stop_at:
+            self._abort(trigger)
+        else:
+            self._cycle(trigger)
+
+    # ---- one cycle -----------------------------------------------------------------------------
+
+    def _cycle(self, trigger: Trigger) -> None:
+        self.notifier.notify(STATUS=f"measuring cycle {trigger.cycle}")
+        triggered_at = time.time() - (time.monotonic() - trigger.received_at)
+        timings: dict[str, float] = {}
+        frame: StereoFrame | None = None
+        result: Measured | None = None
+        try:
+            frame = self._grab(timings)
+            result = self._measure(frame, timings)
+            code, reason = ErrorCode.NONE, None
+        except CycleFailed as failure:
+            code, reason = failure.code, str(failure)
+        except Exception as exc:  # never leave the PLC without an answer
+            log.exception("cycle %d: unexpected failure", trigger.cycle)
+            code, reason = ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}"
+        cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
+        measurement = None if result is None else result.measurement
+        record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
+        assert self._journal is not None
+        self._journal.record(record)  # durable before the PLC hears of it
+        self._publish(trigger.cycle, code, cycle_time_ms, measurement)
+        self._report_health()
+        self.cycles_done += 1
+        if code is ErrorCode.NONE:
+            log.info(
+                "cycle %d: length %.2f heel %.2f toe %.2f mm, %d glue points, %.0f ms",
+                trigger.cycle,
+                record.length_mm,
+                record.heel_height_mm,
+                record.toe_height_mm,
+                len(record.glue_path),
+                cycle_time_ms,
+            )
+        else:
+            log.warning("cycle %d: error %d %s: %s (%.0f ms)", trigger.cycle, code, code.name, reason, cycle_time_ms)
+        if frame is not None and result is not None and self.calib is not None and self._journal is not None:
+            keep_artifacts(
+                self._journal,
+                record,
+                frame,
+                self.calib,
+                result.reconstruction,
+                result.measurement,
+                self.config.journal.keep_artifacts,
+            )
+        self.notifier.notify(STATUS=self._status_text())
+
+    def _grab(self, timings: dict[str, float]) -> StereoFrame:
+        start = time.perf_counter()
+        try:
+            frame = self.source.grab_pair()
+        except CameraError as exc:
+            self._cameras_ok = False
+            self._last_probe = time.monotonic()
+            raise CycleFailed.of(exc.kind, str(exc)) from exc
+        finally:
+            timings["grab"] = time.perf_counter() - start
+        self._cameras_ok = True
+        return frame
+
+    def _measure(self, frame: StereoFrame, timings: dict[str, float]) -> Measured:
+        if self.calib is None or self._reconstructor is None:
+            raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
+        measure = self.config.measure
+        result = measure_frame(
+            frame, self._reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
+        )
+        timings.update(result.timings)
+        if isinstance(result, Refused):
+            raise CycleFailed.of(result.failure, result.reason)
+        return result
+
+    def _publish(self, cycle: int, code: ErrorCode, cycle_time_ms: float, measurement: SoleMeasurement | None) -> None:
+        if code is not ErrorCode.NONE or measurement is None:
+            self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
+            return
+        assert measurement.glue_path is not None
+        self.link.publish_result(
+            cycle,
+            heel_height_mm=float(measurement.heel_height_mm),
+            toe_height_mm=float(measurement.toe_height_mm),
+            length_mm=float(measurement.length_mm),
+            cycle_time_ms=cycle_time_ms,
+            glue_points=_published_points(measurement.glue_path.points),
+        )
+
+    def _abort(self, trigger: Trigger) -> None:
+        reason = "the service is stopping"
+        cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
+        triggered_at = time.time() - (time.monotonic() - trigger.received_at)
+        assert self._journal is not None
+        self._journal.record(
+            _record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
+        )
+        self.link.publish_error(trigger.cycle, ErrorCode.CYCLE_ABORTED, cycle_time_ms=cycle_time_ms)
+        log.warning("cycle %d: aborted, %s", trigger.cycle, reason)
+
+    # ---- health --------------------------------------------------------------------------------
+
+    def _probe_cameras(self, force: bool = False) -> None:
+        """Open the cameras if they are not known to work (at start, and every few s while failing)."""
+        now = time.monotonic()
+        if self._cameras_ok or (not force and now - self._last_probe < CAMERA_PROBE_PERIOD_S):
+            return
+        self._last_probe = now
+        try:
+            self.source.open()
+            self.source.grab_pair()
+        except CameraError as exc:
+            log.warning("cameras not ready: %s", exc)
+            return
+        self._cameras_ok = True
+        log.info("cameras ok")
+        if not force:
+            self._report_health()
+
+    def _report_health(self) -> None:
+        self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=self.calib is not None)
+
+    def _status_text(self) -> str:
+        cameras = "cameras ok" if self._cameras_ok else "CAMERAS NOT OK"
+        calibration = "calibration ok" if self.calib is not None else "NO CALIBRATION"
+        return f"waiting for trigger; {self.cycles_done} cycles; {cameras}; {calibration}"
+
+
+def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None]:
+    try:
+        return Calibration.load(config.calibration.path), None
+    except (OSError, ValueError) as exc:
+        log.error("calibration %s not usable: %s", config.calibration.path, exc)
+        return None, str(exc)
+
+
+def _published_points(points: np.ndarray) -> np.ndarray:
+    """The glue path as the PLC gets it: at most MAX_GLUE_POINTS, evenly thinned if longer."""
+    if len(points) <= MAX_GLUE_POINTS:
+        return points
+    keep = np.linspace(0, len(points), MAX_GLUE_POINTS, endpoint=False).astype(int)
+    return points[keep]
+
+
+def _record(
+    cycle: int,
+    triggered_at: float,
+    code: ErrorCode,
+    reason: str | None,
+    cycle_time_ms: float,
+    timings: dict[str, float],
+    measurement: SoleMeasurement | None,
+    frame: StereoFrame | None,
+) -> CycleRecord:
+    ok = code is ErrorCode.NONE and measurement is not None and measurement.glue_path is not None
+    return CycleRecord(
+        cycle=cycle,
+        triggered_at=triggered_at,
+        status="ok" if ok else "error",
+        error_code=int(code),
+        reason=reason,
+        cycle_time_ms=cycle_time_ms,
+        length_mm=float(measurement.length_mm) if ok else None,
+        heel_height_mm=float(measurement.heel_height_mm) if ok else None,
+        toe_height_mm=float(measurement.toe_height_mm) if ok else None,
+        timings={k: round(v, 5) for k, v in timings.items()},
+        # float32 as published: the journal holds exactly the numbers the PLC reads.
+        glue_path=_published_points(measurement.glue_path.points).astype(np.float32).astype(float).tolist()
+        if ok
+        else [],
+        source={} if frame is None else {**frame.info, "skew_ms": round(frame.skew_s * 1000.0, 3)},
+    )

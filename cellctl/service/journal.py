@@ -1,0 +1,180 @@
+"""The cycle journal: every cycle's outcome in SQLite, written durably before the PLC is told.
+
+    journal = Journal.open(state_dir)
+    row_id = journal.record(CycleRecord(...))      # committed and fsync'ed when this returns
+    ...publish to the PLC...
+    journal.attach_artifacts(row_id, ply_path, overlay_path)   # after publishing, see Daemon
+    journal.last(20)
+
+WAL mode with synchronous=FULL: a commit is on disk when record() returns, readers (`cellctl results`)
+never block the service, and a power cut loses at most the cycle in progress, which the PLC has not been
+told about either. The PLY and overlay PNG of a cycle live under state_dir/cycles/<row id>/; only the newest
+`keep_artifacts` cycles keep them (the rows themselves are small and all kept).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sqlite3
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS cycles (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    cycle INTEGER NOT NULL,            -- the PLC's cycle number (register 2)
+    triggered_at REAL NOT NULL,        -- wall clock, Unix seconds
+    status TEXT NOT NULL,              -- 'ok' or 'error'
+    error_code INTEGER NOT NULL,       -- firmware_io ErrorCode, 0 = none
+    reason TEXT,                       -- why it failed, in words
+    length_mm REAL,
+    heel_height_mm REAL,
+    toe_height_mm REAL,
+    cycle_time_ms REAL NOT NULL,       -- trigger received -> result ready to publish
+    timings TEXT NOT NULL,             -- JSON {step: seconds}
+    glue_path TEXT NOT NULL,           -- JSON [[x, y, z], ...] table frame, mm
+    source TEXT NOT NULL,              -- JSON: where the pair came from (backend, scene, devices)
+    ply_path TEXT,
+    overlay_path TEXT
+);
+"""
+
+COLUMNS = (
+    "id",
+    "cycle",
+    "triggered_at",
+    "status",
+    "error_code",
+    "reason",
+    "length_mm",
+    "heel_height_mm",
+    "toe_height_mm",
+    "cycle_time_ms",
+    "timings",
+    "glue_path",
+    "source",
+    "ply_path",
+    "overlay_path",
+)
+_JSON_COLUMNS = ("timings", "glue_path", "source")
+
+
+@dataclass
+class CycleRecord:
+    """One cycle as journaled."""
+
+    cycle: int
+    triggered_at: float
+    status: str
+    error_code: int
+    cycle_time_ms: float
+    reason: str | None = None
+    length_mm: float | None = None
+    heel_height_mm: float | None = None
+    toe_height_mm: float | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    glue_path: list[list[float]] = field(default_factory=list)
+    source: dict[str, Any] = field(default_factory=dict)
+    ply_path: str | None = None
+    overlay_path: str | None = None
+    id: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class Journal:
+    """The SQLite journal under a state directory. One writer (the service), any number of readers."""
+
+    def __init__(self, connection: sqlite3.Connection, state_dir: Path) -> None:
+        self._db = connection
+        self.state_dir = state_dir
+
+    @classmethod
+    def open(cls, state_dir: str | Path, *, readonly: bool = False) -> Journal:
+        state = Path(state_dir)
+        path = state / "journal.sqlite3"
+        if readonly:
+            if not path.is_file():
+                raise FileNotFoundError(f"no journal at {path}: has `cellctl run` run with this state directory?")
+            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+        else:
+            try:
+                state.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ValueError(f"cannot create the state directory {state}: {exc.strerror}") from None
+            db = sqlite3.connect(path)
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
+            db.executescript(SCHEMA)
+        db.row_factory = sqlite3.Row
+        return cls(db, state)
+
+    def close(self) -> None:
+        self._db.close()
+
+    def record(self, record: CycleRecord) -> int:
+        """Write one cycle and commit; returns its row id."""
+        values = record.to_dict()
+        values.pop("id")
+        for name in _JSON_COLUMNS:
+            values[name] = json.dumps(values[name], allow_nan=False)
+        names = ", ".join(values)
+        marks = ", ".join(f":{name}" for name in values)
+        with self._db:
+            cursor = self._db.execute(f"INSERT INTO cycles ({names}) VALUES ({marks})", values)
+        record.id = int(cursor.lastrowid)
+        return record.id
+
+    def artifact_dir(self, row_id: int) -> Path:
+        return self.state_dir / "cycles" / f"{row_id:08d}"
+
+    def attach_artifacts(self, row_id: int, ply_path: Path | None, overlay_path: Path | None) -> None:
+        with self._db:
+            self._db.execute(
+                "UPDATE cycles SET ply_path = ?, overlay_path = ? WHERE id = ?",
+                (
+                    None if ply_path is None else str(ply_path),
+                    None if overlay_path is None else str(overlay_path),
+                    row_id,
+                ),
+            )
+
+    def prune_artifacts(self, keep: int) -> int:
+        """Delete the artifacts of all but the newest `keep` cycles that have any; returns how many went."""
+        rows = self._db.execute(
+            "SELECT id FROM cycles WHERE ply_path IS NOT NULL OR overlay_path IS NOT NULL "
+            "ORDER BY id DESC LIMIT -1 OFFSET ?",
+            (keep,),
+        ).fetchall()
+        for row in rows:
+            shutil.rmtree(self.artifact_dir(row["id"]), ignore_errors=True)
+        with self._db:
+            self._db.executemany(
+                "UPDATE cycles SET ply_path = NULL, overlay_path = NULL WHERE id = ?", [(row["id"],) for row in rows]
+            )
+        return len(rows)
+
+    def last(self, count: int | None = None) -> list[CycleRecord]:
+        """The newest `count` cycles (all when None), oldest first."""
+        limit = -1 if count is None else count
+        rows = self._db.execute(
+            f"SELECT {', '.join(COLUMNS)} FROM cycles ORDER BY id DESC LIMIT ?", (limit,)
+        ).fetchall()
+        return [_record(row) for row in reversed(rows)]
+
+    def find(self, cycle: int) -> CycleRecord | None:
+        """The newest journaled cycle with this PLC cycle number."""
+        row = self._db.execute(
+            f"SELECT {', '.join(COLUMNS)} FROM cycles WHERE cycle = ? ORDER BY id DESC LIMIT 1", (cycle,)
+        ).fetchone()
+        return None if row is None else _record(row)
+
+
+def _record(row: sqlite3.Row) -> CycleRecord:
+    values = dict(row)
+    for name in _JSON_COLUMNS:
+        values[name] = json.loads(values[name])
+    return CycleRecord(**values)

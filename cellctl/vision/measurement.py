@@ -1,0 +1,284 @@
+"""Measuring a reconstructed sole: length, heel and toe height and the glue path (docs/measurements.md).
+
+    reconstruction = SoleReconstructor(calib).reconstruct(left, right)
+    result = measure_sole(reconstruction)
+    if result.valid:
+        print(result.length_mm, result.heel_height_mm, result.toe_height_mm)
+    else:
+        print("not measured:", result.reason, result.failure)
+
+An invalid result carries no numbers (None), only the reason in words and its `FailureKind` (what a
+program acts on, e.g. the service's PLC error code): the robot must never get a silent wrong value.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from cellctl.errors import FailureKind
+from cellctl.vision.footprint import Footprint
+from cellctl.vision.reconstruction import Reconstruction
+from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
+
+HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
+# Results outside these ranges are no sole on this cell: refused, never published.
+PLAUSIBLE_LENGTH_MM = (100.0, 400.0)
+PLAUSIBLE_HEIGHT_MM = (0.5, 150.0)
+HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
+MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
+GLUE_OFFSET_MM = 2.0
+GLUE_SPACING_MM = 2.0
+GLUE_FIT_RADIUS_MM = 4.0
+GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
+GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
+OUTLINE_SMOOTHING_MM = 2.0  # Gaussian along the outline: removes the raster's staircase, keeps the shape
+
+
+@dataclass
+class GluePath:
+    """Closed path on the sole's top surface, table frame, ordered from the heel end (first point not repeated)."""
+
+    points: np.ndarray  # N x 3, mm
+    normals: np.ndarray  # N x 3, unit, nz > 0
+    closed: bool = True
+
+    @property
+    def length_mm(self) -> float:
+        steps = np.diff(np.vstack([self.points, self.points[:1]]) if self.closed else self.points, axis=0)
+        return float(np.linalg.norm(steps, axis=1).sum())
+
+
+@dataclass
+class SoleMeasurement:
+    """The measurements of one sole, or the reason why there are none."""
+
+    length_mm: float | None
+    heel_height_mm: float | None
+    toe_height_mm: float | None
+    glue_path: GluePath | None
+    points: int  # sole points the measurement rests on
+    valid: bool
+    reason: str | None = None  # why not measured, in words
+    failure: FailureKind | None = None  # the same, as a kind a program can act on
+    timings: dict[str, float] = field(default_factory=dict)
+    # Where the numbers come from (table frame), for drawings and diagnostics; None when unknown.
+    axis: np.ndarray | None = None  # unit heel->toe direction (x, y)
+    heel_point: np.ndarray | None = None  # (x, y, z) where heel_height_mm is taken
+    toe_point: np.ndarray | None = None
+    outline: np.ndarray | None = None  # footprint outline, N x 2
+    half_area_difference: float | None = None  # (toe half - heel half) / area
+    camera_to_table: np.ndarray | None = None  # 4 x 4, rectified left camera -> table
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready summary (keys of the `cellctl measure --json` output)."""
+        path = self.glue_path
+        return {
+            "length_mm": _round(self.length_mm),
+            "heel_height_mm": _round(self.heel_height_mm),
+            "toe_height_mm": _round(self.toe_height_mm),
+            "glue_path": [] if path is None else np.round(path.points, 3).tolist(),
+            "glue_normals": [] if path is None else np.round(path.normals, 4).tolist(),
+            "points": int(self.points),
+            "valid": bool(self.valid),
+            "reason": self.reason,
+            "failure": None if self.failure is None else self.failure.value,
+            "heel_point": None if self.heel_point is None else np.round(self.heel_point, 3).tolist(),
+            "toe_point": None if self.toe_point is None else np.round(self.toe_point, 3).tolist(),
+            "camera_to_table": None if self.camera_to_table is None else np.round(self.camera_to_table, 6).tolist(),
+            "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
+        }
+
+
+def _round(value: float | None) -> float | None:
+    return None if value is None else round(float(value), 3)
+
+
+def measure_sole(
+    reconstruction: Reconstruction,
+    glue_offset_mm: float = GLUE_OFFSET_MM,
+    glue_spacing_mm: float = GLUE_SPACING_MM,
+) -> SoleMeasurement:
+    """Length, heel and toe height and glue path of a reconstructed sole."""
+    if glue_offset_mm < 0 or glue_spacing_mm <= 0:
+        raise ValueError(f"glue offset must be >= 0 and spacing > 0 mm, got {glue_offset_mm:g} and {glue_spacing_mm:g}")
+    timings = dict(reconstruction.timings)
+    points = reconstruction.sole_points
+    base = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)
+    if not reconstruction.valid or reconstruction.footprint is None:
+        return _invalid(
+            reconstruction.failure or FailureKind.NO_SOLE, reconstruction.reason or "no sole reconstructed", **base
+        )
+    start = time.perf_counter()
+    footprint = reconstruction.footprint
+    outline = _smooth_closed(footprint.outline(), OUTLINE_SMOOTHING_MM)
+    centroid, axis = _principal_axis(outline)
+    proj = (outline - centroid) @ axis
+    lo, hi = float(proj.min()), float(proj.max())
+    difference = _half_area_difference(footprint, centroid, axis, 0.5 * (lo + hi))
+    if difference < 0:  # the toe is the end with the larger half: orient the axis heel -> toe
+        axis, lo, hi, difference = -axis, -hi, -lo, -difference
+    length = hi - lo
+    base.update(axis=axis, outline=outline, half_area_difference=difference)
+    if difference < MIN_HALF_AREA_DIFFERENCE:
+        return _invalid(
+            FailureKind.ENDS_TOO_CLOSE_TO_CALL,
+            f"toe and heel too close to call: the footprint halves differ by {100 * difference:.1f} % of the area "
+            f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
+            **base,
+        )
+    heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
+    toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
+    surface = SoleSurface(reconstruction)
+    heights = surface.sample(np.vstack([heel_xy, toe_xy]), HEIGHT_RADIUS_MM)
+    timings["measure"] = time.perf_counter() - start
+    for name, value, xy in (("heel", heights.z[0], heel_xy), ("toe", heights.z[1], toe_xy)):
+        if not np.isfinite(value):
+            return _invalid(
+                FailureKind.SURFACE_NOT_MEASURED,
+                f"no measured surface at the {name} point ({xy[0]:.1f}, {xy[1]:.1f}) mm: fewer than "
+                f"{MIN_CLOUD_POINTS} points within {HEIGHT_RADIUS_MM:g} mm",
+                **base,
+            )
+    heel_z, toe_z = float(heights.z[0]), float(heights.z[1])
+    heel_point, toe_point = np.array([*heel_xy, heel_z]), np.array([*toe_xy, toe_z])
+    base.update(heel_point=heel_point, toe_point=toe_point)
+    start = time.perf_counter()
+    path, problem = glue_path(surface, outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
+    timings["glue_path"] = time.perf_counter() - start
+    if path is None:
+        return _invalid(FailureKind.SURFACE_NOT_MEASURED, problem or "no glue path", **base)
+    implausible = _implausible(length, heel_z, toe_z)
+    if implausible:
+        return _invalid(FailureKind.MEASUREMENT_INVALID, implausible, **base)
+    return SoleMeasurement(
+        length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, valid=True, **base
+    )
+
+
+def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
+    """Why values outside what a sole can be are refused, or None: better no number than a wrong one."""
+    low, high = PLAUSIBLE_LENGTH_MM
+    if not low <= length <= high:
+        return f"sole length {length:.1f} mm outside {low:g}..{high:g} mm"
+    low, high = PLAUSIBLE_HEIGHT_MM
+    for name, value in (("heel", heel_z), ("toe", toe_z)):
+        if not low <= value <= high:
+            return f"{name} height {value:.1f} mm outside {low:g}..{high:g} mm"
+    return None
+
+
+def _invalid(failure: FailureKind, reason: str, **fields_: object) -> SoleMeasurement:
+    return SoleMeasurement(None, None, None, None, valid=False, reason=reason, failure=failure, **fields_)
+
+
+def _principal_axis(outline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid and unit principal axis (largest second moment) of the area inside a polygon."""
+    moments = cv2.moments(outline.astype(np.float32))  # polygon moments by Green's theorem
+    centroid = np.array([moments["m10"], moments["m01"]]) / moments["m00"]
+    cov = np.array([[moments["mu20"], moments["mu11"]], [moments["mu11"], moments["mu02"]]])
+    eigvals, eigvecs = np.linalg.eigh(cov)
+    return centroid, eigvecs[:, int(np.argmax(eigvals))]
+
+
+def _half_area_difference(footprint: Footprint, centroid: np.ndarray, axis: np.ndarray, middle: float) -> float:
+    """(area beyond the middle along +axis - area before it) / total area, from the raster's cells."""
+    proj = (footprint.centres() - centroid) @ axis
+    upper = np.count_nonzero(proj > middle)
+    return (2.0 * upper - len(proj)) / max(len(proj), 1)
+
+
+def glue_path(
+    surface: SoleSurface,
+    outline: np.ndarray,
+    centroid: np.ndarray,
+    axis: np.ndarray,
+    offset_mm: float = GLUE_OFFSET_MM,
+    spacing_mm: float = GLUE_SPACING_MM,
+) -> tuple[GluePath | None, str | None]:
+    """The outline moved `offset_mm` inward, resampled every `spacing_mm`, lifted onto the top surface.
+
+    Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
+    offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
+    Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
+    from the slope along the path and the slope between the rings (a patch's own tilt is too noisy on a
+    weakly textured sole: ~10 degrees).
+    """
+    resampled = _resample_closed(outline, 0.25)
+    inward = -_outward_normals(resampled)
+    path_xy = _resample_closed(resampled + offset_mm * inward, spacing_mm)
+    start = int(np.argmin((path_xy - centroid) @ axis))  # the heel end
+    path_xy = np.roll(path_xy, -start, axis=0)
+    path_inward = -_outward_normals(path_xy)
+    inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
+    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM)
+    missing = np.flatnonzero(~np.isfinite(samples.z[: len(path_xy)]))
+    if missing.size:
+        x, y = path_xy[missing[0]]
+        return None, (
+            f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
+            f"({missing.size} of {len(path_xy)} path points)"
+        )
+    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth along
+    # the path, so a Gaussian along the arc takes the rest (its bias, z'' sigma^2 / 2, is ~0.01 mm here).
+    sigma = GLUE_SMOOTHING_MM / spacing_mm
+    z = _smooth_along(samples.z[: len(path_xy)], sigma)
+    inner = samples.z[len(path_xy) :]
+    inner = np.where(np.isfinite(inner), inner, samples.z[: len(path_xy)])  # no inner sample: flat across
+    across = _smooth_along(inner, sigma) - z
+    return GluePath(np.column_stack([path_xy, z]), _path_normals(path_xy, z, path_inward, across), closed=True), None
+
+
+def _path_normals(path_xy: np.ndarray, z: np.ndarray, inward: np.ndarray, across_rise: np.ndarray) -> np.ndarray:
+    """Unit surface normals from the slope along a closed path and the rise over GLUE_NORMAL_BASE_MM inward."""
+    step = np.roll(path_xy, -1, axis=0) - np.roll(path_xy, 1, axis=0)
+    run = np.maximum(np.linalg.norm(step, axis=1), 1e-9)
+    tangent = step / run[:, None]
+    along = (np.roll(z, -1) - np.roll(z, 1)) / run
+    gradient = along[:, None] * tangent + (across_rise / GLUE_NORMAL_BASE_MM)[:, None] * inward
+    normals = np.column_stack([-gradient, np.ones(len(z))])
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def _smooth_along(values: np.ndarray, sigma_samples: float) -> np.ndarray:
+    """Gaussian smoothing of per-point values (N or N x k) along a closed path."""
+    radius = min(int(np.ceil(3 * sigma_samples)), len(values) // 2)
+    if radius < 1:
+        return values
+    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma_samples).ravel()
+    padded = np.concatenate([values[-radius:], values, values[:radius]])
+    if padded.ndim == 1:
+        return np.convolve(padded, kernel, mode="valid")
+    return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(padded.shape[1])])
+
+
+def _resample_closed(poly: np.ndarray, spacing: float) -> np.ndarray:
+    """Points every `spacing` mm of arc length along a closed polygon (first point kept, not repeated)."""
+    ring = np.vstack([poly, poly[:1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ring, axis=0), axis=1))])
+    count = max(3, int(round(arc[-1] / spacing)))
+    s = np.linspace(0.0, arc[-1], count, endpoint=False)
+    return np.column_stack([np.interp(s, arc, ring[:, 0]), np.interp(s, arc, ring[:, 1])])
+
+
+def _smooth_closed(poly: np.ndarray, sigma_mm: float) -> np.ndarray:
+    """Gaussian smoothing along a closed polygon resampled at 0.25 mm (wrap-around at the ends)."""
+    if len(poly) < 3:
+        return poly
+    step = 0.25
+    ring = _resample_closed(poly, step)
+    sigma = sigma_mm / step
+    radius = int(np.ceil(3 * sigma))
+    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma).ravel()
+    padded = np.vstack([ring[-radius:], ring, ring[:radius]])
+    return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)])
+
+
+def _outward_normals(poly: np.ndarray) -> np.ndarray:
+    """Unit outward normals of a counter-clockwise closed polygon."""
+    tangent = np.roll(poly, -1, axis=0) - np.roll(poly, 1, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
+    return np.column_stack([tangent[:, 1], -tangent[:, 0]])

@@ -1,0 +1,139 @@
+"""The sole's top surface at given table points: height and normal, as precisely as the data allows.
+
+With the rectified images at hand (a stereo reconstruction), each query is a small patch of the surface
+whose disparity plane is fitted directly to the images (cellctl.vision.subpixel), then reprojected and turned
+into a plane in the table frame. Without images (a cloud from elsewhere, e.g. the simulator's true depth)
+the same plane is fitted to the cloud's points near the query.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+
+from cellctl.vision.reconstruction import Reconstruction
+from cellctl.vision.subpixel import PatchSums, refine_patches
+
+MIN_CLOUD_POINTS = 12
+TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
+
+
+@dataclass
+class SurfaceSamples:
+    """Heights (mm above the table) and unit normals at the queried table points; NaN where not measured."""
+
+    z: np.ndarray  # K
+    normals: np.ndarray  # K x 3
+    refined: np.ndarray  # K bool: fitted on the images (else on the cloud)
+
+
+class SoleSurface:
+    """Queries of a reconstructed sole's top surface."""
+
+    def __init__(self, reconstruction: Reconstruction) -> None:
+        self.rec = reconstruction
+        points = reconstruction.sole_points
+        flat = o3d.geometry.PointCloud(
+            o3d.utility.Vector3dVector(np.column_stack([points[:, :2], np.zeros(len(points))]))
+        )
+        self._tree = o3d.geometry.KDTreeFlann(flat)  # neighbours in the table plane
+
+    def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
+        """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        refined = np.zeros(len(xy), bool)
+        if self.rec.rectified is None:
+            z, normals = self._from_cloud(xy, radius_mm)
+            return SurfaceSamples(z, normals, refined)
+        z = self._coarse_heights(xy, radius_mm)
+        normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
+        if np.any(np.isfinite(z)):
+            self._refine(xy, z, normals, refined, radius_mm)
+        # Where the images gave no fit (too few pixels, no convergence), fall back to the cloud.
+        rest = np.flatnonzero(~refined)
+        if rest.size:
+            z[rest], normals[rest] = self._from_cloud(xy[rest], radius_mm)
+        return SurfaceSamples(z, normals, refined)
+
+    def _coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
+        """Median height of the cloud's points within the radius: only the start of the refinement."""
+        points = self.rec.sole_points
+        z = np.full(len(xy), np.nan)
+        for k, (x, y) in enumerate(xy):
+            count, index, _ = self._tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
+            if count >= MIN_CLOUD_POINTS:
+                z[k] = np.median(points[np.asarray(index), 2])
+        return z
+
+    def _from_cloud(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        points = self.rec.sole_points
+        z = np.full(len(xy), np.nan)
+        normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
+        for k, (x, y) in enumerate(xy):
+            count, index, _ = self._tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
+            if count < MIN_CLOUD_POINTS:
+                continue
+            near = points[np.asarray(index)]
+            z[k], normals[k] = _robust_plane(near, np.array([x, y]))
+        return z, normals
+
+    def _refine(
+        self, xy: np.ndarray, z: np.ndarray, normals: np.ndarray, refined: np.ndarray, radius_mm: float
+    ) -> None:
+        rec = self.rec
+        calib = rec.calibration
+        left, right = rec.rectified
+        table_to_camera = np.linalg.inv(rec.camera_to_table)
+        known = np.flatnonzero(np.isfinite(z))
+        guess = np.column_stack([xy[known], z[known]]) @ table_to_camera[:3, :3].T + table_to_camera[:3, 3]
+        focal = calib.focal_px
+        centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
+        start = focal * calib.baseline_mm / guess[:, 2]
+        radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
+        fit = refine_patches(left, right, rec.sole_mask, centres, radius_px, start)
+        homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
+        camera = homogeneous[:, :3] / homogeneous[:, 3:4]
+        table = camera @ rec.camera_to_table[:3, :3].T + rec.camera_to_table[:3, 3]
+        patch_z, patch_normals = _planes_at(table, fit.ids, xy[known])
+        done = fit.ok & np.isfinite(patch_z)
+        z[known[done]], normals[known[done]], refined[known[done]] = patch_z[done], patch_normals[done], True
+
+
+def _planes_at(points: np.ndarray, ids: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """_plane_at for many patches at once: points (N x 3) of patch ids (sorted), evaluated at xy (K x 2).
+
+    Least squares by per-patch normal equations (sums of products), all patches in one pass.
+    """
+    u, v = (points[:, :2] - xy[ids]).T
+    w = points[:, 2]
+    moments = PatchSums(ids, len(xy))(np.vstack([np.ones_like(u), u, v, u * u, u * v, v * v, w, w * u, w * v]))
+    s1, su, sv, suu, suv, svv, sw, swu, swv = moments
+    normal = np.stack([np.stack(row, -1) for row in ((s1, su, sv), (su, suu, suv), (sv, suv, svv))], -2)
+    rhs = np.stack([sw, swu, swv], -1)
+    solvable = np.abs(np.linalg.det(normal)) > 1e-9 * np.maximum(s1, 1.0) ** 3
+    coef = np.full((len(xy), 3), np.nan)
+    coef[solvable] = np.linalg.solve(normal[solvable], rhs[solvable][..., None])[..., 0]
+    normals = np.column_stack([-coef[:, 1], -coef[:, 2], np.ones(len(xy))])
+    return coef[:, 0], normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def _plane_at(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray]:
+    """Least-squares plane z = z0 + gx (x - x0) + gy (y - y0) through points: z0 and the unit normal."""
+    design = np.column_stack([np.ones(len(points)), points[:, 0] - xy[0], points[:, 1] - xy[1]])
+    coef = np.linalg.lstsq(design, points[:, 2], rcond=None)[0]
+    normal = np.array([-coef[1], -coef[2], 1.0])
+    return float(coef[0]), normal / np.linalg.norm(normal)
+
+
+def _robust_plane(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray]:
+    """Plane through the points after trimming the highest and lowest TRIM of their residuals."""
+    z0, normal = _plane_at(points, xy)
+    predicted = z0 - ((points[:, 0] - xy[0]) * normal[0] + (points[:, 1] - xy[1]) * normal[1]) / normal[2]
+    residual = points[:, 2] - predicted
+    lo, hi = np.quantile(residual, [TRIM, 1.0 - TRIM])
+    keep = (residual >= lo) & (residual <= hi)
+    if keep.sum() >= 3:
+        z0, normal = _plane_at(points[keep], xy)
+    return z0, normal

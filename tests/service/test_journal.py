@@ -1,0 +1,96 @@
+"""The cycle journal: durable rows that survive reopening, artifact retention, and `cellctl results`."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import pytest
+
+from cellctl.cli import main
+from cellctl.service.journal import CycleRecord, Journal
+
+
+def ok(cycle: int) -> CycleRecord:
+    return CycleRecord(
+        cycle=cycle,
+        triggered_at=1_700_000_000.0 + cycle,
+        status="ok",
+        error_code=0,
+        cycle_time_ms=800.0 + cycle,
+        length_mm=270.5,
+        heel_height_mm=30.25,
+        toe_height_mm=12.5,
+        timings={"match": 0.5},
+        glue_path=[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]],
+        source={"backend": "simulated", "seed": cycle},
+    )
+
+
+def failed(cycle: int) -> CycleRecord:
+    return CycleRecord(
+        cycle=cycle,
+        triggered_at=1_700_000_100.0,
+        status="error",
+        error_code=10,
+        cycle_time_ms=1.5,
+        reason="left camera unplugged",
+    )
+
+
+def test_rows_survive_reopening_and_keep_their_values(tmp_path: Path) -> None:
+    journal = Journal.open(tmp_path)
+    first = journal.record(ok(1))
+    journal.record(failed(2))
+    journal.close()  # the service stops...
+    again = Journal.open(tmp_path)  # ...and starts again
+    again.record(ok(3))
+    records = again.last()
+    assert [r.cycle for r in records] == [1, 2, 3]
+    assert records[0].id == first and records[0].glue_path == [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+    assert records[0].source == {"backend": "simulated", "seed": 1}
+    assert records[1].error_code == 10 and records[1].length_mm is None and records[1].reason == "left camera unplugged"
+    assert [r.cycle for r in again.last(2)] == [2, 3]
+    assert again.find(3).heel_height_mm == 30.25 and again.find(99) is None
+    mode = again._db.execute("PRAGMA journal_mode").fetchone()[0]
+    assert mode == "wal"
+
+
+def test_artifacts_beyond_the_retention_limit_are_deleted(tmp_path: Path) -> None:
+    journal = Journal.open(tmp_path)
+    for cycle in range(1, 6):
+        row = journal.record(ok(cycle))
+        folder = journal.artifact_dir(row)
+        folder.mkdir(parents=True)
+        (folder / "sole.ply").write_text("ply")
+        journal.attach_artifacts(row, folder / "sole.ply", None)
+    assert journal.prune_artifacts(keep=2) == 3
+    kept = [r for r in journal.last() if r.ply_path is not None]
+    assert [r.cycle for r in kept] == [4, 5]
+    assert sorted(p.name for p in (tmp_path / "cycles").iterdir()) == ["00000004", "00000005"]
+    assert len(journal.last()) == 5  # rows are all kept
+    assert journal.prune_artifacts(keep=2) == 0
+
+
+def test_results_command_text_json_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    journal = Journal.open(tmp_path)
+    for record in (ok(1), failed(2), ok(3)):
+        journal.record(record)
+    journal.close()
+    assert main(["results", "--state-dir", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 3 and "cycle 2: error 10 (left camera unplugged)" in lines[1]
+    assert "length=270.50 heel=30.25 toe=12.50 mm points=2" in lines[0]
+    assert main(["results", "--state-dir", str(tmp_path), "--json", "--last", "2"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [d["cycle"] for d in data] == [2, 3] and data[1]["glue_path"][1] == [4.0, 5.0, 6.0]
+    assert main(["results", "--state-dir", str(tmp_path), "--csv"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert [r["status"] for r in rows] == ["ok", "error", "ok"] and rows[0]["glue_points"] == "2"
+
+
+def test_results_without_a_journal_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["results", "--state-dir", str(tmp_path / "none")]) == 2
+    assert "no journal at" in capsys.readouterr().err

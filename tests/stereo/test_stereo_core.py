@@ -1,0 +1,247 @@
+"""The C core against the numpy reference, stage by stage, exactly."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from cellctl.stereo import StereoMatcher, make_params
+from cellctl.stereo import matcher as stereo
+
+from . import stereo_reference as ref
+
+
+def _params(**kw):
+    p = make_params(**kw)
+    return {f: getattr(p, f) for f in p.__dataclass_fields__}
+
+
+def _pair(seed: int, h: int = 14, w: int = 23, shift: int = 3):
+    """A random pair with a real shift (right = left moved by `shift`) plus noise."""
+    rng = np.random.default_rng(seed)
+    base = rng.integers(0, 256, (h, w + shift), dtype=np.int64)
+    left = base[:, shift:]
+    right = base[:, :w]
+    noise = rng.integers(-6, 7, (h, w))
+    return left.astype(np.uint8), np.clip(right + noise, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("window", [(5, 5), (3, 3), (9, 7), (1, 3), (7, 1)])
+def test_census_matches_reference(window):
+    img, _ = _pair(1, 11, 17)
+    np.testing.assert_array_equal(stereo.census_transform(img, window), ref.census(img, *window))
+
+
+COST_CASES = [
+    dict(num_disparities=7),
+    dict(num_disparities=19, min_disparity=-4),
+    dict(num_disparities=5, min_disparity=3, cost="census"),
+    dict(num_disparities=6, cost="bt", lambda_bt=4.0),
+    dict(num_disparities=16, census_window=(9, 7), lambda_census=9.0, cost_scale=100),
+    dict(num_disparities=33, min_disparity=-10, census_window=(3, 3)),
+]
+
+
+@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("case", COST_CASES)
+def test_cost_volume_matches_reference(case, simd):
+    left, right = _pair(2, 9, 40)
+    got = stereo.cost_volume(left, right, simd=simd, **case)
+    np.testing.assert_array_equal(got, ref.cost_volume(left, right, _params(**case)))
+
+
+AGG_CASES = [
+    dict(num_disparities=7, paths=4),
+    dict(num_disparities=9, paths=8, min_disparity=-2),
+    dict(num_disparities=20, paths=4, p2_gamma=20, p1=7, p2=90),
+    dict(num_disparities=17, paths=8, p2_gamma=5, cost="census", p1=3, p2=31),
+    dict(num_disparities=5, paths=4, cost="bt"),
+]
+
+
+@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("case", AGG_CASES)
+def test_aggregation_matches_reference(case, simd):
+    left, right = _pair(3, 12, 26)
+    got = StereoMatcher(simd=simd, **case).aggregate(left, right)
+    np.testing.assert_array_equal(got, ref.aggregate(left, right, _params(**case)))
+
+
+@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("levels,uniqueness", [(11, 0), (11, 15), (37, 0), (37, 25), (48, 60), (3, 40)])
+@pytest.mark.parametrize("subpixel", [True, False])
+@pytest.mark.parametrize("dmin", [0, -3, 4])
+def test_selection_matches_reference(subpixel, dmin, levels, uniqueness, simd):
+    rng = np.random.default_rng(4)
+    volume = rng.integers(0, 400, (6, 21, levels)).astype(np.uint16)
+    volume[:, :, 3 % levels] = rng.integers(0, 400, (6, 21))  # ties and near-ties
+    volume[0, 0, :] = 5  # all equal: the smallest disparity wins
+    volume[1, :, 1] = 0  # a clear winner beside random costs
+    p = _params(num_disparities=levels, min_disparity=dmin, subpixel=subpixel, uniqueness=uniqueness)
+    left, right = stereo.select(volume, min_disparity=dmin, subpixel=subpixel, uniqueness=uniqueness, simd=simd)
+    ref_left, ref_right = ref.select(volume.astype(np.int64), p)
+    if uniqueness:  # the check really rejects some pixels and keeps others
+        assert 0 < np.count_nonzero(ref_left == ref.INVALID) < ref_left.size
+    np.testing.assert_array_equal(left, ref_left)
+    np.testing.assert_array_equal(right, ref_right)
+
+
+POST_CASES = [
+    dict(fill="background", median=3, weighted_median=0),
+    dict(fill="none", median=3, weighted_median=0),
+    dict(fill="background", median=5, lr_max_diff=0.5, weighted_median=0),
+    dict(median=0, lr_max_diff=-1, weighted_median=0),
+    dict(median=5, fill="none", lr_max_diff=2.0, weighted_median=0),
+    dict(fill="weighted", fill_radius=2, median=0, weighted_median=0),
+    dict(fill="background", median=0, weighted_median=2),
+    dict(fill="weighted", fill_radius=3, median=3, weighted_median=1, wm_sigma_colour=7.0, wm_sigma_space=1.5),
+    dict(fill="weighted", fill_radius=4, weighted_median=3, num_disparities=6, min_disparity=1),  # clamped levels
+    dict(fill="none", weighted_median=2, wm_sigma_colour=400.0, wm_sigma_space=100.0),  # near-plain weighted median
+    dict(),  # the defaults
+]
+
+
+def _raw_maps(h: int = 13, w: int = 30):
+    rng = np.random.default_rng(5)
+    raw_left = (rng.integers(0, 8, (h, w)) * 16 + rng.integers(-8, 8, (h, w))).astype(np.int16)
+    raw_right = (rng.integers(0, 8, (h, w)) * 16).astype(np.int16)
+    raw_right[rng.random((h, w)) < 0.1] = stereo.INVALID
+    raw_right[2, :] = raw_left[2, :]  # a row that passes the check everywhere it can
+    guide = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    guide[:, w // 2 :] //= 8  # two colour regions, so the weights matter
+    return raw_left, raw_right, guide
+
+
+@pytest.mark.parametrize("colour", [True, False])
+@pytest.mark.parametrize("case", POST_CASES)
+def test_postprocess_matches_reference(case, colour):
+    raw_left, raw_right, guide = _raw_maps()
+    if not colour:
+        guide = guide[:, :, 1].copy()
+    got = stereo.postprocess(raw_left, raw_right, guide, **case)
+    want = ref.postprocess(raw_left.astype(np.int64), raw_right.astype(np.int64), _params(**case), guide)
+    for g, r in zip(got, want):
+        np.testing.assert_array_equal(g, r)
+
+
+def test_weighted_stages_change_the_result_and_need_a_matching_guide():
+    raw_left, raw_right, guide = _raw_maps()
+    plain = stereo.postprocess(raw_left, raw_right, guide, fill="background", median=0, weighted_median=0)
+    weighted = stereo.postprocess(raw_left, raw_right, guide, fill="weighted", median=0, weighted_median=2)
+    assert not np.array_equal(plain[1], weighted[1]) and not np.array_equal(plain[2], weighted[2])
+    with pytest.raises(ValueError, match="guide image is"):
+        stereo.postprocess(raw_left, raw_right, guide[:, :-1])
+
+
+def _slanted_maps(h: int = 12, w: int = 40, dmin: int = 0, slope: float = -0.12, seed: int = 7):
+    """Raw maps of a slanted plane (d = dmin + 9 + slope * x + 0.05 y, with noise) seen by both views:
+    the right map holds what each left pixel predicts, so the check keeps the interior and the
+    border-occluded ends fail it, as in a real pair."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    truth = dmin + 9 + slope * x + 0.05 * y
+    raw_left = np.round(16 * truth + rng.integers(-4, 5, (h, w))).astype(np.int64)
+    raw_right = np.full((h, w), stereo.INVALID, np.int64)
+    for yy in range(h):
+        for xx in range(w):
+            xr = xx - (raw_left[yy, xx] + 8) // 16
+            if 0 <= xr < w:
+                raw_right[yy, xr] = raw_left[yy, xx] + rng.integers(-8, 9)
+    raw_left[rng.random((h, w)) < 0.15] = 16 * (dmin + 1)  # mismatches the check rejects
+    guide = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    return raw_left.astype(np.int16), raw_right.astype(np.int16), guide, truth
+
+
+BORDER_CASES = [
+    dict(num_disparities=16, border_fit=6),
+    dict(num_disparities=16, border_fit=2, fill="background", median=0, weighted_median=0),
+    dict(num_disparities=16, border_fit=30),  # too few points: the strip keeps the fill
+    dict(num_disparities=12, border_fit=8, fill_radius=2),  # strip limited to x < 11
+    dict(num_disparities=24, min_disparity=-20, border_fit=5, fill_radius=3),  # both borders
+    dict(num_disparities=16, border_fit=8, fill="none"),  # no fill, no strips
+]
+
+
+@pytest.mark.parametrize("slope", [-0.12, 0.3, -0.4])  # 0.3 and -0.4 are steeper than the 1/4 clamp
+@pytest.mark.parametrize("case", BORDER_CASES)
+def test_border_fit_matches_reference(case, slope):
+    dmin = case.get("min_disparity", 0)
+    raw_left, raw_right, guide, _ = _slanted_maps(dmin=dmin if dmin >= 0 else -12, slope=slope)
+    got = stereo.postprocess(raw_left, raw_right, guide, **case)
+    want = ref.postprocess(raw_left.astype(np.int64), raw_right.astype(np.int64), _params(**case), guide)
+    for g, r in zip(got, want):
+        np.testing.assert_array_equal(g, r)
+
+
+def test_border_fit_follows_a_slanted_surface_across_the_strip():
+    raw_left, raw_right, guide, truth = _slanted_maps(h=20, w=60, slope=-0.15, seed=8)
+    checked, line, _ = stereo.postprocess(
+        raw_left, raw_right, guide, num_disparities=16, border_fit=12, fill="background", median=0, weighted_median=0
+    )
+    _, flat, _ = stereo.postprocess(
+        raw_left, raw_right, guide, num_disparities=16, border_fit=0, fill="background", median=0, weighted_median=0
+    )
+    strip = np.zeros(checked.shape, bool)
+    for y in range(checked.shape[0]):
+        strip[y, : np.flatnonzero(checked[y] != stereo.INVALID)[0]] = True
+    assert strip.sum() > 50
+    err_line = np.abs(stereo.to_float(line) - truth)[strip]
+    err_flat = np.abs(stereo.to_float(flat) - truth)[strip]
+    assert err_line.max() < 0.5 and err_flat.max() > 1.0
+
+
+@pytest.mark.parametrize("bad", [dict(uniqueness=-1), dict(uniqueness=100)])
+def test_uniqueness_is_validated(bad):
+    with pytest.raises(ValueError, match="uniqueness"):
+        make_params(**bad)
+
+
+@pytest.mark.parametrize("bad", [dict(border_fit=1), dict(border_fit=65), dict(border_fit=-1)])
+def test_border_fit_is_validated(bad):
+    with pytest.raises(ValueError, match="border_fit"):
+        make_params(**bad)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(fill_radius=0),
+        dict(fill_radius=16),
+        dict(weighted_median=-1),
+        dict(weighted_median=16),
+        dict(wm_sigma_colour=0.0),
+        dict(wm_sigma_space=-1.0),
+        dict(fill="nearest"),
+    ],
+)
+def test_weighted_parameters_are_validated(bad):
+    with pytest.raises(ValueError, match=next(iter(bad)).split("_")[0]):
+        make_params(**bad)
+
+
+@pytest.mark.parametrize("colour", [False, True])
+@pytest.mark.parametrize(
+    "case",
+    [
+        dict(num_disparities=8, fill="background", median=3, weighted_median=0),
+        dict(num_disparities=12, paths=8, min_disparity=-2, median=5, fill="background", weighted_median=0),
+        dict(num_disparities=8, fill="weighted", fill_radius=3, median=0, weighted_median=2),
+    ],
+)
+def test_full_pipeline_matches_reference_chain(case, colour):
+    left, right = _pair(6, 15, 28)
+    guide = left
+    if colour:  # matching uses grey; the colour only guides the weighted stages
+        guide = np.dstack([left, 255 - left, np.roll(left, 3, axis=1)])
+        left = cv2.cvtColor(guide, cv2.COLOR_BGR2GRAY)
+    p = _params(**case)
+    raw_left, raw_right = ref.select(ref.aggregate(left, right, p), p)
+    want = ref.postprocess(raw_left, raw_right, p, guide)
+    result = StereoMatcher(**case).compute_detailed(guide, right)
+    for got, r in zip(
+        (result.raw_left, result.raw_right, result.checked, result.filled, result.disparity),
+        (raw_left, raw_right) + tuple(want),
+    ):
+        np.testing.assert_array_equal(got, stereo.to_float(r.astype(np.int16)))
+    assert np.array_equal(result.valid, want[0] != ref.INVALID)

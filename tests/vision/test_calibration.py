@@ -1,0 +1,147 @@
+"""Calibration: the rectified geometry it promises, its YAML file and its errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from cellctl.sim.rig import default_rig
+from cellctl.vision.calibration import REQUIRED_KEYS, Calibration
+
+
+@pytest.fixture(scope="module")
+def rig() -> Calibration:
+    return default_rig()
+
+
+def _scene_points() -> np.ndarray:
+    """Points spread over the table region in front of the rig, left camera frame, mm."""
+    xs, ys, zs = np.meshgrid(np.linspace(-150, 200, 6), np.linspace(-150, 150, 5), [450.0, 550.0, 650.0])
+    return np.stack([xs.ravel(), ys.ravel(), zs.ravel()], axis=1)
+
+
+def _project(points: np.ndarray, K: np.ndarray, D: np.ndarray, R: np.ndarray, T: np.ndarray) -> np.ndarray:
+    projected, _ = cv2.projectPoints(points, cv2.Rodrigues(R)[0], T, K, D)
+    return projected.reshape(-1, 2)
+
+
+def test_rectified_pair_has_equal_rows_positive_disparity_and_q_gives_millimetres(rig: Calibration) -> None:
+    points = _scene_points()
+    left = rig.rectify_points_left(_project(points, rig.K1, rig.D1, np.eye(3), np.zeros(3)))
+    right = rig.rectify_points_right(_project(points, rig.K2, rig.D2, rig.R, rig.T))
+    disparity = left[:, 0] - right[:, 0]
+    np.testing.assert_allclose(left[:, 1], right[:, 1], atol=1e-3)
+    assert np.all(disparity > 0)
+    homogeneous = rig.Q @ np.column_stack([left, disparity, np.ones(len(points))]).T
+    reconstructed = (homogeneous[:3] / homogeneous[3]).T
+    # Q gives the point in the rectified left camera frame, i.e. rotated by R1 from the raw left frame.
+    np.testing.assert_allclose(reconstructed, points @ rig.R1.T, atol=1e-3)
+
+
+def test_rectify_moves_image_content_where_rectify_points_says(rig: Calibration) -> None:
+    width, height = rig.image_size
+    raw = np.zeros((height, width), np.uint8)
+    spot = np.array([1000.0, 200.0])
+    cv2.circle(raw, (int(spot[0]), int(spot[1])), 6, 255, -1)
+    rectified, _ = rig.rectify(raw, raw)
+    moments = cv2.moments(rectified.astype(np.float32))
+    centroid = np.array([moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]])
+    np.testing.assert_allclose(centroid, rig.rectify_points_left(spot)[0], atol=0.1)
+
+
+def test_baseline_and_focal_length_of_the_simulated_rig(rig: Calibration) -> None:
+    assert rig.baseline_mm == pytest.approx(60.0)
+    assert rig.focal_px == pytest.approx(rig.P2[0, 0])
+    assert -rig.P2[0, 3] / rig.P2[0, 0] == pytest.approx(rig.baseline_mm)
+    # 300 mm of sole at the 550 mm working distance spans well over half the image width.
+    assert 0.5 < 300.0 * rig.focal_px / 550.0 / rig.image_size[0] < 0.75
+
+
+def test_save_then_load_gives_the_same_calibration(rig: Calibration, tmp_path: Path) -> None:
+    original = Calibration.from_extrinsics(rig.image_size, rig.K1, rig.D1, rig.K2, rig.D2, rig.R, rig.T, rms=0.123)
+    path = tmp_path / "calib.yaml"
+    original.save(path)
+    loaded = Calibration.load(path)
+    assert loaded.image_size == original.image_size
+    assert loaded.rms == pytest.approx(0.123)
+    for key in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q"):
+        np.testing.assert_array_equal(getattr(loaded, key), getattr(original, key), err_msg=key)
+
+
+def _write_keys(path: Path, rig: Calibration, keys: tuple[str, ...]) -> None:
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    values = {"image_width": rig.image_size[0], "image_height": rig.image_size[1]}
+    for key in keys:
+        storage.write(key, values[key] if key in values else getattr(rig, key))
+    storage.release()
+
+
+def test_file_with_only_the_eight_required_keys_loads_and_derives_the_rest(rig: Calibration, tmp_path: Path) -> None:
+    path = tmp_path / "minimal.yaml"
+    _write_keys(path, rig, REQUIRED_KEYS)
+    text = path.read_text()
+    assert "P1" not in text and "Q" not in text
+    loaded = Calibration.load(path)
+    assert loaded.rms is None
+    for key in ("R1", "R2", "P1", "P2", "Q"):
+        np.testing.assert_allclose(getattr(loaded, key), getattr(rig, key), atol=1e-9, err_msg=key)
+
+
+@pytest.mark.parametrize("missing", ["image_height", "D2", "T"])
+def test_file_missing_a_required_key_names_the_key_and_the_file(rig: Calibration, tmp_path: Path, missing: str) -> None:
+    path = tmp_path / "incomplete.yaml"
+    _write_keys(path, rig, tuple(key for key in REQUIRED_KEYS if key != missing))
+    with pytest.raises(ValueError) as error:
+        Calibration.load(path)
+    assert missing in str(error.value) and str(path) in str(error.value)
+
+
+def test_file_with_some_but_not_all_derived_keys_is_refused(rig: Calibration, tmp_path: Path) -> None:
+    path = tmp_path / "partial.yaml"
+    _write_keys(path, rig, (*REQUIRED_KEYS, "R1", "P1"))
+    with pytest.raises(ValueError, match=r"lacks R2, P2, Q"):
+        Calibration.load(path)
+
+
+def test_unreadable_and_absent_files_give_clear_errors(tmp_path: Path) -> None:
+    garbage = tmp_path / "garbage.yaml"
+    garbage.write_text("K1: [1, 2\n  - {\n")
+    with pytest.raises(ValueError, match="not valid OpenCV FileStorage YAML"):
+        Calibration.load(garbage)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        Calibration.load(tmp_path / "absent.yaml")
+
+
+def test_malformed_matrix_is_refused(rig: Calibration, tmp_path: Path) -> None:
+    path = tmp_path / "bad-k.yaml"
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    storage.write("image_width", 1280)
+    storage.write("image_height", 1024)
+    storage.write("K1", np.eye(2))
+    for key in ("D1", "K2", "D2", "R", "T"):
+        storage.write(key, getattr(rig, key))
+    storage.release()
+    with pytest.raises(ValueError, match=r"K1 must be 3x3"):
+        Calibration.load(path)
+
+
+def test_image_of_the_wrong_size_is_refused(rig: Calibration) -> None:
+    with pytest.raises(ValueError, match=r"image is 640x480 px but the calibration is for 1280x1024 px"):
+        rig.check_image(np.zeros((480, 640), np.uint8))
+    with pytest.raises(ValueError, match="640x480"):
+        rig.rectify(np.zeros((1024, 1280), np.uint8), np.zeros((480, 640, 3), np.uint8))
+
+
+def test_swapped_cameras_are_refused(rig: Calibration) -> None:
+    # Right camera 60 mm to the LEFT of the left one: disparities would be negative.
+    with pytest.raises(ValueError, match="swap the LEFT and RIGHT"):
+        Calibration.from_extrinsics(rig.image_size, rig.K1, rig.D1, rig.K2, rig.D2, np.eye(3), [60.0, 0.0, 0.0])
+
+
+def test_deployed_simulated_rig_file_is_the_default_rig(rig: Calibration) -> None:
+    deployed = Calibration.load(Path(__file__).resolve().parents[2] / "deploy" / "sim-calib.yaml")
+    for key in ("K1", "D1", "K2", "D2", "R", "T", "P1", "P2", "Q"):
+        np.testing.assert_allclose(getattr(deployed, key), getattr(rig, key), atol=1e-12, err_msg=key)

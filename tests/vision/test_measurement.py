@@ -1,0 +1,282 @@
+"""Sole reconstruction and measurement against simulated soles of known geometry (docs/measurements.md).
+
+Three levels: the measuring code on the simulator's true depth (no matcher: tests segmentation and
+measurement alone), end to end through the stereo matcher on white and black soles (the paper's 1.3 mm),
+and bad input that must give a clear error or an invalid result, never a number.
+The 20-sole accuracy table is `cellctl bench-sole`, not a test.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from cellctl.cli import main
+from cellctl.errors import FailureKind, MeasurementInputError
+from cellctl.sim.rig import default_rig
+from cellctl.sim.scene import SoleScene, true_cloud
+from cellctl.sim.sole import SoleModel, SolePose
+from cellctl.vision.measurement import SoleMeasurement, measure_sole
+from cellctl.vision.reconstruction import SoleReconstructor, StereoCloud
+
+TOLERANCE_MM = 1.3  # Wang et al. 2022, Table 4
+STEREO_SOLES = [(0, "white"), (3, "white"), (1, "black"), (5, "black")]
+
+
+@pytest.fixture(scope="module")
+def rig():  # noqa: ANN201
+    return default_rig()
+
+
+@pytest.fixture(scope="module")
+def reconstructor(rig) -> SoleReconstructor:  # noqa: ANN001
+    return SoleReconstructor(rig)
+
+
+@pytest.fixture(scope="module")
+def stereo_results(rig, reconstructor):  # noqa: ANN001, ANN201
+    results = []
+    for seed, colour in STEREO_SOLES:
+        scene = SoleScene.random(seed, colour, rig)
+        pair = scene.render()
+        reconstruction = reconstructor.reconstruct(pair.left, pair.right)
+        results.append((scene, pair, reconstruction, measure_sole(reconstruction)))
+    return results
+
+
+def errors(scene: SoleScene, result: SoleMeasurement) -> np.ndarray:
+    truth = scene.sole.truth()
+    assert result.valid, result.reason
+    return np.array(
+        [
+            result.length_mm - truth.length_mm,
+            result.heel_height_mm - truth.heel_height_mm,
+            result.toe_height_mm - truth.toe_height_mm,
+        ]
+    )
+
+
+# ---- on the true depth: segmentation and measurement alone ----------------------------------------------
+
+
+@pytest.mark.parametrize(("seed", "colour"), [(2, "white"), (6, "black")])
+def test_measurement_on_true_depth(rig, reconstructor, seed: int, colour: str) -> None:  # noqa: ANN001
+    scene = SoleScene.random(seed, colour, rig)
+    pair = scene.render()
+    reconstruction = reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left))
+    result = measure_sole(reconstruction)
+    length, heel, toe = errors(scene, result)
+    assert abs(length) < 0.5
+    assert abs(heel) < 0.05 and abs(toe) < 0.05
+    # The measured table frame really is the table: its z = 0 plane maps onto the true one.
+    transform = scene.table_from_measured(reconstruction.camera_to_table)
+    assert abs(transform[2, 3]) < 0.05 and transform[2, 2] == pytest.approx(1.0, abs=1e-4)
+
+
+# ---- end to end through the stereo matcher -------------------------------------------------------------
+
+
+def test_stereo_measurements_within_the_paper_tolerance(stereo_results) -> None:  # noqa: ANN001
+    table = np.array([errors(scene, result) for scene, _, _, result in stereo_results])
+    assert np.all(np.abs(table) < TOLERANCE_MM), table
+    # What the line aims for: heights within 0.5 mm, length within 1 mm.
+    assert np.all(np.abs(table[:, 1:]) < 0.5), table
+    assert np.all(np.abs(table[:, 0]) < 1.0), table
+
+
+def test_white_and_black_soles_use_the_colour_filter(stereo_results) -> None:  # noqa: ANN001
+    for scene, _, reconstruction, _ in stereo_results:
+        assert reconstruction.colour_filter, scene.color
+        assert reconstruction.sole_points[:, 2].min() > 2.9  # nothing of the table is left in the sole's cloud
+
+
+def test_glue_path_follows_the_edge_on_the_surface(stereo_results) -> None:  # noqa: ANN001
+    scene, _, reconstruction, result = stereo_results[0]
+    path = result.glue_path
+    assert path.closed and len(path.points) > 200
+    steps = np.linalg.norm(np.diff(np.vstack([path.points, path.points[:1]])[:, :2], axis=0), axis=1)
+    assert np.allclose(steps, 2.0, atol=0.1)
+    # Counter-clockwise seen from the cameras, starting at the heel end.
+    xy = path.points[:, :2]
+    assert 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) > 0
+    assert np.argmin(xy @ result.axis) == 0
+    # In the simulator's frame: 2 mm inside the true outline, on the true top surface, with its normal.
+    transform = scene.table_from_measured(reconstruction.camera_to_table)
+    true_xyz = path.points @ transform[:3, :3].T + transform[:3, 3]
+    outline = scene.sole.outline_table(4000).astype(np.float32).reshape(-1, 1, 2)
+    inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in true_xyz[:, :2]])
+    assert np.all(np.abs(inset - 2.0) < 0.6), (inset.min(), inset.max())
+    height_error = true_xyz[:, 2] - scene.sole.top_height_at(true_xyz[:, :2])
+    assert np.percentile(np.abs(height_error), 95) < 0.6 and np.abs(height_error).max() < 1.0
+    angles = np.degrees(
+        np.arccos(
+            np.clip(
+                np.sum(path.normals @ transform[:3, :3].T * scene.sole.top_normal_at(true_xyz[:, :2]), axis=1), -1, 1
+            )
+        )
+    )
+    assert np.median(angles) < 3.0 and angles.max() < 8.0, (np.median(angles), angles.max())
+
+
+# ---- bad input -----------------------------------------------------------------------------------------
+
+
+def test_no_sole_in_view(rig, reconstructor) -> None:  # noqa: ANN001
+    empty = dataclasses.replace(SoleScene.random(0, "white", rig), sole=None)
+    pair = empty.render()
+    result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
+    assert not result.valid and "no sole in view" in result.reason
+    assert result.failure is FailureKind.NO_SOLE
+    assert result.length_mm is None and result.heel_height_mm is None and result.glue_path is None
+
+
+def test_sole_cut_by_the_image_border(rig, reconstructor) -> None:  # noqa: ANN001
+    scene = SoleScene.random(0, "white", rig)
+    # Slide the sole towards -x until its end leaves the left camera's image.
+    pose = scene.sole.pose
+    cut = dataclasses.replace(
+        scene, sole=SoleModel(scene.sole.shape, SolePose(pose.x - 170.0, pose.y, 0.0, pose.mirrored))
+    )
+    assert not cut.in_view(0)
+    pair = cut.render()
+    result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
+    assert not result.valid and "cut by the image border" in result.reason
+    assert result.failure is FailureKind.SOLE_AT_BORDER
+    assert result.length_mm is None
+
+
+def test_calibration_not_matching_the_images(reconstructor, stereo_results) -> None:  # noqa: ANN001
+    _, pair, _, _ = stereo_results[0]
+    half = cv2.resize(pair.left, (640, 512)), cv2.resize(pair.right, (640, 512))
+    with pytest.raises(MeasurementInputError, match="calibrat") as error:
+        reconstructor.reconstruct(*half)
+    assert error.value.kind is FailureKind.CALIBRATION_MISMATCH
+    assert isinstance(error.value, ValueError)  # an error of the call, as the CLI reports bad input
+
+
+def test_sole_coloured_like_the_table_is_not_measured(rig, reconstructor, stereo_results) -> None:  # noqa: ANN001
+    # Without a colour edge the matcher's halo would make the sole mm too long: refuse, do not guess.
+    _, pair, _, _ = stereo_results[0]
+    rng = np.random.default_rng(0)
+    grey = np.clip(40 + 4 * rng.standard_normal(pair.left.shape[:2]), 0, 255).astype(np.uint8)
+    result = measure_sole(reconstructor.segment(true_cloud(rig, pair.depth_left, cv2.merge([grey] * 3))))
+    assert not result.valid and "colours too similar" in result.reason
+    assert result.failure is FailureKind.COLOURS_TOO_SIMILAR
+    assert result.length_mm is None
+
+
+def test_no_table_plane(rig, reconstructor) -> None:  # noqa: ANN001
+    # Enough measured points, but scattered through the working volume: nothing is a plane.
+    width, height = rig.image_size
+    count = width * height // 4
+    rng = np.random.default_rng(0)
+    points = rng.uniform([-200.0, -150.0, 450.0], [200.0, 150.0, 650.0], size=(count, 3))
+    cloud = StereoCloud(points, np.zeros((count, 3), np.float32), np.zeros((count, 2)), np.ones(count), rig.image_size)
+    result = measure_sole(reconstructor.segment(cloud))
+    assert not result.valid and "no table plane" in result.reason
+    assert result.failure is FailureKind.NO_TABLE
+
+
+def test_no_surface_measured_at_the_heel_point(rig, reconstructor) -> None:  # noqa: ANN001
+    scene = SoleScene.random(2, "white", rig)
+    pair = scene.render()
+    reconstruction = reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left))
+    heel = measure_sole(reconstruction).heel_point
+    # The same footprint, but no measured points around the heel point (a glossy spot, say).
+    far = np.linalg.norm(reconstruction.sole_points[:, :2] - heel[:2], axis=1) > 15.0
+    holed = dataclasses.replace(reconstruction, sole_points=reconstruction.sole_points[far])
+    result = measure_sole(holed)
+    assert not result.valid and "no measured surface at the heel point" in result.reason
+    assert result.failure is FailureKind.SURFACE_NOT_MEASURED and result.heel_height_mm is None
+
+
+def test_too_few_measured_points(rig, reconstructor) -> None:  # noqa: ANN001
+    width, height = rig.image_size
+    blank = np.full((height, width, 3), 40, np.uint8)  # a covered lens: nothing to match
+    result = measure_sole(reconstructor.reconstruct(blank, blank.copy()))
+    assert not result.valid and "too few measured points" in result.reason
+    assert result.failure is FailureKind.TOO_FEW_POINTS
+
+
+def test_toe_and_heel_too_close_to_call(rig, reconstructor) -> None:  # noqa: ANN001
+    scene = SoleScene.random(2, "white", rig)
+    shape = scene.sole.shape
+    # A sole as wide at the heel as at the ball, with no arch and the same round ends: symmetric.
+    symmetric = dataclasses.replace(
+        shape,
+        heel_half_width=shape.ball_half_width,
+        medial_arch=0.0,
+        lateral_arch=0.0,
+        heel_cap=shape.toe_cap,
+        toe_shift=0.0,
+    )
+    scene = dataclasses.replace(scene, sole=SoleModel(symmetric, scene.sole.pose))
+    assert abs(scene.sole.truth().half_area_difference) < 0.01
+    pair = scene.render()
+    result = measure_sole(reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left)))
+    assert not result.valid and "too close to call" in result.reason
+    assert result.failure is FailureKind.ENDS_TOO_CLOSE_TO_CALL
+    assert result.heel_height_mm is None and result.toe_height_mm is None
+
+
+# ---- the command ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("bound", "limits", "named"),
+    [
+        ("PLAUSIBLE_LENGTH_MM", (100.0, 200.0), "sole length"),  # the simulated soles are 240-300 mm
+        ("PLAUSIBLE_HEIGHT_MM", (0.5, 5.0), "heel height"),
+    ],
+)
+def test_implausible_results_are_refused_not_reported(
+    stereo_results,
+    monkeypatch: pytest.MonkeyPatch,  # noqa: ANN001
+    bound: str,
+    limits: tuple[float, float],
+    named: str,
+) -> None:
+    import cellctl.vision.measurement as measurement
+
+    reconstruction = stereo_results[0][2]
+    assert measure_sole(reconstruction).valid
+    monkeypatch.setattr(measurement, bound, limits)
+    result = measure_sole(reconstruction)
+    assert not result.valid and result.failure is FailureKind.MEASUREMENT_INVALID
+    assert named in result.reason and result.length_mm is None and result.glue_path is None
+
+
+def test_measure_command_json(tmp_path: Path, stereo_results, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001
+    scene, pair, _, expected = stereo_results[2]
+    scene.write(tmp_path, pair)
+    args = ["measure", "--calib", str(tmp_path / "calib.yaml"), str(tmp_path / "left.png"), str(tmp_path / "right.png")]
+    code = main([*args, "--json", "--ply", str(tmp_path / "sole.ply"), "--png", str(tmp_path / "overlay.png")])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"length_mm", "heel_height_mm", "toe_height_mm", "glue_path", "points", "valid"} <= out.keys()
+    assert out["valid"] is True and out["failure"] is None
+    # Same images, same numbers up to Open3D's parallel RANSAC and outlier removal, which are not bit-exact.
+    assert out["length_mm"] == pytest.approx(expected.length_mm, abs=0.1)
+    assert abs(len(out["glue_path"]) - len(expected.glue_path.points)) <= 1 and len(out["glue_path"][0]) == 3
+    assert (tmp_path / "sole.ply").stat().st_size > 100_000
+    overlay = cv2.imread(str(tmp_path / "overlay.png"))
+    assert overlay.shape[0] == 1024 and overlay.shape[1] > 1280  # the left image plus the top view
+
+
+def test_measure_command_bad_input(tmp_path: Path, stereo_results, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001
+    scene, pair, _, _ = stereo_results[0]
+    scene.write(tmp_path, pair)
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), cv2.resize(pair.left, (640, 512)))
+    calib = str(tmp_path / "calib.yaml")
+    assert main(["measure", "--calib", calib, str(small), str(tmp_path / "right.png")]) == 2
+    assert "calibrat" in capsys.readouterr().err
+    (tmp_path / "broken.png").write_bytes(b"not an image")
+    assert main(["measure", "--calib", calib, str(tmp_path / "broken.png"), str(tmp_path / "right.png")]) == 2
+    assert "cannot be read" in capsys.readouterr().err
+    assert main(["measure", "--calib", str(tmp_path / "missing.yaml"), str(small), str(small)]) == 2
