@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision.checks import CheckFailure, check_glue_path, check_outline_depth, check_outline_right
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
@@ -34,6 +35,7 @@ GLUE_OFFSET_MM = 2.0
 GLUE_SPACING_MM = 2.0
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
+GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
 GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
 OUTLINE_SMOOTHING_MM = 2.0  # Gaussian along the outline: removes the raster's staircase, keeps the shape
 
@@ -45,6 +47,10 @@ class GluePath:
     points: np.ndarray  # N x 3, mm
     normals: np.ndarray  # N x 3, unit, nz > 0
     closed: bool = True
+    # What the path was made from, for its self-check (cellctl.vision.checks): per point, the height of the
+    # surface patch before smoothing along the path, and the patches' own normals smoothed along it.
+    raw_z: np.ndarray | None = None
+    surface_normals: np.ndarray | None = None
 
     @property
     def length_mm(self) -> float:
@@ -130,6 +136,9 @@ def measure_sole(
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
         )
+    problem = _outline_problem(reconstruction, outline)
+    if problem is not None:
+        return _invalid(problem.kind, problem.reason, **base)
     heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
     toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
     surface = SoleSurface(reconstruction)
@@ -151,11 +160,51 @@ def measure_sole(
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, problem or "no glue path", **base)
+    sole_z = np.quantile(points[:, 2], [0.01, 0.99])
+    problem = check_glue_path(
+        path.points,
+        path.normals,
+        path.raw_z,
+        path.surface_normals,
+        (float(sole_z[0]), float(sole_z[1])),
+        glue_spacing_mm,
+    )
+    if problem is not None:
+        return _invalid(problem.kind, problem.reason, **base)
     implausible = _implausible(length, heel_z, toe_z)
     if implausible:
         return _invalid(FailureKind.MEASUREMENT_INVALID, implausible, **base)
     return SoleMeasurement(
         length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, valid=True, **base
+    )
+
+
+def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> CheckFailure | None:
+    """The outline's self-checks: against the depth step, and against the right image when a table is taught."""
+    ring = _resample_closed(outline, 1.0)
+    outward = _outward_normals(ring)
+    if reconstruction.raised is not None and reconstruction.measured_cells is not None:
+        problem = check_outline_depth(ring, outward, reconstruction.raised, reconstruction.measured_cells)
+        if problem is not None:
+            return problem
+    changed_right, calib = reconstruction.changed_right, reconstruction.calibration
+    if changed_right is None or calib is None or reconstruction.camera_to_table is None:
+        return None
+    to_camera = np.linalg.inv(reconstruction.camera_to_table)
+    f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
+
+    def right_pixel(table: np.ndarray) -> np.ndarray:
+        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
+        return np.column_stack(
+            [f * (camera[:, 0] - baseline) / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy]
+        )
+
+    centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
+    edge_height = SoleSurface(reconstruction).coarse_heights(ring - 3.0 * outward, 3.0)
+    edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
+    assert reconstruction.footprint is not None
+    return check_outline_right(
+        ring, outward, edge_height, changed_right, right_pixel, centre[:3], reconstruction.footprint
     )
 
 
@@ -225,11 +274,29 @@ def glue_path(
     # Neighbouring patches overlap but their noise does not all average out; the surface is smooth along
     # the path, so a Gaussian along the arc takes the rest (its bias, z'' sigma^2 / 2, is ~0.01 mm here).
     sigma = GLUE_SMOOTHING_MM / spacing_mm
-    z = _smooth_along(samples.z[: len(path_xy)], sigma)
-    inner = samples.z[len(path_xy) :]
-    inner = np.where(np.isfinite(inner), inner, samples.z[: len(path_xy)])  # no inner sample: flat across
+    raw = _without_single_outliers(samples.z[: len(path_xy)])
+    z = _smooth_along(raw, sigma)
+    inner = _without_single_outliers(samples.z[len(path_xy) :])
+    inner = np.where(np.isfinite(inner), inner, raw)  # no inner sample: flat across
     across = _smooth_along(inner, sigma) - z
-    return GluePath(np.column_stack([path_xy, z]), _path_normals(path_xy, z, path_inward, across), closed=True), None
+    patch_normals = _smooth_along(samples.normals[: len(path_xy)], sigma)
+    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
+    normals = _path_normals(path_xy, z, path_inward, across)
+    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+
+
+def _without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -> np.ndarray:
+    """Heights along a closed path with isolated bad patch fits replaced by their neighbours' median.
+
+    One patch fit can fail (a highlight, a mismatch) and smoothing would spread it over its neighbours;
+    a lone value that departs from the median of the five around it is replaced. Two or more in a row are
+    kept: that is the surface, or a fault the self-check must see (cellctl.vision.checks).
+    """
+    window = np.stack([np.roll(z, k) for k in (-2, -1, 0, 1, 2)])
+    median = np.nanmedian(window, axis=0)
+    bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
+    lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
+    return np.where(lone, median, z)
 
 
 def _path_normals(path_xy: np.ndarray, z: np.ndarray, inward: np.ndarray, across_rise: np.ndarray) -> np.ndarray:

@@ -62,6 +62,11 @@ class Reconstruction:
     calibration: Calibration | None = None
     rectified: tuple[np.ndarray, np.ndarray] | None = None  # grey float32 rectified pair
     sole_mask: np.ndarray | None = None  # bool, rectified left pixels on the sole (off its very edge)
+    # The depth step on the footprint's raster, for the outline's self-check (cellctl.vision.checks):
+    raised: Footprint | None = None  # cells where most measured points rise above the table
+    measured_cells: Footprint | None = None  # cells with any measured point
+    taught: TaughtTable | None = None  # the taught table the sole was found against, if any
+    changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
 
     @property
     def valid(self) -> bool:
@@ -97,6 +102,9 @@ class Segmentation:
         self.transform: np.ndarray | None = None
         self.colour_filter = False
         self.separation = 0.0
+        self.raised: Footprint | None = None  # cells where most measured points rise above the table
+        self.measured_cells: Footprint | None = None  # cells with any measured point
+        self.changed_right: np.ndarray | None = None
 
     def run(self) -> Reconstruction:
         if self.fraction < MIN_VALID_FRACTION:
@@ -147,6 +155,12 @@ class Segmentation:
         footprint = _footprint(raster, every, xy[high])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, no_sole)
+        high_counts = raster.counts(xy[high])
+        # The raster is finer than the pixels: cells between measured ones are filled from their neighbours.
+        self.raised = Footprint(
+            ((high_counts > 0) & (2 * high_counts >= every)).astype(np.uint8), raster.origin, raster.cell_mm
+        ).morphology(close_mm=1.5, open_mm=0.0)
+        self.measured_cells = Footprint((every > 0).astype(np.uint8), raster.origin, raster.cell_mm).dilated(0.75)
         if self.taught is not None:
             changed = self._change_filter(points, footprint, high)
             if changed is None:
@@ -220,6 +234,13 @@ class Segmentation:
         if test is None:
             return None
         changed = test.changed(current, reference)
+        # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
+        right_table = self.cloud.pixels[outside] - np.column_stack(
+            [self.cloud.disparity[outside], np.zeros(len(outside))]
+        )
+        right_test = ChangeTest.fit(self.cloud.rectified[1], self.taught.right, np.round(right_table).astype(np.int64))
+        if right_test is not None:
+            self.changed_right = right_test.changed(self.cloud.rectified[1], self.taught.right)
         x, y = np.round(self.cloud.pixels[high]).astype(np.int64).T
         return changed[y, x]
 
@@ -288,6 +309,10 @@ class Segmentation:
             failure=failure,
             timings=self.timings,
             calibration=self.cloud.calibration,
+            raised=self.raised,
+            measured_cells=self.measured_cells,
+            taught=self.taught,
+            changed_right=self.changed_right,
             **sole,
         )
 
