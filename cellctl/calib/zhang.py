@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from cellctl.images import grey
 from cellctl.vision.calibration import Calibration
 
 IMAGE_EXTENSIONS: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -166,7 +167,7 @@ def find_pairs(directory: str | os.PathLike[str]) -> list[PairFiles]:
 
 def find_corners(image: np.ndarray, board: Checkerboard) -> np.ndarray | None:
     """Sub-pixel inner corners of `board` in `image` (N x 2, canonical order), or None if not all found."""
-    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+    gray = grey(image)
     # No CALIB_CB_NORMALIZE_IMAGE: the adaptive threshold already copes with uneven light, and with
     # normalisation a 1280x1024 image without a complete board takes seconds to give up on instead of 0.3 s.
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_FAST_CHECK
