@@ -206,7 +206,7 @@ def _distortion(value: np.ndarray, name: str) -> np.ndarray:
 def _rotation(value: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(value, dtype=np.float64)
     if arr.size == 3:  # a Rodrigues vector, as some tools store it
-        arr = cv2.Rodrigues(arr.reshape(3, 1))[0]
+        arr = np.asarray(cv2.Rodrigues(arr.reshape(3, 1))[0], dtype=np.float64)
     arr = _matrix(arr, (3, 3), name)
     if not np.allclose(arr @ arr.T, np.eye(3), atol=1e-6) or np.linalg.det(arr) <= 0:
         raise ValueError(f"{name} is not a rotation matrix")

@@ -68,7 +68,7 @@ def vertical_disparity(left: np.ndarray, right: np.ndarray) -> VerticalDisparity
     scenes such as a checkerboard: a plane leaves the fundamental matrix undetermined, and RANSAC then
     accepts matches one square off.
     """
-    sift = cv2.SIFT_create(nfeatures=4000)
+    sift = cv2.SIFT_create(nfeatures=4000)  # type: ignore[attr-defined]  # in OpenCV's main module since 4.4, not in its stubs
     kp_left, desc_left = sift.detectAndCompute(grey(left), None)
     kp_right, desc_right = sift.detectAndCompute(grey(right), None)
     if desc_left is None or desc_right is None or len(kp_left) < MIN_MATCHES or len(kp_right) < MIN_MATCHES:
@@ -77,8 +77,8 @@ def vertical_disparity(left: np.ndarray, right: np.ndarray) -> VerticalDisparity
     good = [m[0] for m in pairs if len(m) == 2 and m[0].distance < 0.75 * m[1].distance]
     if len(good) < MIN_MATCHES:
         raise ValueError(_too_few(len(good), "matches"))
-    pts_left = np.float64([kp_left[m.queryIdx].pt for m in good])
-    pts_right = np.float64([kp_right[m.trainIdx].pt for m in good])
+    pts_left = np.array([kp_left[m.queryIdx].pt for m in good], dtype=np.float64)
+    pts_right = np.array([kp_right[m.trainIdx].pt for m in good], dtype=np.float64)
     _, inliers = cv2.findFundamentalMat(pts_left, pts_right, cv2.FM_RANSAC, 1.0, 0.999)
     if inliers is None or int(inliers.sum()) < MIN_MATCHES:
         raise ValueError(_too_few(0 if inliers is None else int(inliers.sum()), "consistent matches"))
