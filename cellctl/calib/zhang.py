@@ -218,18 +218,19 @@ def detect_views(pairs: Sequence[PairFiles], board: Checkerboard) -> list[BoardV
 
 def _detect_view(pair: PairFiles, board: Checkerboard) -> BoardView:
     images: dict[str, np.ndarray] = {}
+    names: dict[str, str] = {}
     for side, path in (("left", pair.left), ("right", pair.right)):
         if path is None:
             return BoardView(pair.name, None, None, problem=f"{side}_{pair.name} image missing")
         image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
         if image is None:
             return BoardView(pair.name, None, None, problem=f"cannot read {path.name}")
-        images[side] = image
+        images[side], names[side] = image, path.name
     left, right = images["left"], images["right"]
     size = (left.shape[1], left.shape[0])
     if left.shape != right.shape:
         raise ValueError(
-            f"{pair.left.name} is {left.shape[1]}x{left.shape[0]} px but {pair.right.name} is "
+            f"{names['left']} is {left.shape[1]}x{left.shape[0]} px but {names['right']} is "
             f"{right.shape[1]}x{right.shape[0]} px: both cameras must capture at the same resolution"
         )
     corners = {side: find_corners(image, board) for side, image in images.items()}
@@ -284,15 +285,16 @@ def calibrate_views(
 
 def _calibrate(views: Sequence[BoardView], board: Checkerboard, fit_k3: bool) -> tuple[Calibration, np.ndarray]:
     """One calibration round: each camera alone for a start, then both jointly. Returns per-pair errors."""
-    size = views[0].image_size
+    size = _image_size(views[0])
     objects = [board.object_points()] * len(views)
-    lefts = [view.left.reshape(-1, 1, 2) for view in views]
-    rights = [view.right.reshape(-1, 1, 2) for view in views]
+    lefts = [_corners(view.left, view).reshape(-1, 1, 2) for view in views]
+    rights = [_corners(view.right, view).reshape(-1, 1, 2) for view in views]
     # k3 mostly fits noise for the mild distortion of machine-vision lenses, and makes k1/k2 unstable.
     flags = 0 if fit_k3 else cv2.CALIB_FIX_K3
     _, K1, D1, _, _ = cv2.calibrateCamera(objects, lefts, size, None, None, flags=flags, criteria=_CALIB_CRITERIA)
     _, K2, D2, _, _ = cv2.calibrateCamera(objects, rights, size, None, None, flags=flags, criteria=_CALIB_CRITERIA)
-    rms, K1, D1, K2, D2, R, T, _, _, _, _, per_view = cv2.stereoCalibrateExtended(
+    # R and T are outputs: None lets OpenCV allocate them (its stubs type them as required inputs).
+    rms, K1, D1, K2, D2, R, T, _, _, _, _, per_view = cv2.stereoCalibrateExtended(  # type: ignore[call-overload]
         objects, lefts, rights, K1, D1, K2, D2, size, None, None,
         flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS, criteria=_CALIB_CRITERIA,
     )  # fmt: skip
@@ -303,6 +305,18 @@ def _calibrate(views: Sequence[BoardView], board: Checkerboard, fit_k3: bool) ->
     except ValueError as exc:
         raise ValueError(f"{exc} (the calibration found the right camera on the left)") from None
     return calibration, errors
+
+
+def _image_size(view: BoardView) -> tuple[int, int]:
+    if view.image_size is None:
+        raise ValueError(f"pair {view.name} has no image size: it was not read")
+    return view.image_size
+
+
+def _corners(corners: np.ndarray | None, view: BoardView) -> np.ndarray:
+    if corners is None:
+        raise ValueError(f"pair {view.name} has no corners: {view.problem}")
+    return corners
 
 
 def _threshold(errors: np.ndarray) -> float:
