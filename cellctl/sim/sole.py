@@ -108,6 +108,12 @@ class SoleShape:
         cap = np.sqrt(np.clip(1.0 - (1.0 - heel) ** 2, 0.0, 1.0)) * np.sqrt(np.clip(1.0 - (1.0 - toe) ** 2, 0.0, 1.0))
         return profile * cap
 
+    def edge_distance_estimate(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """How far (u, v) lies inside the outline across the sole: cheap, for colour bands, not for truth."""
+        offset = np.asarray(v) - self.centre_line(u)
+        half = np.where(offset >= 0, self.half_width(u, True), self.half_width(u, False))
+        return half - np.abs(offset)
+
     def u_samples(self, n: int) -> np.ndarray:
         """n values of u from heel tip to toe tip, dense near the tips where the outline turns fastest."""
         return self.length * 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n)))
@@ -204,6 +210,10 @@ class SoleModel:
         """The footprint outline in the table frame (N x 2), counter-clockwise seen from above."""
         xy = self.pose.to_table(self.shape.outline(n), self.shape.length)
         return xy[::-1] if self.pose.mirrored else xy  # mirroring flips the winding
+
+    def footprint_table(self, n: int = TRUTH_OUTLINE_SAMPLES) -> np.ndarray:
+        """The footprint as docs/measurements.md defines it (table frame, counter-clockwise): the outline."""
+        return self.outline_table(n)
 
     def top_height_at(self, xy: np.ndarray) -> np.ndarray:
         """Top-surface height at table points (N x 2); meaningful inside the footprint only."""
