@@ -29,7 +29,7 @@ RIG_HEIGHT_MM = 550.0  # rig (baseline mid-point) above the table
 RIG_TILT_DEG = (2.0, -1.0)  # a rig is never mounted perfectly level: about its x and y axes
 
 TABLE_GEOMETRY, SOLE_GEOMETRY = 0, 1
-PART_TOP, PART_WALL, PART_UNDERSIDE = 0, 1, 2
+PART_TOP, PART_WALL, PART_UNDERSIDE, PART_EDGE = 0, 1, 2, 3  # PART_EDGE: top surface within the edge profile
 
 
 AMBIENT = 0.35
@@ -214,12 +214,12 @@ class SceneRenderer:
         uv = pose.to_sole(hits["points"][sole, :2], shape.length)
         z = hits["points"][sole, 2]
         part = hits["part"][sole]
-        # Smooth analytic normals on the top surface; the walls and underside are flat facets.
-        top_normals = self.sole.top_normal_at(hits["points"][sole, :2])
+        # Smooth analytic normals on the top surface; the walls, underside and edge profile are fine facets.
+        top_normals = self.sole.interior_normal_at(hits["points"][sole, :2])
         facet = hits["facet_normals"][sole]
         normals[sole] = np.where((part == 0)[:, None], top_normals, facet)
         # Walls take the texture at (u, v + z) so that it varies down the wall too.
-        tex_v = np.where(part == 0, uv[:, 1], uv[:, 1] + z)
+        tex_v = np.where((part == PART_TOP) | (part == PART_EDGE), uv[:, 1], uv[:, 1] + z)
         texture[sole] = self._sole_texture.sample(uv[:, 0], tex_v)
         return self._colours.albedo(shape, uv, part == PART_WALL)
 

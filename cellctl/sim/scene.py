@@ -54,7 +54,7 @@ class SoleScene:
 
             calib = rig_for(look.rig)
         rng = np.random.default_rng(seed)
-        shape = SoleShape.random(rng)
+        shape = SoleShape.random(rng, look)
         camera_pose = rig_pose(calib)
         for _ in range(PLACEMENT_ATTEMPTS):
             yaw = rng.uniform(-35.0, 35.0) + (180.0 if rng.random() < 0.5 else 0.0)
