@@ -18,6 +18,9 @@ CHANGE_SIGMAS = 4.0  # gain fit: residuals beyond this many sigmas are not table
 PIXEL_SIGMAS = 3.0  # a pixel is changed beyond this many sigmas (0.3 % false flags, removed by the majority)
 MIN_TABLE_PIXELS = 2000  # table pixels needed to estimate the gain and the noise
 CONTRAST_WINDOW_PX = 11  # local contrast of the change: ~4 mm, narrower than a sole's rim or logo
+NCC_WINDOW_PX = 7
+MIN_TABLE_NCC = 0.6  # table under a shadow correlates with its reference well above this; a sole near 0 +- 0.15
+TEXTURE_SIGMAS = 2.0  # the reference has texture where its local spread exceeds this many residual sigmas
 NOISE_FLOOR_DN = 0.5  # a quantised 8-bit image never has less residual noise than this
 
 
@@ -69,4 +72,23 @@ class ChangeTest:
         window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
         contrast = cv2.blur(magnitude * clear, window) / np.maximum(cv2.blur(clear, window), 1e-6)
         raw = (magnitude > np.maximum(floor, 0.5 * contrast)).astype(np.uint8)
+        raw[self._still_table(current, reference)] = 0
         return cv2.medianBlur(raw, 3) > 0
+
+    def _still_table(self, current: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        """Pixels whose surroundings still show the table's own texture, only darker or lighter (a shadow).
+
+        Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
+        brightness; every window that covers the pixel must correlate (a minimum filter), so a sole pixel
+        next to the table, whose window centred further inside does not correlate, is never vetoed: the
+        edge stays where the per-pixel test put it. Only where the reference has texture to compare.
+        """
+        window = (NCC_WINDOW_PX, NCC_WINDOW_PX)
+        cur, ref = current.astype(np.float32), reference.astype(np.float32)
+        mean_c, mean_r = cv2.blur(cur, window), cv2.blur(ref, window)
+        var_c = cv2.blur(cur * cur, window) - mean_c * mean_c
+        var_r = cv2.blur(ref * ref, window) - mean_r * mean_r
+        ncc = (cv2.blur(cur * ref, window) - mean_c * mean_r) / np.sqrt(np.maximum(var_c * var_r, 1e-6))
+        textured = var_r > (TEXTURE_SIGMAS * self.sigma) ** 2
+        score = np.where(textured, ncc, -1.0).astype(np.float32)
+        return cv2.erode(score, np.ones(window, np.uint8)) > MIN_TABLE_NCC

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -32,8 +33,11 @@ MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fractio
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
+GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: Gaussian over arc length
 GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
-OUTLINE_SMOOTHING_MM = 2.0  # Gaussian along the outline: removes the raster's staircase, keeps the shape
+# Gaussian along the outline: removes the raster's staircase (0.25 mm cells) and pixel noise; wider would cut
+# the tip of a pointed toe (a 2 mm sigma takes ~1 mm off a 35 degree wedge).
+OUTLINE_SMOOTHING_MM = 0.75
 
 
 @dataclass
@@ -109,7 +113,8 @@ def measure_sole(
         raise ValueError(f"glue offset must be >= 0 and spacing > 0 mm, got {glue_offset_mm:g} and {glue_spacing_mm:g}")
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
-    base = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)
+    # What every result carries, valid or not; grows as the measurement learns more about the sole.
+    base: dict[str, Any] = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)
     if not reconstruction.valid or reconstruction.footprint is None:
         return _invalid(
             reconstruction.failure or FailureKind.NO_SOLE, reconstruction.reason or "no sole reconstructed", **base
@@ -152,18 +157,15 @@ def measure_sole(
     heel_point, toe_point = np.array([*heel_xy, heel_z]), np.array([*toe_xy, toe_z])
     base.update(heel_point=heel_point, toe_point=toe_point)
     start = time.perf_counter()
-    path, problem = glue_path(surface, outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
+    path, missing = glue_path(surface, outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
-        return _invalid(FailureKind.SURFACE_NOT_MEASURED, problem or "no glue path", **base)
+        return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
     sole_z = np.quantile(points[:, 2], [0.01, 0.99])
+    raw_z = path.points[:, 2] if path.raw_z is None else path.raw_z
+    patch_normals = path.normals if path.surface_normals is None else path.surface_normals
     problem = check_glue_path(
-        path.points,
-        path.normals,
-        path.raw_z,
-        path.surface_normals,
-        (float(sole_z[0]), float(sole_z[1])),
-        glue_spacing_mm,
+        path.points, path.normals, raw_z, patch_normals, (float(sole_z[0]), float(sole_z[1])), glue_spacing_mm
     )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
@@ -216,7 +218,7 @@ def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
     return None
 
 
-def _invalid(failure: FailureKind, reason: str, **fields_: object) -> SoleMeasurement:
+def _invalid(failure: FailureKind, reason: str, **fields_: Any) -> SoleMeasurement:
     return SoleMeasurement(None, None, None, None, valid=False, reason=reason, failure=failure, **fields_)
 
 
@@ -274,10 +276,13 @@ def glue_path(
     z = _smooth_along(raw, sigma)
     inner = _without_single_outliers(samples.z[len(path_xy) :])
     inner = np.where(np.isfinite(inner), inner, raw)  # no inner sample: flat across
-    across = _smooth_along(inner, sigma) - z
+    # The normal turns slowly along a sole's edge but its slopes are differences of noisy heights: they are
+    # smoothed over a longer stretch than the heights themselves.
+    wide = GLUE_NORMAL_SMOOTHING_MM / spacing_mm
+    across = _smooth_along(inner - raw, wide)
     patch_normals = _smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    normals = _path_normals(path_xy, z, path_inward, across)
+    normals = _path_normals(path_xy, _smooth_along(raw, wide), path_inward, across)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
 
 

@@ -39,6 +39,8 @@ MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles
 BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
 FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is not quantised to a coarse grid
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
+FOOTPRINT_OPEN_MM = 1.0  # specks thinner than this go; a pointed toe's tip (radius >= 0.5 mm) stays
+EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 
 
@@ -168,7 +170,7 @@ class Segmentation:
                     FailureKind.TABLE_MOVED,
                     "too little of the taught table is visible around the sole to compare with: clear the table",
                 )
-            keep = high[changed]
+            keep = changed
         else:
             keep = high[self._colour_filter(points, footprint, high)]
         if self.taught is None and not self.colour_filter:
@@ -182,7 +184,7 @@ class Segmentation:
         footprint = _footprint(raster, every, xy[keep])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour")
-        index = keep[footprint.contains(xy[keep])]
+        index = keep[footprint.contains(xy[keep]) & (z[keep] > self.min_height)]  # the foot of a wall: outline only
         self.timings["background"] = time.perf_counter() - start
         start = time.perf_counter()
         index = self._without_outliers(index, points)
@@ -217,14 +219,16 @@ class Segmentation:
         mask = np.zeros((height, width), np.uint8)
         x, y = np.round(self.cloud.pixels[index]).astype(int).T
         mask[y, x] = 1
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-        return cv2.erode(mask, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
+        closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+        return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
 
     def _change_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray | None:
-        """Which of the `high` points (indices) show something else than the taught table (cellctl.vision.change).
+        """The sole's points (indices): changed against the taught table (cellctl.vision.change), and either
+        high or within EDGE_BAND_MM of the raised footprint; None if the table around is not seen.
 
-        High AND changed: stereo edge fattening drags the sole's height onto table pixels next to it, but
-        those pixels still show the table's own texture, so they are unchanged against the reference.
+        Stereo edge fattening drags the sole's height onto table pixels next to it, but those pixels still
+        show the table's own texture: unchanged, so dropped. The foot of a wall that leans out lies lower
+        than MIN_HEIGHT_MM but has changed: kept, so the outline is the footprint on the table.
         """
         assert self.taught is not None and self.cloud.rectified is not None
         current, reference = self.cloud.rectified[0], self.taught.left
@@ -241,8 +245,11 @@ class Segmentation:
         right_test = ChangeTest.fit(self.cloud.rectified[1], self.taught.right, np.round(right_table).astype(np.int64))
         if right_test is not None:
             self.changed_right = right_test.changed(self.cloud.rectified[1], self.taught.right)
-        x, y = np.round(self.cloud.pixels[high]).astype(np.int64).T
-        return changed[y, x]
+        near = np.flatnonzero((points[:, 2] > -TABLE_INLIER_MM) & (points[:, 2] <= self.min_height))
+        near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
+        candidates = np.concatenate([high, near])
+        x, y = np.round(self.cloud.pixels[candidates]).astype(np.int64).T
+        return np.sort(candidates[changed[y, x]])
 
     def _colour_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray:
         """Which of the `high` points (indices) are sole-coloured (all when the colours do not separate).
@@ -323,4 +330,8 @@ def _footprint(raster: Footprint, every: np.ndarray, sole_xy: np.ndarray) -> Foo
     sole = raster.counts(sole_xy)
     # A cell is sole if most of its own points are; cells without points are decided by the closing.
     mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
-    return Footprint(mask, raster.origin, raster.cell_mm).morphology(close_mm=2.0, open_mm=2.0).largest_region()
+    return (
+        Footprint(mask, raster.origin, raster.cell_mm)
+        .morphology(close_mm=2.0, open_mm=FOOTPRINT_OPEN_MM)
+        .largest_region()
+    )

@@ -84,19 +84,21 @@ class SoleSurface:
         self, xy: np.ndarray, z: np.ndarray, normals: np.ndarray, refined: np.ndarray, radius_mm: float
     ) -> None:
         rec = self.rec
-        calib = rec.calibration
-        left, right = rec.rectified
-        table_to_camera = np.linalg.inv(rec.camera_to_table)
+        calib, rectified, to_table, mask = rec.calibration, rec.rectified, rec.camera_to_table, rec.sole_mask
+        if calib is None or rectified is None or to_table is None or mask is None:
+            return  # not a stereo reconstruction: the cloud answers every query
+        left, right = rectified
+        table_to_camera = np.linalg.inv(to_table)
         known = np.flatnonzero(np.isfinite(z))
         guess = np.column_stack([xy[known], z[known]]) @ table_to_camera[:3, :3].T + table_to_camera[:3, 3]
         focal = calib.focal_px
         centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
         start = focal * calib.baseline_mm / guess[:, 2]
         radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
-        fit = refine_patches(left, right, rec.sole_mask, centres, radius_px, start)
+        fit = refine_patches(left, right, mask, centres, radius_px, start)
         homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
         camera = homogeneous[:, :3] / homogeneous[:, 3:4]
-        table = camera @ rec.camera_to_table[:3, :3].T + rec.camera_to_table[:3, 3]
+        table = camera @ to_table[:3, :3].T + to_table[:3, 3]
         patch_z, patch_normals = _planes_at(table, fit.ids, xy[known])
         # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the cloud's
         # plane takes over there.
