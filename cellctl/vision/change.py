@@ -19,7 +19,9 @@ PIXEL_SIGMAS = 3.0  # a pixel is changed beyond this many sigmas (0.3 % false fl
 MIN_TABLE_PIXELS = 2000  # table pixels needed to estimate the gain and the noise
 CONTRAST_WINDOW_PX = 11  # local contrast of the change: ~4 mm, narrower than a sole's rim or logo
 NCC_WINDOW_PX = 7
-MIN_TABLE_NCC = 0.6  # table under a shadow correlates with its reference well above this; a sole near 0 +- 0.15
+TABLE_NCC = 0.5  # table under a shadow correlates with its reference well above this; a covered table near 0
+UNANIMOUS = 0.9  # share of the windows covering a pixel that must agree (a sole pixel at the edge: ~half)
+MIN_TEXTURED_SHARE = 0.3  # of the windows covering a pixel: fewer with texture to compare and there is no vote
 TEXTURE_SIGMAS = 2.0  # the reference has texture where its local spread exceeds this many residual sigmas
 NOISE_FLOOR_DN = 0.5  # a quantised 8-bit image never has less residual noise than this
 
@@ -71,17 +73,20 @@ class ChangeTest:
         clear = (magnitude > floor).astype(np.float32)
         window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
         contrast = cv2.blur(magnitude * clear, window) / np.maximum(cv2.blur(clear, window), 1e-6)
-        raw = (magnitude > np.maximum(floor, 0.5 * contrast)).astype(np.uint8)
-        raw[self._still_table(current, reference)] = 0
-        return cv2.medianBlur(raw, 3) > 0
+        raw = magnitude > np.maximum(floor, 0.5 * contrast)
+        still_table, texture_gone = self._texture(current, reference)
+        mask = ((raw | texture_gone) & ~still_table).astype(np.uint8)
+        return cv2.medianBlur(mask, 3) > 0
 
-    def _still_table(self, current: np.ndarray, reference: np.ndarray) -> np.ndarray:
-        """Pixels whose surroundings still show the table's own texture, only darker or lighter (a shadow).
+    def _texture(self, current: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(still table, texture gone): the table's own texture is still there, only darker or lighter (a
+        shadow), or it is gone (covered by something of whatever brightness).
 
         Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
-        brightness; every window that covers the pixel must correlate (a minimum filter), so a sole pixel
-        next to the table, whose window centred further inside does not correlate, is never vetoed: the
-        edge stays where the per-pixel test put it. Only where the reference has texture to compare.
+        brightness. Still table: nearly all the textured windows covering the pixel correlate, so a sole
+        pixel next to the table, about half of whose windows lie further inside, is not vetoed. Texture
+        gone: nearly none correlates, which finds a sole of the table's own brightness but does not reach
+        past its edge. Only windows where the reference has texture to compare vote.
         """
         window = (NCC_WINDOW_PX, NCC_WINDOW_PX)
         cur, ref = current.astype(np.float32), reference.astype(np.float32)
@@ -90,5 +95,10 @@ class ChangeTest:
         var_r = cv2.blur(ref * ref, window) - mean_r * mean_r
         ncc = (cv2.blur(cur * ref, window) - mean_c * mean_r) / np.sqrt(np.maximum(var_c * var_r, 1e-6))
         textured = var_r > (TEXTURE_SIGMAS * self.sigma) ** 2
-        score = np.where(textured, ncc, -1.0).astype(np.float32)
-        return cv2.erode(score, np.ones(window, np.uint8)) > MIN_TABLE_NCC
+        # Votes of the textured windows covering each pixel: nearly all correlate, or nearly none does.
+        share = cv2.blur(textured.astype(np.float32), window)
+        agree = cv2.blur((textured & (ncc > TABLE_NCC)).astype(np.float32), window)
+        enough = share > MIN_TEXTURED_SHARE
+        still = enough & (agree > UNANIMOUS * share)
+        gone = enough & (agree < (1.0 - UNANIMOUS) * share)
+        return still, gone
