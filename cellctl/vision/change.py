@@ -22,6 +22,7 @@ NCC_WINDOW_PX = 7
 TABLE_NCC = 0.5  # table under a shadow correlates with its reference well above this; a covered table near 0
 UNANIMOUS = 0.9  # share of the windows covering a pixel that must agree (a sole pixel at the edge: ~half)
 MIN_TEXTURED_SHARE = 0.3  # of the windows covering a pixel: fewer with texture to compare and there is no vote
+FAINT_CONTRAST_SIGMAS = 8.0  # a change fainter than this (local contrast) may be found by texture alone
 TEXTURE_SIGMAS = 2.0  # the reference has texture where its local spread exceeds this many residual sigmas
 NOISE_FLOOR_DN = 0.5  # a quantised 8-bit image never has less residual noise than this
 
@@ -75,6 +76,9 @@ class ChangeTest:
         contrast = cv2.blur(magnitude * clear, window) / np.maximum(cv2.blur(clear, window), 1e-6)
         raw = magnitude > np.maximum(floor, 0.5 * contrast)
         still_table, texture_gone = self._texture(current, reference)
+        # Next to a strong step every window covering a table pixel also covers the step and correlates
+        # poorly: the texture vote would move the edge out. It only speaks where the change is faint.
+        texture_gone &= contrast < FAINT_CONTRAST_SIGMAS * self.sigma
         mask = ((raw | texture_gone) & ~still_table).astype(np.uint8)
         return cv2.medianBlur(mask, 3) > 0
 

@@ -40,6 +40,7 @@ BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras
 FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is not quantised to a coarse grid
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
 FOOTPRINT_OPEN_MM = 1.0  # specks thinner than this go; a pointed toe's tip (radius >= 0.5 mm) stays
+WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
 EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 
@@ -245,7 +246,8 @@ class Segmentation:
         right_test = ChangeTest.fit(self.cloud.rectified[1], self.taught.right, np.round(right_table).astype(np.int64))
         if right_test is not None:
             self.changed_right = right_test.changed(self.cloud.rectified[1], self.taught.right)
-        near = np.flatnonzero((points[:, 2] > -TABLE_INLIER_MM) & (points[:, 2] <= self.min_height))
+        # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
+        near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= self.min_height))
         near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
         candidates = np.concatenate([high, near])
         x, y = np.round(self.cloud.pixels[candidates]).astype(np.int64).T
