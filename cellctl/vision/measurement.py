@@ -27,6 +27,7 @@ from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
+MAX_UNMEASURED_FRACTION = 0.05  # of the sole's changed pixels without depth: beyond, blame the lost pixels
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
 HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
@@ -139,6 +140,14 @@ def measure_sole(
             **base,
         )
     problem = _outline_problem(reconstruction, outline)
+    if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
+        # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
+        return _invalid(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth (glare "
+            f"or no texture), so its edge cannot be confirmed ({problem.reason})",
+            **base,
+        )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
