@@ -39,6 +39,9 @@ GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, ave
 # Gaussian along the outline: removes the raster's staircase (0.25 mm cells) and pixel noise; wider would cut
 # the tip of a pointed toe (a 2 mm sigma takes ~1 mm off a 35 degree wedge).
 OUTLINE_SMOOTHING_MM = 0.75
+# Without a taught table the edge comes from the colour test, whose noise on black soles biases the extreme
+# projections (the length) outward by 0.3-0.5 mm at 0.75 mm: the 2 mm it was tuned with.
+COLOUR_OUTLINE_SMOOTHING_MM = 2.0
 GLUE_OUTLINE_SMOOTHING_MM = 1.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
@@ -123,7 +126,8 @@ def measure_sole(
         )
     start = time.perf_counter()
     footprint = reconstruction.footprint
-    outline = _smooth_closed(footprint.outline(), OUTLINE_SMOOTHING_MM)
+    smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
+    outline = _smooth_closed(footprint.outline(), smoothing)
     centroid, axis = _principal_axis(outline)
     proj = (outline - centroid) @ axis
     lo, hi = float(proj.min()), float(proj.max())
