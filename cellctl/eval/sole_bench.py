@@ -37,6 +37,7 @@ class SoleBenchRow:
     seconds: float
     variations: str = "plain"  # matrix variations of the scene, "+"-joined (cellctl.sim.look)
     failure: str | None = None  # FailureKind value of a refusal
+    half_area_difference_true: float | None = None  # the truth's (toe half - heel half) / area
 
 
 def bench_soles(
@@ -76,6 +77,7 @@ def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations
         seconds,
         variations,
         None if result.failure is None else result.failure.value,
+        truth.half_area_difference,
     )
     if result.valid:
         assert result.length_mm is not None and result.heel_height_mm is not None

@@ -19,11 +19,13 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from cellctl.errors import FailureKind
 from cellctl.eval.sole_bench import SoleBenchRow, measure_scene
 from cellctl.sim.matrix import MatrixSole
 from cellctl.sim.rig import rig_for
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.measurement import MIN_HALF_AREA_DIFFERENCE
 from cellctl.vision.reconstruction import SoleReconstructor
 
 # The acceptance of issue 11, per valid result: |error| at most these.
@@ -36,6 +38,9 @@ TOLERANCES: dict[str, float] = {
     "glue_normal_error_max_deg": 5.0,
 }
 MIN_MEASURED_FRACTION = 0.9
+# A sole whose true half-areas differ by less than the measurement's threshold plus this may fairly be
+# refused as "too close to call": the measured footprint's halves scatter by a per cent or so.
+ENDS_CALL_MARGIN = 0.02
 
 
 @dataclass
@@ -50,7 +55,12 @@ class MatrixRow:
 
 def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
     if not row.valid:
-        fair = row.failure is not None and row.failure in {kind.value for kind in sole.fair_refusals}
+        fair_kinds = set(sole.fair_refusals)
+        if row.half_area_difference_true is not None and (
+            row.half_area_difference_true < MIN_HALF_AREA_DIFFERENCE + ENDS_CALL_MARGIN
+        ):
+            fair_kinds.add(FailureKind.ENDS_TOO_CLOSE_TO_CALL)
+        fair = row.failure is not None and row.failure in {kind.value for kind in fair_kinds}
         return MatrixRow(sole, row, "fair refusal" if fair else "missed")
     bad = tuple(name for name, limit in TOLERANCES.items() if abs(getattr(row, name)) > limit)
     return MatrixRow(sole, row, "WRONG" if bad else "right", bad)

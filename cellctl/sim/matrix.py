@@ -61,7 +61,7 @@ def matrix_soles(count: int, first_seed: int = 0, entries: tuple[str, ...] | Non
             _add_compatible(chosen, END_VARIATIONS, rng)
         if rng.random() < 0.35:
             _add_compatible(chosen, tuple(n for n in VARIATIONS if n not in END_VARIATIONS), rng)
-        colour = MATRIX_COLOURS[(i + round_) % len(MATRIX_COLOURS)]
+        colour = MATRIX_COLOURS[(i % len(names) + round_) % len(MATRIX_COLOURS)]
         soles.append(MatrixSole(seed, colour, tuple(c for c in chosen if c != "plain" or c == primary)))
     return soles
 

@@ -25,6 +25,10 @@ from cellctl.vision.reconstruction import StereoCloud
 
 VIEW_MARGIN_PX = 40  # a random sole keeps this far from the edges of both images
 PLACEMENT_ATTEMPTS = 200
+# Soles whose toe and heel halves differ by less than this (fraction of the area; the measurement refuses
+# below 4 %) are drawn again: a scene should be measurable, and toe and heel tellable apart, by design.
+MEASURABLE_HALF_AREA_DIFFERENCE = 0.07
+SHAPE_ATTEMPTS = 30
 
 
 @dataclass
@@ -54,7 +58,11 @@ class SoleScene:
 
             calib = rig_for(look.rig)
         rng = np.random.default_rng(seed)
-        shape = SoleShape.random(rng, look)
+        for _ in range(SHAPE_ATTEMPTS):  # a plain sole always passes at once: the plain scenes stay as they were
+            shape = SoleShape.random(rng, look)
+            upright = SoleModel(shape, SolePose(0.0, 0.0, 0.0, False))
+            if upright.truth().half_area_difference >= MEASURABLE_HALF_AREA_DIFFERENCE:
+                break
         camera_pose = rig_pose(calib)
         for _ in range(PLACEMENT_ATTEMPTS):
             yaw = rng.uniform(-35.0, 35.0) + (180.0 if rng.random() < 0.5 else 0.0)
