@@ -126,7 +126,7 @@ class SoleScene:
                 raise ValueError(f"cannot write {out / name}: check the directory is writable")
         np.save(out / "depth_left.npy", pair.depth_left)
         if self.sole is not None:
-            np.save(out / "outline.npy", self.sole.outline_table(2000))
+            np.save(out / "outline.npy", self.sole.footprint_table(2000))
         (out / "truth.json").write_text(json.dumps(self.truth(), indent=2) + "\n")
         self.calib.save(out / "calib.yaml")
         return out

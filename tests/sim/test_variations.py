@@ -3,7 +3,9 @@ deterministic and exclusive, and the matrix benchmark judges a tiny set. Renders
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -20,7 +22,7 @@ from cellctl.sim.render import SceneRenderer
 from cellctl.sim.scene import SoleScene
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
 from cellctl.sim.sole_profile import FOOT_MM, EdgeProfile, EndShape
-from tests.sim_rig import half_size_rig
+from tests.sim_rig import half_size_rig, write_half_size_rig
 
 
 def shape_with(look: SceneLook, seed: int = 3) -> SoleShape:
@@ -270,3 +272,32 @@ def test_bench_sole_matrix_command_lists_and_rejects(capsys: pytest.CaptureFixtu
     assert main(["bench-sole", "--matrix", "--variations", "purple-sole"]) == 2
     assert "unknown variation 'purple-sole'" in capsys.readouterr().err
     assert main(["bench-sole", "--variations", "rim"]) == 2
+
+
+def test_simulate_sole_applies_variations(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    calib = write_half_size_rig(tmp_path)
+    args = ["simulate", "sole", "--out", str(tmp_path / "scene"), "--seed", "6", "--color", "grey"]
+    assert main([*args, "--calib", str(calib), "--variations", "rim,square-toe"]) == 0
+    truth = json.loads((tmp_path / "scene" / "truth.json").read_text())
+    assert truth["look"]["colours"] == "rim" and truth["look"]["toe"] == "square"
+    assert truth["sole_shape"]["toe_end"]["kind"] == "square"
+    assert "rim,square-toe" in capsys.readouterr().out
+    assert main([*args, "--variations", "purple-sole"]) == 2
+    assert "unknown variation" in capsys.readouterr().err
+
+
+def test_distorted_rig_bends_straight_lines_and_is_the_looks_rig() -> None:
+    from cellctl.sim.render import project, rig_pose
+    from cellctl.sim.rig import default_rig, distorted_rig
+
+    def bend(calib) -> float:  # noqa: ANN001
+        # A straight table edge 150 mm off centre, seen by the left camera: worst distance from its chord.
+        line = np.column_stack([np.linspace(-200, 200, 41), np.full(41, 150.0), np.zeros(41)])
+        px = project(calib, rig_pose(calib), "left", line)
+        chord = (px[-1] - px[0]) / np.linalg.norm(px[-1] - px[0])
+        offsets = (px - px[0]) @ np.array([-chord[1], chord[0]])
+        return float(np.abs(offsets).max())
+
+    assert bend(distorted_rig()) > 3 * bend(default_rig())
+    scene = SoleScene.random(3, "white", look=look_for(("distorted-rig",), 3))
+    np.testing.assert_allclose(scene.calib.D1, distorted_rig().D1)
