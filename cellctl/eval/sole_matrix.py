@@ -4,6 +4,7 @@ Every sole of `cellctl.sim.matrix.matrix_soles` is rendered with its variations,
 
 * measured and within the acceptance tolerances: right;
 * measured but outside a tolerance: WRONG, the worst outcome (a silent wrong number for the robot);
+* the measurement raised an exception: CRASH (a defect: the cell would stop, not answer);
 * refused with a reason its variations make fair (`cellctl.sim.look`, e.g. "too few points" under heavy
   noise): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
 
@@ -20,7 +21,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import SoleBenchRow, measure_scene
+from cellctl.eval.sole_bench import CRASHED, SoleBenchRow, measure_scene
 from cellctl.sim.matrix import MatrixSole
 from cellctl.sim.rig import rig_for
 from cellctl.sim.scene import SoleScene
@@ -49,11 +50,13 @@ class MatrixRow:
 
     sole: MatrixSole
     row: SoleBenchRow
-    verdict: str  # "right", "WRONG", "fair refusal", "missed"
+    verdict: str  # "right", "WRONG", "fair refusal", "missed", "CRASH"
     out_of_tolerance: tuple[str, ...] = ()
 
 
 def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
+    if not row.valid and row.failure == CRASHED:
+        return MatrixRow(sole, row, "CRASH")
     if not row.valid:
         fair_kinds = set(sole.fair_refusals)
         if row.half_area_difference_true is not None and (
@@ -112,7 +115,9 @@ def _group_line(name: str, group: list[MatrixRow]) -> str:
     rows = [g.row for g in group]
     valid = [r for r in rows if r.valid]
     reasons = Counter(
-        f"{g.row.failure}{'' if g.verdict == 'fair refusal' else ' (wrong reason)'}" for g in group if not g.row.valid
+        f"{g.row.failure}{'' if g.verdict in ('fair refusal', 'CRASH') else ' (wrong reason)'}"
+        for g in group
+        if not g.row.valid
     )
     refused = ", ".join(f"{n} {k}" for k, n in sorted(reasons.items())) or "0"
     wrong = sum(g.verdict == "WRONG" for g in group)
@@ -134,6 +139,7 @@ class Acceptance:
     wrong: int  # valid but outside a tolerance
     fair_refusals: int
     missed: int  # refused with a reason the scene does not justify
+    crashed: int  # the measurement raised an exception
 
     @property
     def measured_fraction(self) -> float:
@@ -141,13 +147,22 @@ class Acceptance:
 
     @property
     def passed(self) -> bool:
-        return self.soles > 0 and self.measured_fraction >= MIN_MEASURED_FRACTION and not self.wrong and not self.missed
+        return (
+            self.soles > 0
+            and self.measured_fraction >= MIN_MEASURED_FRACTION
+            and not (self.wrong or self.missed or self.crashed)
+        )
 
 
 def acceptance(results: list[MatrixRow]) -> Acceptance:
     verdicts = Counter(r.verdict for r in results)
     return Acceptance(
-        len(results), sum(r.row.valid for r in results), verdicts["WRONG"], verdicts["fair refusal"], verdicts["missed"]
+        len(results),
+        sum(r.row.valid for r in results),
+        verdicts["WRONG"],
+        verdicts["fair refusal"],
+        verdicts["missed"],
+        verdicts["CRASH"],
     )
 
 
@@ -157,7 +172,7 @@ def matrix_markdown(results: list[MatrixRow], command: str) -> str:
     lines = [
         f"Command: `{command}`. {acc.measured} of {acc.soles} soles measured "
         f"({100 * acc.measured_fraction:.0f} %), {acc.wrong} valid but outside a tolerance (WRONG), "
-        f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason. "
+        f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason, {acc.crashed} crashed. "
         f"Acceptance {'met' if acc.passed else 'NOT met'}.",
         "",
         "Errors are |measured - true|, mean / max over the measured soles; glue columns are the worst point of "

@@ -14,7 +14,7 @@ import pytest
 
 from cellctl.cli import main
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import SoleBenchRow
+from cellctl.eval.sole_bench import SoleBenchRow, measure_scene
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
 from cellctl.sim.matrix import END_VARIATIONS, MATRIX_COLOURS, MatrixSole, matrix_soles
@@ -298,3 +298,15 @@ def test_distorted_rig_bends_straight_lines_and_is_the_looks_rig() -> None:
     assert corner_shift(distorted_rig()) > 4 * corner_shift(default_rig()) > 40.0
     scene = SoleScene.random(3, "white", look=look_for(("distorted-rig",), 3))
     np.testing.assert_allclose(scene.calib.D1, distorted_rig().D1)
+
+
+def test_a_measurement_that_raises_is_a_crash_not_the_end_of_the_run() -> None:
+    class Raising:
+        def reconstruct(self, left: np.ndarray, right: np.ndarray) -> None:
+            raise np.linalg.LinAlgError("Singular matrix")
+
+    scene = SoleScene.random(5, "white", half_size_rig())
+    row = measure_scene(Raising(), scene)  # type: ignore[arg-type]
+    assert not row.valid and row.reason is not None and "LinAlgError" in row.reason
+    assert judge(MatrixSole(5, "white", ("plain",)), row).verdict == "CRASH"
+    assert not acceptance([judge(MatrixSole(5, "white", ("plain",)), row)]).passed
