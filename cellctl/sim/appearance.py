@@ -150,7 +150,7 @@ class ColourScheme:
 
     @classmethod
     def draw(cls, rng: np.random.Generator, color: str, look: SceneLook, shape: SoleShape) -> ColourScheme:
-        base = SOLE_MATERIALS[color].albedo_bgr
+        base = TABLES[look.table].albedo_bgr if look.camouflage else SOLE_MATERIALS[color].albedo_bgr
         accent = LIGHT_ACCENT if color == "black" else DARK_ACCENT
         if look.colours == "rim":
             return cls(base, float(rng.uniform(4.0, 9.0)), accent, ())

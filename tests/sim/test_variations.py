@@ -17,7 +17,7 @@ from cellctl.errors import FailureKind
 from cellctl.eval.sole_bench import SoleBenchRow, measure_scene
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
-from cellctl.sim.matrix import END_VARIATIONS, MATRIX_COLOURS, MatrixSole, matrix_soles
+from cellctl.sim.matrix import END_VARIATIONS, MATRIX_COLOURS, MATRIX_ENTRIES, MatrixSole, matrix_soles
 from cellctl.sim.render import SceneRenderer
 from cellctl.sim.scene import SoleScene
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
@@ -51,14 +51,15 @@ def test_looks_combine_deterministically_and_exclusively() -> None:
 
 
 def test_matrix_visits_every_entry_with_colours_and_ends_mixed() -> None:
-    soles = matrix_soles(2 * len(VARIATIONS), first_seed=40)
-    assert [s.primary for s in soles[: len(VARIATIONS)]] == list(VARIATIONS)
-    assert soles == matrix_soles(2 * len(VARIATIONS), first_seed=40)
+    soles = matrix_soles(2 * len(MATRIX_ENTRIES), first_seed=40)
+    assert [s.primary for s in soles[: len(MATRIX_ENTRIES)]] == list(MATRIX_ENTRIES)
+    assert soles == matrix_soles(2 * len(MATRIX_ENTRIES), first_seed=40)
     assert {s.color for s in soles} == set(MATRIX_COLOURS)
+    assert "camouflage" in VARIATIONS and not any("camouflage" in s.variations for s in soles)
     # Every entry meets more than one colour over two rounds, and ends are mixed into other entries.
-    for name in VARIATIONS:
+    for name in MATRIX_ENTRIES:
         assert len({s.color for s in soles if s.primary == name}) == 2
-    assert sum(any(v in END_VARIATIONS for v in s.variations[1:]) for s in soles) >= len(VARIATIONS) // 2
+    assert sum(any(v in END_VARIATIONS for v in s.variations[1:]) for s in soles) >= len(MATRIX_ENTRIES) // 2
     for sole in soles:
         sole.look  # every combination the matrix makes is a valid one  # noqa: B018
 
@@ -219,6 +220,15 @@ def test_side_light_casts_the_soles_shadow() -> None:
     assert lit[-1][np.argmax(facing)] and not lit[-1][np.argmin(facing)]
     assert lit[-1][facing < -0.7].mean() < 0.1
     assert lit[0].mean() > lit[-1].mean()  # the high LED bars throw far shorter shadows
+
+
+def test_camouflaged_sole_has_the_tables_colour() -> None:
+    from cellctl.sim.appearance import TABLES, ColourScheme
+
+    look = look_for(("camouflage",), 1)
+    scheme = ColourScheme.draw(np.random.default_rng(0), "black", look, shape_with(look))
+    assert scheme.base == TABLES["grey"].albedo_bgr and look.table == "grey"
+    assert fair_refusals(("camouflage",)) == {FailureKind.COLOURS_TOO_SIMILAR}
 
 
 def test_patterned_table_has_strong_contrast() -> None:
