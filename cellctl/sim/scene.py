@@ -80,7 +80,9 @@ class SoleScene:
         if self.sole is None:
             return True
         outline = self.sole.outline_table(400)
-        top = self.sole.top_height_at(outline)
+        # The top without its edge profile: at least as high as the sole anywhere near the outline.
+        uv = self.sole.pose.to_sole(outline, self.sole.shape.length)
+        top = self.sole.shape.top_height(uv[:, 0], uv[:, 1])
         corners = np.vstack([np.column_stack([outline, np.zeros(len(outline))]), np.column_stack([outline, top])])
         width, height = self.calib.image_size
         for side in ("left", "right"):
