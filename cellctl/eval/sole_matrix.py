@@ -8,7 +8,7 @@ Every sole of `cellctl.sim.matrix.matrix_soles` is rendered with its variations,
 * refused with a reason its variations make fair (`cellctl.sim.look`, e.g. "too few points" under heavy
   noise): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
 
-The table prints, per primary variation, soles measured / refused (with reasons), the length, heel and toe
+The table prints, per variation (every sole that has it), soles measured / refused (with reasons), the length, heel and toe
 errors (mean and max of |error|), the glue path's worst inset, height and normal errors, and the time.
 """
 
@@ -167,7 +167,7 @@ def acceptance(results: list[MatrixRow]) -> Acceptance:
 
 
 def matrix_markdown(results: list[MatrixRow], command: str) -> str:
-    """The matrix table (one line per primary variation, then all), the acceptance figures and every sole."""
+    """The matrix table (one line per variation, per colour, then all), the acceptance figures and every sole."""
     acc = acceptance(results)
     lines = [
         f"Command: `{command}`. {acc.measured} of {acc.soles} soles measured "
@@ -175,18 +175,25 @@ def matrix_markdown(results: list[MatrixRow], command: str) -> str:
         f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason, {acc.crashed} crashed. "
         f"Acceptance {'met' if acc.passed else 'NOT met'}.",
         "",
-        "Errors are |measured - true|, mean / max over the measured soles; glue columns are the worst point of "
-        "any sole. Tolerances: length 1.0 mm, heel and toe 0.5 mm, glue inset and height 1.0 mm, normal 5 deg.",
+        "A row per variation over every sole that has it (soles mix variations, so a sole counts in several "
+        "rows; plain = no variation). Errors are |measured - true|, mean / max over the measured soles; glue "
+        "columns are the worst point of any sole. Tolerances: length 1.0 mm, heel and toe 0.5 mm, glue inset "
+        "and height 1.0 mm, normal 5 deg.",
         "",
         "| variation | measured | refused (reason) | WRONG | length mm | heel mm | toe mm | glue inset | glue z | "
         "glue normal deg | time |",
         "| :-- | --: | :-- | --: | --: | --: | --: | --: | --: | --: | --: |",
     ]
-    groups: dict[str, list[MatrixRow]] = {}
-    for r in results:
-        groups.setdefault(r.sole.primary, []).append(r)
-    for name, group in groups.items():
-        lines.append(_group_line(name, group))
+    # A row per variation over every sole that has it (as its primary or a mixed-in one), so a sole counts
+    # in each of its variations' rows; "plain" is the soles with no variation at all.
+    names = [r.sole.primary for r in results] + [v for r in results for v in r.sole.variations[1:]]
+    for name in dict.fromkeys(names):
+        if name == "plain":
+            group = [r for r in results if set(r.sole.variations) == {"plain"}]
+        else:
+            group = [r for r in results if name in r.sole.variations]
+        if group:
+            lines.append(_group_line(name, group))
     for colour in ("white", "black", "grey"):
         group = [r for r in results if r.sole.color == colour]
         if group:
