@@ -20,6 +20,7 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.measurement import SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.teach import TeachError, average_exposures
 
 CRASHED = "measurement raised"  # reason and failure of a sole whose measurement raised an exception
 
@@ -64,10 +65,21 @@ def bench_soles(
     return rows
 
 
+TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellctl teach` takes several pairs
+
+
 def taught_reconstructor(calib: Calibration, scene: SoleScene) -> SoleReconstructor:
-    """A reconstructor with the scene's empty table taught from its own exposure (new sensor noise)."""
-    empty = scene.render_empty()
-    return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(empty.left, empty.right))
+    """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise).
+
+    If the table cannot be taught (e.g. too noisy to match), the reconstructor is an untaught one, as the
+    service runs without a taught table.
+    """
+    shots = [scene.render_empty(shot) for shot in range(1, TEACH_SHOTS + 1)]
+    left, right = average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+    try:
+        return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
+    except TeachError:
+        return SoleReconstructor(calib)
 
 
 def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain") -> SoleBenchRow:
