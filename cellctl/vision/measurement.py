@@ -42,7 +42,7 @@ OUTLINE_SMOOTHING_MM = 0.75
 # Without a taught table the edge comes from the colour test, whose noise on black soles biases the extreme
 # projections (the length) outward by 0.3-0.5 mm at 0.75 mm: the 2 mm it was tuned with.
 COLOUR_OUTLINE_SMOOTHING_MM = 2.0
-GLUE_OUTLINE_SMOOTHING_MM = 1.0  # the glue line's staircase and pixel noise; its inward normals follow it
+GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
 @dataclass
