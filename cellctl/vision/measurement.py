@@ -205,7 +205,9 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> Che
     ring = _resample_closed(outline, 1.0)
     outward = _outward_normals(ring)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
-        problem = check_outline_depth(ring, outward, reconstruction.raised, reconstruction.measured_cells)
+        problem = check_outline_depth(
+            ring, outward, reconstruction.raised, reconstruction.measured_cells, reconstruction.footprint
+        )
         if problem is not None:
             return problem
     changed_right, calib = reconstruction.changed_right, reconstruction.calibration
