@@ -38,7 +38,9 @@ typedef struct cc_params {
     int census_height;      /* odd, 1..7 */
     int cost_mode;          /* enum cc_cost_mode */
     float lambda_census;    /* rho scale of the Hamming distance (bits), > 0 */
-    float lambda_bt;        /* rho scale of the BT cost (grey levels), > 0 */
+    float lambda_bt;        /* rho scale of the BT cost (levels of the BT image), > 0 */
+    int bt_prefilter;       /* BT image: 0 = raw intensities; 1..63 = horizontal Sobel clipped to
+                               [-cap, cap] (OpenCV's preFilterCap), robust to gain and exposure */
     int cost_scale;         /* each rho term is quantised to 0..cost_scale (1..127) */
     int p1;                 /* penalty for a disparity step of 1 */
     int p2;                 /* penalty for larger steps, p1 < p2 <= CC_MAX_P2 */

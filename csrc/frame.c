@@ -54,6 +54,27 @@ void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw
     }
 }
 
+/* The image the BT term compares, row y: raw intensities (cap 0), or as OpenCV's
+ * StereoSGBM prefilter, the horizontal Sobel response clipped to [-cap, cap] and
+ * shifted to 0..2cap.  BT on raw intensities breaks when the two cameras differ
+ * in gain or exposure; the clipped derivative keeps only where the intensity
+ * changes, which a gain or offset leaves (nearly) in place.  Borders replicated. */
+static void bt_source_row(const uint8_t *img, int width, int height, int stride, int y, int cap, uint8_t *out)
+{
+    const uint8_t *b = img + (size_t)y * stride;
+    if (cap == 0) {
+        memcpy(out, b, (size_t)width);
+        return;
+    }
+    const uint8_t *a = img + (size_t)clampi(y - 1, 0, height - 1) * stride;
+    const uint8_t *c = img + (size_t)clampi(y + 1, 0, height - 1) * stride;
+    for (int x = 0; x < width; x++) {
+        int xm = x > 0 ? x - 1 : 0, xp = x < width - 1 ? x + 1 : width - 1;
+        int v = (a[xp] - a[xm]) + 2 * (b[xp] - b[xm]) + (c[xp] - c[xm]);
+        out[x] = (uint8_t)(clampi(v, -cap, cap) + cap);
+    }
+}
+
 /* BT bounds: min and max of the pixel and its two half-pixel neighbours,
  * (I(x) + I(x -+ 1)) / 2 rounded down, borders replicated. */
 static void bt_bounds_row(const uint8_t *row, int width, uint8_t *lo, uint8_t *hi)
@@ -88,7 +109,7 @@ size_t cc_frame_bytes(const cc_setup *s, int width, int height)
 {
     int nb, pad, rs;
     frame_geometry(s, width, &nb, &pad, &rs);
-    return (size_t)height * ((size_t)width * (nb + 3) + (size_t)rs * (nb + 3));
+    return (size_t)height * ((size_t)width * (nb + 4) + (size_t)rs * (nb + 3));
 }
 
 int cc_frame_alloc(cc_frame *f, const cc_setup *s, int width, int height)
@@ -99,7 +120,7 @@ int cc_frame_alloc(cc_frame *f, const cc_setup *s, int width, int height)
     f->height = height;
     size_t lsize = (size_t)width * height, rsize = (size_t)f->rstride * height;
     f->lcen = cc_alloc(lsize * f->nbytes);
-    f->lint = cc_alloc(lsize * 3);
+    f->lint = cc_alloc(lsize * 4);
     f->rcen = cc_alloc(rsize * f->nbytes);
     f->rint = cc_alloc(rsize * 3);
     if (!f->lcen || !f->lint || !f->rcen || !f->rint) {
@@ -108,6 +129,7 @@ int cc_frame_alloc(cc_frame *f, const cc_setup *s, int width, int height)
     }
     f->lmin = f->lint + lsize;
     f->lmax = f->lmin + lsize;
+    f->lgrey = f->lmax + lsize;
     f->rmin = f->rint + rsize;
     f->rmax = f->rmin + rsize;
     /* The padding of the mirrored rows is read but never used: keep it defined. */
@@ -130,8 +152,7 @@ static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int 
                         int y, int mirrored, uint8_t *scratch)
 {
     int w = f->width, h = f->height, nb = f->nbytes;
-    const uint8_t *row = img + (size_t)y * stride;
-    uint8_t *lo = scratch, *hi = scratch + w, *padded = scratch + 2 * (size_t)w;
+    uint8_t *row = scratch, *lo = scratch + w, *hi = scratch + 2 * (size_t)w, *padded = scratch + 3 * (size_t)w;
     uint8_t *planes[8];
     for (int b = 0; b < nb; b++) /* the left image's planes go straight into the frame */
         planes[b] = mirrored ? padded + (size_t)w + 8 + (size_t)b * w : f->lcen + ((size_t)b * h + y) * w;
@@ -140,8 +161,10 @@ static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int 
     else
         for (int b = 0; b < nb; b++)
             memset(planes[b], 0, (size_t)w);
+    bt_source_row(img, w, h, stride, y, s->p.bt_prefilter, row);
     if (!mirrored) {
         size_t o = (size_t)y * w;
+        memcpy(f->lgrey + o, img + (size_t)y * stride, (size_t)w);
         bt_bounds_row(row, w, f->lmin + o, f->lmax + o);
         memcpy(f->lint + o, row, (size_t)w);
         return;
@@ -161,7 +184,7 @@ static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int 
 }
 
 /* Rounded to 64 bytes so that every thread's slice starts aligned for its uint64 row. */
-size_t cc_frame_scratch_bytes(int width) { return ((size_t)width * 11 + 16 + 127) / 64 * 64; }
+size_t cc_frame_scratch_bytes(int width) { return ((size_t)width * 12 + 16 + 127) / 64 * 64; }
 
 /* scratch: threads * cc_frame_scratch_bytes(width) bytes, one slice per thread. */
 void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int stride_left,

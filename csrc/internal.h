@@ -33,9 +33,10 @@ typedef struct cc_frame {
     int nbytes;              /* census bytes per pixel */
     int pad, rstride;        /* mirrored right rows: index pad + (width-1-x) */
     uint8_t *lcen;           /* [nbytes][height][width] */
-    uint8_t *lint, *lmin, *lmax;            /* [height][width] */
+    uint8_t *lint, *lmin, *lmax;            /* [height][width]: the BT image and its bounds */
+    uint8_t *lgrey;                         /* [height][width]: left intensities (adaptive P2) */
     uint8_t *rcen;           /* [nbytes][height][rstride] */
-    uint8_t *rint, *rmin, *rmax;            /* [height][rstride] */
+    uint8_t *rint, *rmin, *rmax;            /* [height][rstride]: the BT image and its bounds */
 } cc_frame;
 
 /* Everything the kernels need, derived once from the parameters. */

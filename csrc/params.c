@@ -16,6 +16,7 @@ void cc_params_default(cc_params *p)
     p->cost_mode = CC_COST_CENSUS_BT;
     p->lambda_census = 45.0f;
     p->lambda_bt = 30.0f;
+    p->bt_prefilter = 0;
     p->cost_scale = 63;
     p->p1 = 32;
     p->p2 = 100;
@@ -64,6 +65,8 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("lambda_census must be a finite number > 0");
     if (!(p->lambda_bt > 0.0f) || !isfinite(p->lambda_bt))
         REJECT("lambda_bt must be a finite number > 0");
+    if (p->bt_prefilter < 0 || p->bt_prefilter > 63)
+        REJECT("bt_prefilter must be between 0 (raw intensities) and 63 (Sobel cap)");
     if (p->cost_scale < 1 || p->cost_scale > 127)
         REJECT("cost_scale must be between 1 and 127");
     if (p->p1 < 0)

@@ -45,6 +45,7 @@ _SAME_IN_C = (
     "num_disparities",
     "lambda_census",
     "lambda_bt",
+    "bt_prefilter",
     "cost_scale",
     "p1",
     "p2",
@@ -70,7 +71,8 @@ class MatcherParams:
     census_window: tuple[int, int]  # (width, height), odd, up to 9x7
     cost: str  # "census_bt" (the paper), "census" or "bt"
     lambda_census: float  # rho scale of the Hamming distance, bits
-    lambda_bt: float  # rho scale of the BT cost, grey levels
+    lambda_bt: float  # rho scale of the BT cost, levels of the BT image
+    bt_prefilter: int  # BT image: 0 raw grey, 1..63 horizontal Sobel clipped to +-cap (OpenCV's preFilterCap)
     cost_scale: int  # each rho term is quantised to 0..cost_scale
     p1: int  # penalty of a 1 px disparity step
     p2: int  # penalty of larger steps (p2 > p1)
@@ -160,6 +162,7 @@ def make_params(**overrides: Any) -> MatcherParams:
     ints = (
         "min_disparity",
         "num_disparities",
+        "bt_prefilter",
         "cost_scale",
         "p1",
         "p2",
