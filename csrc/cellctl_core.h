@@ -14,7 +14,6 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define CC_DISP_SHIFT 4
 #define CC_DISP_SCALE 16
 #define CC_INVALID (-32768)
 
@@ -36,6 +35,7 @@ typedef struct cc_params {
     int num_disparities;    /* any count >= 1 */
     int census_width;       /* odd, 1..9 */
     int census_height;      /* odd, 1..7 */
+    int census_smooth;      /* 0: census of the pixels; 1: of their 3x3 sums (robust in flat regions) */
     int cost_mode;          /* enum cc_cost_mode */
     float lambda_census;    /* rho scale of the Hamming distance (bits), > 0 */
     float lambda_bt;        /* rho scale of the BT cost (levels of the BT image), > 0 */
@@ -65,7 +65,6 @@ typedef struct cc_params {
 #define CC_MAX_P2 2000
 #define CC_MAX_DISPARITIES 2048
 #define CC_MAX_DIM 16384
-#define CC_BT_CAP 63        /* BT costs are truncated here before the rho table */
 #define CC_MAX_WM_RADIUS 15 /* largest weighted-median window: 31 x 31 */
 #define CC_MAX_BORDER_FIT 64
 

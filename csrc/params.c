@@ -2,7 +2,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "internal.h"
+#include "aggregate.h"
+#include "params.h"
 
 void cc_params_default(cc_params *p)
 {
@@ -13,6 +14,7 @@ void cc_params_default(cc_params *p)
     p->num_disparities = 64;
     p->census_width = 5;
     p->census_height = 5;
+    p->census_smooth = 0;
     p->cost_mode = CC_COST_CENSUS_BT;
     p->lambda_census = 45.0f;
     p->lambda_bt = 30.0f;
@@ -57,6 +59,8 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("census_width must be odd and between 1 and 9");
     if (p->census_height < 1 || p->census_height > 7 || p->census_height % 2 == 0)
         REJECT("census_height must be odd and between 1 and 7");
+    if (p->census_smooth != 0 && p->census_smooth != 1)
+        REJECT("census_smooth must be 0 (pixels) or 1 (3x3 sums)");
     if (p->cost_mode < CC_COST_CENSUS_BT || p->cost_mode > CC_COST_BT)
         REJECT("cost_mode must be census_bt, census or bt");
     if (p->cost_mode != CC_COST_BT && p->census_width * p->census_height < 2)

@@ -2,7 +2,10 @@
 #include <omp.h>
 #include <string.h>
 
-#include "internal.h"
+#include "aggregate.h"
+#include "cost.h"
+#include "passes.h"
+#include "select.h"
 
 static inline int intensity(const cc_frame *f, int x, int y) { return f->lgrey[(size_t)y * f->width + x]; }
 

@@ -2,7 +2,8 @@
 #include <omp.h>
 #include <string.h>
 
-#include "internal.h"
+#include "params.h"
+#include "postprocess.h"
 
 static void lr_check_row(const cc_params *p, const int16_t *left, const int16_t *right, int width,
                          int16_t *out)

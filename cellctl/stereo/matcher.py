@@ -43,6 +43,7 @@ _ERRORS = {
 _SAME_IN_C = (
     "min_disparity",
     "num_disparities",
+    "census_smooth",
     "lambda_census",
     "lambda_bt",
     "bt_prefilter",
@@ -69,6 +70,7 @@ class MatcherParams:
     min_disparity: int
     num_disparities: int
     census_window: tuple[int, int]  # (width, height), odd, up to 9x7
+    census_smooth: int  # 0: census of the pixels, 1: of their 3x3 sums (robust in flat regions)
     cost: str  # "census_bt" (the paper), "census" or "bt"
     lambda_census: float  # rho scale of the Hamming distance, bits
     lambda_bt: float  # rho scale of the BT cost, levels of the BT image

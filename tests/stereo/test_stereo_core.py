@@ -40,6 +40,9 @@ COST_CASES = [
     dict(num_disparities=6, cost="bt", lambda_bt=4.0),
     dict(num_disparities=16, census_window=(9, 7), lambda_census=9.0, cost_scale=100),
     dict(num_disparities=33, min_disparity=-10, census_window=(3, 3)),
+    dict(num_disparities=12, bt_prefilter=0, census_smooth=0),  # the raw-intensity BT of the paper
+    dict(num_disparities=12, bt_prefilter=5, lambda_bt=3.0),  # the clip bites
+    dict(num_disparities=10, min_disparity=-3, census_smooth=1, census_window=(7, 5), bt_prefilter=63),
 ]
 
 
@@ -57,6 +60,7 @@ AGG_CASES = [
     dict(num_disparities=20, paths=4, p2_gamma=20, p1=7, p2=90),
     dict(num_disparities=17, paths=8, p2_gamma=5, cost="census", p1=3, p2=31),
     dict(num_disparities=5, paths=4, cost="bt"),
+    dict(num_disparities=11, paths=4, census_smooth=1, bt_prefilter=9, p2_gamma=30),
 ]
 
 
