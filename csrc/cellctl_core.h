@@ -52,6 +52,8 @@ typedef struct cc_params {
     int lr_max_diff;        /* left-right tolerance in 1/16 px; < 0 disables the check */
     int fill_mode;          /* enum cc_fill_mode */
     int median;             /* 0 (off), 3 or 5 */
+    int fill_interpolate;   /* fill: a run between two valid pixels at most this many px apart in
+                               disparity is interpolated linearly (one surface), else background; 0 off */
     int fill_radius;        /* CC_FILL_WEIGHTED: window radius of the weighted median over filled pixels */
     int border_fit;         /* fill: border-occluded end strips of a row follow a line fitted to the
                                next border_fit px of measurements (0: the nearest value), 0 or 2..64 */
@@ -68,7 +70,7 @@ typedef struct cc_params {
 #define CC_MAX_WM_RADIUS 15 /* largest weighted-median window: 31 x 31 */
 #define CC_MAX_BORDER_FIT 64
 
-/* Fills *p with the defaults (tuned on Middlebury v2, see docs/benchmarks.md). */
+/* Fills *p with the defaults (tuned on Middlebury 2001/2003 + 2005/2006, see docs/benchmarks.md). */
 void cc_params_default(cc_params *p);
 /* CC_OK or CC_ERR_PARAM; on error a static message is stored in *message. */
 int cc_params_check(const cc_params *p, const char **message);

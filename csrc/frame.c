@@ -26,7 +26,8 @@ static void census_values(const uint8_t *img, int width, int height, int stride,
     const uint8_t *c = img + (size_t)clampi(y + 1, 0, height - 1) * stride;
     for (int x = 0; x < width; x++) {
         int xm = x > 0 ? x - 1 : 0, xp = x < width - 1 ? x + 1 : width - 1;
-        out[x] = (uint16_t)(a[xm] + a[x] + a[xp] + b[xm] + b[x] + b[xp] + c[xm] + c[x] + c[xp]);
+        out[x] = (uint16_t)(a[xm] + a[x] + a[xp] + b[xm] + b[x] + b[xp] + c[xm] + c[x] + c[xp] +
+                            (smooth == 2 ? 8 * b[x] : 0));
     }
 }
 
@@ -188,8 +189,8 @@ static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int 
     for (int b = 0; b < nb; b++) /* the left image's planes go straight into the frame */
         planes[b] = mirrored ? mine + (size_t)b * w : f->lcen + ((size_t)b * h + y) * w;
     if (s->p.cost_mode != CC_COST_BT)
-        census_row_planes(img, w, h, stride, s->p.census_width, s->p.census_height, s->p.census_smooth, y, planes,
-                          nb, work);
+        census_row_planes(img, w, h, stride, s->p.census_width, s->p.census_height, s->p.census_smooth, y,
+                          planes, nb, work);
     else
         for (int b = 0; b < nb; b++)
             memset(planes[b], 0, (size_t)w);

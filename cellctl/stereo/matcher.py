@@ -54,6 +54,7 @@ _SAME_IN_C = (
     "paths",
     "uniqueness",
     "median",
+    "fill_interpolate",
     "fill_radius",
     "border_fit",
     "weighted_median",
@@ -85,6 +86,7 @@ class MatcherParams:
     lr_max_diff: float  # left-right tolerance in px; negative disables the check
     fill: str  # "weighted" (background, then colour-weighted median), "background" or "none"
     median: int  # 0, 3 or 5
+    fill_interpolate: int  # fill: runs between valid pixels this close (px) follow a line, 0 = off
     fill_radius: int  # window radius (px) of the weighted fill, 1..15
     border_fit: int  # fill: border-occluded strips follow a line fitted to this many px, 0 = off
     weighted_median: int  # window radius (px) of the final colour-weighted median, 0 = off
@@ -172,6 +174,7 @@ def make_params(**overrides: Any) -> MatcherParams:
         "paths",
         "uniqueness",
         "median",
+        "fill_interpolate",
         "fill_radius",
         "border_fit",
         "weighted_median",

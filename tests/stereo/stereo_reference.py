@@ -310,6 +310,10 @@ def postprocess(raw_left, raw_right, p, guide=None):
                     [checked[y, after[0]]] if len(after) else []
                 )
                 filled[y, x] = min(cands) if cands else INVALID
+                span = p["fill_interpolate"] * 16
+                if len(cands) == 2 and span > 0 and abs(int(cands[0]) - int(cands[1])) <= span:
+                    xl, xr, dl, dr = int(before[-1]), int(after[0]), int(cands[0]), int(cands[1])
+                    filled[y, x] = dl + (2 * (dr - dl) * (x - xl) + (xr - xl)) // (2 * (xr - xl))
     background = filled.copy()  # the weighted fill votes with the background fill, strips included
     strip = np.zeros((h, w), bool)
     if p["fill"] in ("background", "weighted") and p["border_fit"]:
