@@ -7,7 +7,7 @@ from pathlib import Path
 
 import cv2
 
-from cellctl.calib.zhang import MIN_PAIRS, Checkerboard, calibrate_views, detect_views, find_pairs
+from cellctl.calib.zhang import MIN_PAIRS, CalibrationResult, Checkerboard, calibrate_views, detect_views, find_pairs
 from cellctl.errors import UserError
 
 
@@ -54,5 +54,22 @@ def run(args: argparse.Namespace) -> int:
     chart = args.chart or args.output.with_name(f"{args.output.stem}-errors.png")
     if not cv2.imwrite(str(chart), result.error_chart()):
         raise UserError(f"cannot write the error chart {chart}: check the directory exists and is writable")
+    _write_report(args.output, board_text, result)
     print(f"wrote {args.output} and {chart}")
     return 0
+
+
+def _write_report(output: Path, board_text: str, result: CalibrationResult) -> None:
+    """CAL-report.json beside the calibration: what the operator station shows about it."""
+    import json
+    from datetime import datetime
+
+    report = {
+        "calibrated_at": datetime.now().astimezone().isoformat(timespec="seconds"),
+        "board": board_text,
+        "pairs_used": len(result.kept),
+        "pairs_total": len(result.pairs),
+        "rms_px": result.calibration.rms,
+        "per_pair": [{"pair": p.name, "status": p.status, "error_px": p.error_px} for p in result.pairs],
+    }
+    output.with_name(f"{output.stem}-report.json").write_text(json.dumps(report, indent=1), encoding="utf-8")
