@@ -13,6 +13,7 @@ import numpy as np
 from cellctl.cameras.base import StereoFrame
 from cellctl.service.config import CellConfig
 from cellctl.service.daemon import Daemon
+from cellctl.service.events import CellEvent, CycleDone
 from cellctl.service.station import Station
 from firmware_io.plc_sim import CycleReading, PlcSimulator
 from tests.sim_rig import write_half_size_rig
@@ -39,6 +40,10 @@ class StationService:
     def __init__(self, config: CellConfig) -> None:
         self.daemon = Daemon(config)
         self.station = Station.attach(self.daemon, port=0)
+        # Subscribed after the station: when this hears of a cycle, the image log has written it.
+        self._done: set[int] = set()
+        self._done_changed = threading.Condition()
+        self.daemon.events.subscribe(self._on_event)
         assert self.station.url is not None
         self.url = self.station.url.rstrip("/")
         self.error: BaseException | None = None
@@ -54,8 +59,18 @@ class StationService:
         except BaseException as exc:  # reported by the test
             self.error = exc
 
+    def _on_event(self, event: CellEvent) -> None:
+        if isinstance(event, CycleDone):
+            with self._done_changed:
+                self._done.add(event.record.cycle)
+                self._done_changed.notify_all()
+
     def cycle(self) -> CycleReading:
-        return self.plc.run_cycle(timeout_s=120.0)
+        """One PLC cycle, returned once the service's observers (image log, metrics, hub) have it too."""
+        reading = self.plc.run_cycle(timeout_s=120.0)
+        with self._done_changed:
+            assert self._done_changed.wait_for(lambda: reading.cycle in self._done, timeout=60.0)
+        return reading
 
     def failing_cycle(self) -> CycleReading:
         """A cycle on an empty, featureless view (as if the table were covered): refused by the real
