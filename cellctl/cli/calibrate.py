@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import cv2
-
-from cellctl.calib.zhang import MIN_PAIRS, CalibrationResult, Checkerboard, calibrate_views, detect_views, find_pairs
 from cellctl.errors import UserError
+
+if TYPE_CHECKING:
+    from cellctl.calib.zhang import CalibrationResult
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -28,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--chart", type=Path, metavar="PNG", help="per-pair error chart (default: NAME-errors.png next to the output)"
     )
     parser.add_argument(
-        "--min-pairs", type=int, default=MIN_PAIRS, metavar="N", help=f"never keep fewer pairs (default {MIN_PAIRS})"
+        "--min-pairs", type=int, metavar="N", help="never keep fewer pairs (default: cellctl.calib.zhang.MIN_PAIRS, 6)"
     )
     parser.add_argument(
         "--fit-k3", action="store_true", help="also fit the third radial distortion term (wide-angle lenses)"
@@ -37,6 +38,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # Imported here, not at the top: `cellctl --help` and the light commands must not load them.
+    import cv2
+
+    from cellctl.calib.zhang import MIN_PAIRS, Checkerboard, calibrate_views, detect_views, find_pairs
+
     try:
         board = Checkerboard.from_spec(args.board, args.square)
     except ValueError as exc:
@@ -48,7 +54,9 @@ def run(args: argparse.Namespace) -> int:
     for view in views:
         if not view.usable:
             print(f"skipping pair {view.name}: {view.problem}")
-    result = calibrate_views(views, board, min_pairs=args.min_pairs, fit_k3=args.fit_k3)
+    result = calibrate_views(
+        views, board, min_pairs=MIN_PAIRS if args.min_pairs is None else args.min_pairs, fit_k3=args.fit_k3
+    )
     print(result.table())
     result.calibration.save(args.output)
     chart = args.chart or args.output.with_name(f"{args.output.stem}-errors.png")

@@ -12,11 +12,6 @@ import argparse
 import time
 from pathlib import Path
 
-import cv2
-import numpy as np
-
-from cellctl.cli.demo_cell import run_cell_demo
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -41,10 +36,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.teddy:
         return run_teddy(args)
+    from cellctl.cli.demo_cell import run_cell_demo  # pymodbus: loaded only when the demo runs
+
     return run_cell_demo(args.config, args.port, args.cycles, Path(args.out))
 
 
 def run_teddy(args: argparse.Namespace) -> int:
+    import cv2
+    import numpy as np
+
     from cellctl.eval.middlebury import bad_pixel_percent, load_scene
     from cellctl.eval.pictures import disparity_colour
     from cellctl.stereo import StereoMatcher

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-
-import cv2
-import numpy as np
+from typing import TYPE_CHECKING
 
 from cellctl.errors import UserError
-from cellctl.vision.calibration import Calibration
-from cellctl.vision.rectification import side_by_side, vertical_disparity
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +30,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # Imported here, not at the top: `cellctl --help` and the light commands must not load them.
+    import cv2
+
+    from cellctl.vision.calibration import Calibration
+    from cellctl.vision.rectification import side_by_side, vertical_disparity
+
     calibration = Calibration.load(args.calibration)
     left, right = _read(args.left), _read(args.right)
     for name, image in ((args.left, left), (args.right, right)):
@@ -55,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(path: Path) -> np.ndarray:
+    import cv2
+
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise UserError(f"cannot read image {path}: check the path and that it is a PNG/JPEG/BMP/TIFF file")

@@ -10,8 +10,6 @@ import sys
 import threading
 from pathlib import Path
 
-from cellctl.service.config import CellConfig
-
 # syslog priorities for systemd's "<N>" line prefix (SyslogLevelPrefix=, on by default for services).
 _PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3, logging.CRITICAL: 2}
 
@@ -62,6 +60,7 @@ def setup_logging(verbose: bool) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from cellctl.service.config import CellConfig
     from cellctl.service.daemon import Daemon
     from cellctl.service.station import Station
 

@@ -5,11 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cellctl.calib.zhang import Checkerboard
 from cellctl.errors import UserError
-from cellctl.sim.checkerboard import BAD_KINDS, CheckerboardSimulator, write_pairs
-from cellctl.sim.rig import default_rig
-from cellctl.vision.calibration import Calibration
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -31,6 +27,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # Imported here, not at the top: `cellctl --help` and the light commands must not load them.
+    from cellctl.calib.zhang import Checkerboard
+    from cellctl.sim.checkerboard import BAD_KINDS, CheckerboardSimulator, write_pairs
+    from cellctl.sim.rig import default_rig
+    from cellctl.vision.calibration import Calibration
+
     if args.pairs < 1:
         raise UserError(f"--pairs must be at least 1, got {args.pairs}")
     try:

@@ -29,9 +29,10 @@ from cellctl.service.metrics import CellMetrics
 from cellctl.service.operator_text import describe_code
 from cellctl.service.station.actions import CameraActions
 from cellctl.service.station.calibration_info import calibration_facts
-from cellctl.service.station.history import HistoryFilter, local_time, to_csv, trends
+from cellctl.service.station.history import HistoryFilter, to_csv, trends
 from cellctl.service.station.hub import StationHub
 from cellctl.service.station.live import LiveView
+from cellctl.service.timefmt import local_time
 
 HERE = Path(__file__).parent
 SSE_POLL_S = 0.25  # how often a live page's stream looks for news; events are rare, the check is cheap

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cellctl.service.station.history import local_time
+from cellctl.service.timefmt import local_time
 from cellctl.vision.calibration import Calibration
 
 

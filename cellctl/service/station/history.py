@@ -6,10 +6,10 @@ import csv
 import io
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import datetime
 from html import escape
 
 from cellctl.service.journal import CycleRecord
+from cellctl.service.timefmt import iso_time
 
 CSV_FIELDS = (
     "id",
@@ -23,16 +23,6 @@ CSV_FIELDS = (
     "toe_height_mm",
     "cycle_time_ms",
 )
-
-
-def local_time(unix_s: float) -> str:
-    """Wall-clock time in the machine's zone, with the zone named (what the operator's watch shows)."""
-    return datetime.fromtimestamp(unix_s).astimezone().strftime("%Y-%m-%d %H:%M:%S %Z")
-
-
-def iso_time(unix_s: float) -> str:
-    """ISO 8601 with the UTC offset, for files other programs read."""
-    return datetime.fromtimestamp(unix_s).astimezone().isoformat(timespec="milliseconds")
 
 
 @dataclass(frozen=True)
