@@ -22,9 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("directory", metavar="DIR", type=Path, help="directory with left_NN.png / right_NN.png pairs")
     parser.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners of the board, e.g. 9x6")
     parser.add_argument("--square", required=True, type=float, metavar="MM", help="side of one square, mm")
-    parser.add_argument(
-        "-o", "--output", required=True, type=Path, metavar="calib.yaml", help="calibration file to write"
-    )
+    parser.add_argument("-o", "--out", required=True, type=Path, metavar="calib.yaml", help="calibration file to write")
     parser.add_argument(
         "--chart", type=Path, metavar="PNG", help="per-pair error chart (default: NAME-errors.png next to the output)"
     )
@@ -58,12 +56,12 @@ def run(args: argparse.Namespace) -> int:
         views, board, min_pairs=MIN_PAIRS if args.min_pairs is None else args.min_pairs, fit_k3=args.fit_k3
     )
     print(result.table())
-    result.calibration.save(args.output)
-    chart = args.chart or args.output.with_name(f"{args.output.stem}-errors.png")
+    result.calibration.save(args.out)
+    chart = args.chart or args.out.with_name(f"{args.out.stem}-errors.png")
     if not cv2.imwrite(str(chart), result.error_chart()):
         raise UserError(f"cannot write the error chart {chart}: check the directory exists and is writable")
-    _write_report(args.output, board_text, result)
-    print(f"wrote {args.output} and {chart}")
+    _write_report(args.out, board_text, result)
+    print(f"wrote {args.out} and {chart}")
     return 0
 
 

@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--data", help="with --teddy: Middlebury 2001-2003 folder (default ../shared/data/middlebury/2001-2003)"
     )
     p.add_argument(
-        "--out", default="demo-out", help="output folder: journal, PLY and overlays, Teddy PNG (default demo-out)"
+        "-o", "--out", default="demo-out", help="output folder: journal, PLY and overlays, Teddy PNG (default demo-out)"
     )
     p.set_defaults(func=run)
 

@@ -47,7 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     middlebury_parser.add_argument("--json", action="store_true", help="print JSON instead of markdown tables")
     middlebury_parser.add_argument(
-        "--out", type=Path, default=None, help="folder for middlebury.md, .csv, .json and one PNG grid per scene"
+        "-o", "--out", type=Path, default=None, help="folder for middlebury.md, .csv, .json and one PNG grid per scene"
     )
     middlebury_parser.set_defaults(func=run)
 

@@ -17,7 +17,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     and calib.yaml (the rig that took the pair) to the output directory. The same seed always gives the
     same sole, pose and noise.
     """
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="directory to write the scene to")
+    parser.add_argument("-o", "--out", required=True, type=Path, metavar="DIR", help="directory to write the scene to")
     parser.add_argument("--seed", type=int, default=0, help="sole shape, pose and noise (default 0)")
     # Checked in run(): the colours live with the renderer, which imports Open3D (slow for `--help`).
     parser.add_argument("--color", default="white", help="sole colour: white (default) or black")
