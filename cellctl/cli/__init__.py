@@ -26,6 +26,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "bench_sole",
     "results",
     "run",
+    "capture",
+    "check",
 )
 
 

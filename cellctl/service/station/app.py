@@ -136,16 +136,24 @@ def create_app(ctx: StationContext) -> Starlette:
         if (refusal := _refuse(ctx, request)) is not None:
             return refusal
         try:
-            result = await run_in_threadpool(ctx.actions.capture)
+            saved = await run_in_threadpool(ctx.actions.capture)
         except (CameraError, OSError) as exc:
             return JSONResponse({"error": str(exc)}, status_code=409)
-        return JSONResponse(result.to_dict())
+        return JSONResponse(
+            {
+                "name": saved.name,
+                "folder": str(saved.left.parent),
+                "line": saved.describe(),
+                "board_left": saved.board_left,
+                "board_right": saved.board_right,
+            }
+        )
 
     async def capture_preview(request: Request) -> Response:
         last = ctx.actions.last_capture
         if last is None:
             return PlainTextResponse("no pair captured yet", status_code=404)
-        return Response(last.preview_jpeg, media_type="image/jpeg", headers={"Cache-Control": "no-store"})
+        return Response(last[1], media_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
     async def calibration(request: Request) -> Response:
         facts = calibration_facts(ctx.hub.calib, ctx.calibration_path)

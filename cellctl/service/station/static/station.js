@@ -57,8 +57,7 @@
           const img = document.getElementById("rectified");
           img.src = "/calibration/rectified.jpg?t=" + Date.now(); img.hidden = false;
         } else {
-          const board = (v) => v === null ? "not checked" : (v ? "found" : "NOT found");
-          out.textContent = "saved pair " + body.name + " in " + body.folder + "; board left " + board(body.board_left) + ", right " + board(body.board_right);
+          out.textContent = "saved " + body.line + " in " + body.folder;
           const img = document.getElementById("capture-preview");
           img.src = "/captures/last.jpg?t=" + Date.now(); img.hidden = false;
         }
