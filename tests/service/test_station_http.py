@@ -82,7 +82,10 @@ def test_logged_cycles_replay_through_the_replay_backend_and_measure(cell: Stati
     done = subprocess.run([*command, "--json"], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     again = json.loads(done.stdout)
-    assert again["length_mm"] == pytest.approx(good.length_mm, abs=0.01)  # the same pair measures the same
+    # The same pair measures the same, within what the table fit's multithreaded RANSAC (Open3D segment_plane)
+    # varies from process to process (0.13 mm seen on this machine under load; see docs/station.md).
+    for name in ("length_mm", "heel_height_mm", "toe_height_mm"):
+        assert again[name] == pytest.approx(getattr(good, name), abs=0.5), name
 
 
 def test_actions_need_the_token(cell: StationService) -> None:
