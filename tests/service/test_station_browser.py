@@ -112,7 +112,6 @@ def test_a_failed_cycle_opens_its_pictures_from_the_history(cell: StationService
     browser.get(cell.url + "/history?status=error")
     rows = browser.find_elements(By.CSS_SELECTOR, "table.history tbody tr")
     assert rows and all("FAIL" in row.text for row in rows)
-    shot(browser, "history")
     rows[0].find_element(By.CSS_SELECTOR, "a.pics").click()
     for picture in ("cycle-overlay", "cycle-left", "cycle-right"):
         WebDriverWait(browser, WAIT_S).until(lambda d, p=picture: image_loaded(d, p))
@@ -142,3 +141,16 @@ def test_the_calibration_page_shows_the_loaded_calibration(cell: StationService,
     text = browser.find_element(By.TAG_NAME, "main").text
     assert "LOADED" in text and "640 × 512 px" in text
     shot(browser, "calibration")
+
+
+def test_the_history_shows_every_cycle_with_trends(cell: StationService, browser: WebDriver) -> None:
+    readings = [cell.cycle(), cell.cycle()]
+    browser.get(cell.url + "/history")
+    rows = browser.find_elements(By.CSS_SELECTOR, "table.history tbody tr")
+    assert len(rows) >= 4 and any("FAIL" in r.text for r in rows) and any("PASS" in r.text for r in rows)
+    assert f"{readings[-1].length_mm:.2f}" in rows[0].text  # newest first
+    plots = browser.find_elements(By.CSS_SELECTOR, "svg.trend")
+    assert [p.get_attribute("aria-label") for p in plots] == ["Length", "Heel height", "Toe height", "Cycle time"]
+    assert all(p.find_elements(By.CSS_SELECTOR, "polyline") for p in plots)
+    assert plots[0].find_elements(By.CSS_SELECTOR, "line.fail")  # the failed cycle is marked on the length axis
+    shot(browser, "history")
