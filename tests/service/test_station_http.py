@@ -108,3 +108,14 @@ def test_history_csv_has_iso_times_and_every_page_answers(cell: StationService) 
     for page in ("/", "/history", "/history?status=error&code=32", "/cameras", "/calibration", "/cameras/left.jpg"):
         assert cell.get(page)[0] == 200, page
     assert cell.get("/cycle/999999")[0] == 404
+
+
+def test_rectification_check_on_a_fresh_pair(cell: StationService) -> None:
+    status, body = cell.get("/api/rectification-check", method="POST")
+    assert status == 200, body
+    summary = json.loads(body)["summary"]
+    assert summary.startswith("residual vertical disparity")
+    rms = float(summary.split("RMS ")[1].split(" px")[0])
+    assert rms < 0.3  # the simulated rig is exactly calibrated
+    status, picture = cell.get("/calibration/rectified.jpg")
+    assert status == 200 and picture[:2] == b"\xff\xd8"

@@ -4,13 +4,16 @@ metrics from events, history filter and trend plots."""
 from __future__ import annotations
 
 import re
+import socket
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
+from starlette.applications import Starlette
 
-from cellctl.cameras.base import StereoFrame
+from cellctl.cameras.base import CameraError, StereoFrame
 from cellctl.cameras.replay import ReplayCameras
 from cellctl.service.config import CellConfig, ConfigError, ImageLogConfig
 from cellctl.service.events import CellState, CycleDone
@@ -19,7 +22,10 @@ from cellctl.service.journal import CycleRecord
 from cellctl.service.metrics import CellMetrics
 from cellctl.service.operator_text import OPERATOR_TEXT, describe_code
 from cellctl.service.station.history import HistoryFilter, trend_svg
+from cellctl.service.station.live import LiveView, Preview, measured_region
+from cellctl.service.station.server import WebServer
 from firmware_io.registers import ErrorCode
+from tests.sim_rig import half_size_rig
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
@@ -144,3 +150,58 @@ def test_history_filter_and_trend() -> None:
     svg = trend_svg([r.length_mm for r in records], "Length", "mm")
     assert svg.startswith("<svg") and svg.count('class="fail"') == 3 and "<polyline" in svg
     assert "no data yet" in trend_svg([None, None], "Heel", "mm")
+
+
+class CountingSource:
+    """A FrameSource that counts grabs."""
+
+    def __init__(self) -> None:
+        self.grabs = 0
+
+    def open(self) -> None:
+        pass
+
+    def grab_pair(self) -> StereoFrame:
+        self.grabs += 1
+        return frame(self.grabs)
+
+    def close(self) -> None:
+        pass
+
+
+def test_live_view_never_grabs_during_a_cycle() -> None:
+    source, lock = CountingSource(), threading.Lock()
+    state = {"now": CellState("busy", True, True, cycle=7)}
+    live = LiveView(source, lock, lambda: state["now"], None, (450.0, 650.0))
+    assert live.preview().note.startswith("paused: cycle 7") and source.grabs == 0
+    with pytest.raises(CameraError, match="measuring cycle 7"):
+        live.grab_idle()
+    state["now"] = CellState("ready", True, True)
+    with lock:  # the daemon is grabbing: the preview does not wait for it
+        live._last = Preview(None, "", 0.0)
+        assert live.preview().note.startswith("paused") and source.grabs == 0
+    live._last = Preview(None, "", 0.0)
+    shown = live.preview()
+    assert shown.note == "" and shown.frame is not None and source.grabs == 1
+    assert live.panel_jpeg("left")[:2] == b"\xff\xd8"  # a JPEG, from the cached preview
+    assert source.grabs == 1
+
+
+def test_measured_region_lies_in_the_image_and_shrinks_by_the_disparity() -> None:
+    rig = half_size_rig()
+    width, height = rig.image_size
+    for side in ("left", "right"):
+        region = measured_region(rig, (450.0, 650.0), side)
+        assert region[:, 0].min() > -5 and region[:, 0].max() < width + 5
+        assert region[:, 1].min() > -5 and region[:, 1].max() < height + 5
+        span = region[:, 0].max() - region[:, 0].min()
+        assert span < width - 0.5 * rig.focal_px * rig.baseline_mm / 450.0  # the unmatched strip is left out
+
+
+def test_the_web_server_names_a_busy_port() -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        server = WebServer(Starlette(), "127.0.0.1", busy.getsockname()[1])
+        with pytest.raises(ValueError, match=r"cannot listen on 127\.0\.0\.1.*\[station\]"):
+            server.start()
