@@ -7,9 +7,10 @@
     finally:
         station.stop()
 
-Modules: app (routes, pages), hub (latest state, last picture), live (camera preview), actions (capture,
-rectification check), history (table, CSV, trends), calibration_info, server (uvicorn in a thread);
-templates/ and static/ are package data.
+Modules: app (the Starlette app), pages (HTML), api (streams, actions, /metrics), context (what handlers
+read), hub (latest state, last picture), live (camera preview), actions (capture, rectification check),
+history (table, CSV, trends), calibration_info, server (uvicorn in a thread); templates/ and static/ are
+package data.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from cellctl.service.daemon import Daemon
 from cellctl.service.imagelog import ImageLog
 from cellctl.service.metrics import CellMetrics
 from cellctl.service.station.actions import CameraActions
-from cellctl.service.station.app import StationContext, create_app
+from cellctl.service.station.app import create_app
+from cellctl.service.station.context import StationContext
 from cellctl.service.station.hub import StationHub
 from cellctl.service.station.live import LiveView
 from cellctl.service.station.server import WebServer
