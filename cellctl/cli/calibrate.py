@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from cellctl.errors import UserError
 
 if TYPE_CHECKING:
-    from cellctl.calib.zhang import CalibrationResult
+    from cellctl.calib.report import CalibrationResult
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,7 +39,9 @@ def run(args: argparse.Namespace) -> int:
     # Imported here, not at the top: `cellctl --help` and the light commands must not load them.
     import cv2
 
-    from cellctl.calib.zhang import MIN_PAIRS, Checkerboard, calibrate_views, detect_views, find_pairs
+    from cellctl.calib.board import Checkerboard
+    from cellctl.calib.pairs import find_pairs
+    from cellctl.calib.zhang import MIN_PAIRS, calibrate_views, detect_views
 
     try:
         board = Checkerboard.from_spec(args.board, args.square)

@@ -30,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cellctl.calib.zhang import Checkerboard
+    from cellctl.calib.board import Checkerboard
     from cellctl.cameras import CameraError, open_frame_source
     from cellctl.service.capture import save_pair
     from cellctl.service.config import CellConfig

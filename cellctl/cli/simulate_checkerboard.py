@@ -33,7 +33,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # Imported here, not at the top: `cellctl --help` and the light commands must not load them.
-    from cellctl.calib.zhang import Checkerboard
+    from cellctl.calib.board import Checkerboard
     from cellctl.sim.checkerboard import BAD_KINDS, CheckerboardSimulator, write_pairs
     from cellctl.sim.rig import default_rig
     from cellctl.vision.calibration import Calibration

@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cellctl.calib.zhang import Checkerboard, find_corners
+from cellctl.calib.board import Checkerboard, find_corners
 from cellctl.cameras.base import StereoFrame
 
 _PAIR = re.compile(r"left_(\d+)\.png")

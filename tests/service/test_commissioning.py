@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cellctl.calib.zhang import Checkerboard
+from cellctl.calib.board import Checkerboard
 from cellctl.cli import main
 from cellctl.sim.checkerboard import CheckerboardSimulator, write_pairs
 from tests.sim_rig import half_size_rig, write_half_size_rig

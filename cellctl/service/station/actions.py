@@ -9,7 +9,7 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
-from cellctl.calib.zhang import Checkerboard
+from cellctl.calib.board import Checkerboard
 from cellctl.service.capture import SavedPair, save_pair
 from cellctl.service.station.hub import encode_jpeg, shrink
 from cellctl.service.station.live import LiveView
