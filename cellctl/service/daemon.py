@@ -266,10 +266,10 @@ class Daemon:
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         triggered_at = time.time() - (time.monotonic() - trigger.received_at)
         assert self._journal is not None
-        self._journal.record(
-            _record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
-        )
+        record = _record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
+        self._journal.record(record)
         self.link.publish_error(trigger.cycle, ErrorCode.CYCLE_ABORTED, cycle_time_ms=cycle_time_ms)
+        self.events.publish(CycleDone(record, None, None))
         log.warning("cycle %d: aborted, %s", trigger.cycle, reason)
 
     # ---- health --------------------------------------------------------------------------------
