@@ -4,8 +4,8 @@
     daemon.events.state                   # the latest CellState, from any thread
 
 The daemon publishes; it never knows who listens. Callbacks run in the daemon's thread after the PLC has its
-answer, so they must be quick (the image log writes a few PNGs for a failed cycle, ~0.2 s); an exception in a
-callback is logged and never reaches the cycle.
+answer, so they must be quick (the image log only queues its pictures for its own writer thread); an
+exception in a callback is logged and never reaches the cycle.
 """
 
 from __future__ import annotations

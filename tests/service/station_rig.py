@@ -40,7 +40,7 @@ class StationService:
     def __init__(self, config: CellConfig) -> None:
         self.daemon = Daemon(config)
         self.station = Station.attach(self.daemon, port=0)
-        # Subscribed after the station: when this hears of a cycle, the image log has written it.
+        # Subscribed after the station: when this hears of a cycle, the hub, metrics and image log have it.
         self._done: set[int] = set()
         self._done_changed = threading.Condition()
         self.daemon.events.subscribe(self._on_event)
@@ -70,6 +70,7 @@ class StationService:
         reading = self.plc.run_cycle(timeout_s=120.0)
         with self._done_changed:
             assert self._done_changed.wait_for(lambda: reading.cycle in self._done, timeout=60.0)
+        assert self.station.context.image_log.wait_written(60.0)
         return reading
 
     def failing_cycle(self) -> CycleReading:

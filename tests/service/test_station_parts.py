@@ -99,12 +99,14 @@ def test_image_log_keeps_failures_and_every_nth_good_and_replays(tmp_path: Path)
     log = ImageLog(tmp_path / "images", None, ImageLogConfig(every_nth_good=2, keep_cycles=100, max_mb=100))
     for i, ok in enumerate([True, False, True, True, True], start=1):
         log.on_event(CycleDone(record(i, ok), frame(i), None))
+    assert log.wait_written()
     assert [e.row_id for e in log.entries()] == [2, 3, 5]  # the failure, and the 2nd and 4th good cycles
     assert log.find(2) is not None and log.find(2).meta()["reason"] == "no sole in view"  # type: ignore[union-attr]
     replay = ReplayCameras(tmp_path / "images")
     first = replay.grab_pair()
     assert np.array_equal(first.left, frame(2).left) and np.array_equal(first.right, frame(2).right)
     log.on_event(CycleDone(record(6, False), None, None))  # no frame (camera error): nothing to log
+    assert log.wait_written()
     assert [e.row_id for e in log.entries()] == [2, 3, 5]
 
 
@@ -112,6 +114,7 @@ def test_image_log_retention_by_count_and_by_disk(tmp_path: Path) -> None:
     log = ImageLog(tmp_path / "images", None, ImageLogConfig(keep_cycles=3, max_mb=100))
     for i in range(1, 7):
         log.on_event(CycleDone(record(i, False), frame(i), None))
+    assert log.wait_written()
     assert [e.row_id for e in log.entries()] == [4, 5, 6]
     one_entry = sum(p.stat().st_size for p in (tmp_path / "images").iterdir()) / 3
     log.config = ImageLogConfig(keep_cycles=100, max_mb=1.5 * one_entry / 1e6)

@@ -78,3 +78,5 @@ class Station:
     def stop(self) -> None:
         if self.server is not None:
             self.server.stop()
+        if not self.context.image_log.wait_written(10.0):
+            log.warning("image log: some pictures were not written before the stop")
