@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -102,3 +103,21 @@ def test_results_reads_the_journal_without_open3d_or_opencv(tmp_path: Path) -> N
 def test_version() -> None:
     done = subprocess.run([sys.executable, "-m", "cellctl", "--version"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.startswith("cellctl ")
+
+
+def test_results_show_local_time_with_its_zone(tmp_path: Path) -> None:
+    from cellctl.service.journal import CycleRecord, Journal
+
+    journal = Journal.open(tmp_path)
+    journal.record(
+        CycleRecord(
+            cycle=1, triggered_at=1_767_225_600.0, status="error", error_code=30, cycle_time_ms=900.0, reason="x"
+        )
+    )
+    journal.close()
+    environment = {**os.environ, "TZ": "Europe/Berlin"}  # 2026-01-01 00:00 UTC is 01:00 CET there
+    command = [sys.executable, "-m", "cellctl", "results", "--state-dir", str(tmp_path)]
+    text = subprocess.run(command, capture_output=True, text=True, env=environment, timeout=120).stdout
+    assert text.startswith("2026-01-01 01:00:00 CET cycle 1: error 30")
+    table = subprocess.run([*command, "--csv"], capture_output=True, text=True, env=environment, timeout=120).stdout
+    assert "2026-01-01T01:00:00.000+01:00" in table
