@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
-from prometheus_client.core import CounterMetricFamily
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 from prometheus_client.registry import Collector
 
 from cellctl.service.events import CellEvent, CellState, CycleDone
@@ -88,9 +88,9 @@ class _LinkCollector(Collector):
         self.link = link
 
     def collect(self):  # noqa: ANN201 - prometheus_client's Collector protocol
-        clients = Gauge("cellctl_modbus_clients", "Modbus TCP clients connected now", registry=None)
-        clients.set(self.link.connected_clients)
-        yield from clients.collect()
+        yield GaugeMetricFamily(
+            "cellctl_modbus_clients", "Modbus TCP clients connected now", value=self.link.connected_clients
+        )
         stalls = CounterMetricFamily(
             "cellctl_heartbeat_stalls", "Times the heartbeat stopped because the controller loop went silent"
         )
