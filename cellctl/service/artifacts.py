@@ -1,11 +1,22 @@
 """What a cycle leaves for people: the sole's cloud as PLY and the left image with the glue path drawn.
 
-Written after the PLC has its answer; a failure here is logged and never fails the cycle.
+Written after the PLC has its answer, and only while the service is idle: the PLC may trigger again as
+soon as it has read a result, and on 2 cores artifacts written beside a cycle slowed its match by as much
+as they saved (docs/sole-benchmark.md). So `ArtifactWriter` keeps the newest few cycles' jobs and a
+low-priority thread writes them step by step, each step started only while no cycle runs; jobs that a
+busy line never leaves time for are dropped, oldest first (counted and logged). The journal is only
+touched from the daemon's thread (`attach_finished`), as SQLite connections belong to one thread. A failure
+here is logged and never fails a cycle.
 """
 
 from __future__ import annotations
 
+import collections
 import logging
+import os
+import threading
+from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 
@@ -18,35 +29,150 @@ from cellctl.vision.reconstruction import Reconstruction
 
 log = logging.getLogger(__name__)
 
-# Huffman coding only: lossless, ~20 % faster and smaller than zlib level 1 on camera images
-# (63 vs 79 ms for 1280x1024); the next trigger may be waiting for this.
+# Huffman coding only: lossless, ~20 % faster and smaller than zlib level 1 on camera images (63 vs 79 ms).
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
+MAX_PENDING = 4  # jobs kept waiting for idle time (each holds a frame pair and a cloud, ~20 MB)
+WRITER_NICE = 19  # the writer thread's niceness: the matcher's threads always win the cores
 
 
-def keep_artifacts(
-    journal: Journal,
-    record: CycleRecord,
-    frame: StereoFrame,
-    calib: Calibration,
-    reconstruction: Reconstruction,
-    measurement: SoleMeasurement,
-    keep: int,
-) -> None:
-    """PLY and overlay PNG of the cycle in its artifact folder, then prune to the newest `keep` cycles."""
-    if keep == 0 or record.id is None:
-        return
-    try:
-        folder = journal.artifact_dir(record.id)
-        folder.mkdir(parents=True, exist_ok=True)
-        ply = folder / f"cycle-{record.cycle}.ply"
+@dataclass(frozen=True)
+class ArtifactJob:
+    """One cycle's artifacts to write: everything needed, nothing shared with the next cycle."""
+
+    row_id: int
+    cycle: int
+    folder: Path
+    frame: StereoFrame
+    reconstruction: Reconstruction
+    measurement: SoleMeasurement
+
+
+@dataclass(frozen=True)
+class WrittenArtifacts:
+    row_id: int
+    cycle: int
+    ply: Path
+    overlay: Path
+
+
+class ArtifactWriter:
+    """Writes artifact jobs on a low-priority thread while `idle` is set; the daemon owns the journal side."""
+
+    def __init__(self, calib: Calibration, keep: int) -> None:
+        self.calib = calib
+        self.keep = keep
+        self.dropped = 0
+        self._pending: collections.deque[ArtifactJob] = collections.deque()
+        self._finished: collections.deque[WrittenArtifacts] = collections.deque()
+        self._lock = threading.Lock()
+        self._work = threading.Condition(self._lock)
+        self._idle = threading.Event()
+        self._closing = False
+        self._thread: threading.Thread | None = None
+
+    # ---- the daemon's side ------------------------------------------------------------------------
+
+    def submit(
+        self,
+        journal: Journal,
+        record: CycleRecord,
+        frame: StereoFrame,
+        result: Reconstruction,
+        measurement: SoleMeasurement,
+    ) -> None:
+        """Queue a measured cycle's artifacts (nothing is written now)."""
+        if self.keep == 0 or record.id is None:
+            return
+        job = ArtifactJob(record.id, record.cycle, journal.artifact_dir(record.id), frame, result, measurement)
+        with self._work:
+            self._pending.append(job)
+            limit = min(self.keep, MAX_PENDING)
+            while len(self._pending) > limit:
+                old = self._pending.popleft()
+                self.dropped += 1
+                log.info("cycle %d: artifacts skipped, no idle time before newer cycles", old.cycle)
+            self._start()
+            self._work.notify()
+
+    def set_idle(self, idle: bool) -> None:
+        """Whether the service waits for a trigger (the writer works) or runs a cycle (the writer waits)."""
+        if idle:
+            self._idle.set()
+        else:
+            self._idle.clear()
+
+    def attach_finished(self, journal: Journal) -> None:
+        """Record written artifacts in the journal and prune old ones (daemon thread, idle time)."""
+        while True:
+            with self._lock:
+                if not self._finished:
+                    return
+                done = self._finished.popleft()
+            try:
+                journal.attach_artifacts(done.row_id, done.ply, done.overlay)
+                journal.prune_artifacts(self.keep)
+            except Exception as exc:
+                log.warning("cycle %d: artifacts not recorded: %s", done.cycle, exc)
+
+    def flush(self, timeout_s: float) -> bool:
+        """Write what is pending now, whatever the idle state (at stop); True when all was written."""
+        self._idle.set()
+        with self._work:
+            return self._work.wait_for(lambda: not self._pending and not self._writing, timeout_s)
+
+    def close(self) -> None:
+        with self._work:
+            self._closing = True
+            self._work.notify()
+        self._idle.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+
+    # ---- the writer thread --------------------------------------------------------------------------
+
+    _writing = False
+
+    def _start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="artifact writer", daemon=True)
+            self._thread.start()
+
+    def _run(self) -> None:
+        try:  # Linux: a thread has its own niceness (setpriority on its thread id)
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), WRITER_NICE)
+        except (OSError, AttributeError) as exc:
+            log.debug("artifact writer keeps normal priority: %s", exc)
+        while True:
+            with self._work:
+                self._work.wait_for(lambda: self._pending or self._closing)
+                if self._closing:
+                    return
+                job = self._pending.popleft()
+                self._writing = True
+            try:
+                written = self._write(job)
+            except Exception as exc:
+                log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
+                written = None
+            with self._work:
+                if written is not None:
+                    self._finished.append(written)
+                self._writing = False
+                self._work.notify_all()
+
+    def _write(self, job: ArtifactJob) -> WrittenArtifacts:
+        """The job in steps, each started only while the service is idle."""
         import open3d as o3d
 
-        if not o3d.io.write_point_cloud(str(ply), reconstruction.point_cloud(), write_ascii=False):
+        self._idle.wait()
+        job.folder.mkdir(parents=True, exist_ok=True)
+        ply = job.folder / f"cycle-{job.cycle}.ply"
+        if not o3d.io.write_point_cloud(str(ply), job.reconstruction.point_cloud(), write_ascii=False):
             raise OSError(f"Open3D could not write {ply}")
-        overlay = folder / f"cycle-{record.cycle}-overlay.png"
-        if not cv2.imwrite(str(overlay), draw_on_left(frame.left, calib, measurement), PNG_FAST):
+        self._idle.wait()
+        picture = draw_on_left(job.frame.left, self.calib, job.measurement)
+        self._idle.wait()
+        overlay = job.folder / f"cycle-{job.cycle}-overlay.png"
+        if not cv2.imwrite(str(overlay), picture, PNG_FAST):
             raise OSError(f"cannot write {overlay}")
-        journal.attach_artifacts(record.id, ply, overlay)
-        journal.prune_artifacts(keep)
-    except Exception as exc:
-        log.warning("cycle %d: artifacts not kept: %s", record.cycle, exc)
+        return WrittenArtifacts(job.row_id, job.cycle, ply, overlay)
