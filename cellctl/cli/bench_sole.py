@@ -22,6 +22,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--soles", type=int, default=20, help="number of soles (default 20)")
     parser.add_argument("--first-seed", type=int, default=0, help="seed of the first sole (default 0)")
     parser.add_argument("--calib", metavar="calib.yaml", help="rig to simulate (default: the built-in simulated rig)")
+    parser.add_argument(
+        "--taught", action="store_true", help="teach each scene's empty table first (as `cellctl teach` at set-up)"
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of markdown")
     parser.set_defaults(func=run)
 
@@ -36,10 +39,13 @@ def run(args: argparse.Namespace) -> int:
     calib = Calibration.load(args.calib) if args.calib else default_rig()
     # Alternate colours over consecutive seeds, so both colours see every kind of shape and pose.
     soles = [(args.first_seed + i, "white" if i % 2 == 0 else "black") for i in range(args.soles)]
-    rows = bench_sole.bench_soles(calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr))
+    rows = bench_sole.bench_soles(
+        calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught
+    )
     if args.json:
         print(json.dumps(bench_sole.as_json(rows), indent=2))
     else:
         command = f"cellctl bench-sole --soles {args.soles} --first-seed {args.first_seed}"
+        command += " --taught" if args.taught else ""
         print(bench_sole.to_markdown(rows, command + (f" --calib {args.calib}" if args.calib else "")))
     return 0

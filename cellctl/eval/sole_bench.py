@@ -38,13 +38,23 @@ class SoleBenchRow:
 
 
 def bench_soles(
-    calib: Calibration, soles: list[tuple[int, str]], progress: Callable[[str], None] | None = None
+    calib: Calibration,
+    soles: list[tuple[int, str]],
+    progress: Callable[[str], None] | None = None,
+    taught: bool = False,
 ) -> list[SoleBenchRow]:
-    """Measure each (seed, colour) sole once and compare with its truth."""
+    """Measure each (seed, colour) sole once and compare with its truth.
+
+    taught: teach the empty table first (its own exposure of the scene's table, not timed), as a cell
+    does once at set-up (cellctl.vision.teach); else measure without a taught table.
+    """
     reconstructor = SoleReconstructor(calib)
     rows = []
     for seed, color in soles:
         scene = SoleScene.random(seed, color, calib)
+        if taught:
+            empty = scene.render_empty()
+            reconstructor = SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(empty.left, empty.right))
         pair = scene.render()
         start = time.perf_counter()
         reconstruction = reconstructor.reconstruct(pair.left, pair.right)

@@ -44,6 +44,7 @@ from cellctl.service.sdnotify import SystemdNotifier
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.teach import TaughtTable, TeachError, load_taught
 from firmware_io.handshake import Trigger
 from firmware_io.registers import MAX_GLUE_POINTS, ErrorCode
 from firmware_io.server import PlcLink
@@ -98,7 +99,9 @@ class Daemon:
             liveness_timeout_s=plc.liveness_timeout_s,
         )
         self._reconstructor = (
-            None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
+            None
+            if self.calib is None
+            else SoleReconstructor(self.calib, config.measure.depth_range_mm, taught=_load_taught(config, self.calib))
         )
         self._stop = threading.Event()
         self._stop_at = math.inf  # time.monotonic() of the stop request
@@ -335,6 +338,17 @@ def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | Non
     except (OSError, ValueError) as exc:
         log.error("calibration %s not usable: %s", config.calibration.path, exc)
         return None, str(exc)
+
+
+def _load_taught(config: CellConfig, calib: Calibration) -> TaughtTable | None:
+    """The table taught beside the calibration (`cellctl teach`), None if none or unusable (logged)."""
+    try:
+        taught = load_taught(config.calibration.path, calib)
+    except TeachError as exc:
+        log.error("taught table not used: %s", exc)
+        return None
+    log.info("taught table %s", "loaded" if taught is not None else "absent: measuring without (cellctl teach)")
+    return taught
 
 
 def _published_points(points: np.ndarray) -> np.ndarray:

@@ -108,7 +108,13 @@ class SceneRenderer:
     """Renders one scene (table and optional sole) through a calibrated rig."""
 
     def __init__(
-        self, calib: Calibration, camera_pose: np.ndarray, sole: SoleModel | None, color: str = "white", seed: int = 0
+        self,
+        calib: Calibration,
+        camera_pose: np.ndarray,
+        sole: SoleModel | None,
+        color: str = "white",
+        seed: int = 0,
+        noise_seed: int | None = None,
     ) -> None:
         if color not in SOLE_MATERIALS:
             raise ValueError(f"sole colour must be one of {', '.join(SOLE_MATERIALS)}, got {color!r}")
@@ -119,7 +125,8 @@ class SceneRenderer:
         rng = np.random.default_rng([seed, 7])
         self._table_texture = _Texture.fractal(rng, (-400.0, -350.0), (800.0, 700.0), 0.25, TABLE.octaves)
         self._sole_texture = _Texture.fractal(rng, (-5.0, -80.0), (320.0, 160.0), 0.2, self.material.octaves)
-        self._noise_rng = np.random.default_rng([seed, 11])
+        # The sensor noise may come from its own seed: the same table (textures from `seed`) shot again.
+        self._noise_rng = np.random.default_rng([seed if noise_seed is None else noise_seed, 11])
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(_table_mesh())  # geometry id 0 = TABLE_GEOMETRY
         self._parts = np.zeros(0, np.int32)

@@ -27,8 +27,16 @@ from cellctl.vision.cloud import StereoCloud, cloud_from_disparity, disparity_ra
 from cellctl.vision.search_region import SearchRegion, coarse_pair, coarse_range, find_region
 from cellctl.vision.segmentation import MIN_HEIGHT_MM, Reconstruction, Segmentation
 from cellctl.vision.table import TablePlane
+from cellctl.vision.teach import TaughtTable, teach_table
 
-__all__ = ["DEFAULT_DEPTH_RANGE_MM", "Reconstruction", "SoleReconstructor", "StereoCloud", "disparity_range"]
+__all__ = [
+    "DEFAULT_DEPTH_RANGE_MM",
+    "Reconstruction",
+    "SoleReconstructor",
+    "StereoCloud",
+    "TaughtTable",
+    "disparity_range",
+]
 
 DEFAULT_DEPTH_RANGE_MM: tuple[float, float] = (450.0, 650.0)  # covers a table 550 mm below the rig and soles on it
 # Only really measured pixels (no fill); the widest census window, because the sole's texture is weak:
@@ -48,12 +56,16 @@ class SoleReconstructor:
         depth_range_mm: tuple[float, float] = DEFAULT_DEPTH_RANGE_MM,
         table_plane: TablePlane | None = None,
         min_height_mm: float = MIN_HEIGHT_MM,
+        taught: TaughtTable | None = None,
         **matcher_params: object,
     ) -> None:
+        if taught is not None and not taught.matches(calib):
+            raise ValueError("the taught table was taught with another calibration: teach the empty table again")
         self.calib = calib
+        self.taught = taught
         self.depth_range_mm = (float(depth_range_mm[0]), float(depth_range_mm[1]))
         self.min_disparity, self.num_disparities = disparity_range(calib, self.depth_range_mm)
-        self.table_plane = table_plane
+        self.table_plane = table_plane if taught is None else taught.plane
         self.min_height_mm = float(min_height_mm)
         self._matcher_params = {**SOLE_MATCHER_PARAMS, **matcher_params}
         if self._matcher_params["fill"] != "none":
@@ -152,7 +164,11 @@ class SoleReconstructor:
 
     def segment(self, cloud: StereoCloud) -> Reconstruction:
         """Table plane, background removal, largest region and outlier removal on a measured cloud."""
-        return Segmentation(cloud, self.table_plane, self.min_height_mm).run()
+        return Segmentation(cloud, self.table_plane, self.min_height_mm, self.taught).run()
+
+    def teach(self, left: np.ndarray, right: np.ndarray) -> TaughtTable:
+        """The taught table from a raw pair of the EMPTY fixture (cellctl.vision.teach); TeachError if not empty."""
+        return teach_table(self.points_from_disparity(left, right), self.calib)
 
     def _stereo_matcher(self, low: int, num: int, coarse: bool = False):  # noqa: ANN202 - lazily imported core
         """One matcher per disparity range, kept: its buffers stay allocated between cycles of one size."""

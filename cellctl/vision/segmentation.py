@@ -25,10 +25,12 @@ import open3d as o3d
 
 from cellctl.errors import FailureKind
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.outliers import statistical_inliers
 from cellctl.vision.table import TABLE_INLIER_MM, TablePlane, find_table, refine_table
+from cellctl.vision.teach import TaughtTable, check_drift
 
 MIN_HEIGHT_MM = 3.0  # points lower than this belong to the table (its height noise is well below 1 mm)
 MAX_HEIGHT_MM = 150.0  # anything higher is not a sole lying on the table (a hand, the robot)
@@ -77,8 +79,15 @@ class Reconstruction:
 class Segmentation:
     """One run of the segmentation; a class only to keep the steps short and their shared state named."""
 
-    def __init__(self, cloud: StereoCloud, table_plane: TablePlane | None, min_height_mm: float) -> None:
+    def __init__(
+        self,
+        cloud: StereoCloud,
+        table_plane: TablePlane | None,
+        min_height_mm: float,
+        taught: TaughtTable | None = None,
+    ) -> None:
         self.cloud = cloud
+        self.taught = taught
         self.plane = table_plane
         self.min_height = min_height_mm
         self.timings = dict(cloud.timings)
@@ -105,6 +114,11 @@ class Segmentation:
             return self._fail(
                 FailureKind.NO_TABLE, "no table plane found: the table must fill most of the view, below the sole"
             )
+        if self.taught is not None:
+            drift = check_drift(self.taught, self.cloud.points)
+            self.timings["table_drift"] = time.perf_counter() - start
+            if drift.problem is not None:
+                return self._fail(FailureKind.TABLE_MOVED, drift.problem)
         transform = self.plane.camera_to_table()
         points = self.cloud.points @ transform[:3, :3].T + transform[:3, 3]
         # The table frame's z is the height above the plane: no second pass over the ~10^6 points for it.
@@ -132,8 +146,17 @@ class Segmentation:
         footprint = _footprint(raster, every, xy[high])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, no_sole)
-        keep = high[self._colour_filter(points, footprint, high)]
-        if not self.colour_filter:
+        if self.taught is not None:
+            changed = self._change_filter(points, footprint, high)
+            if changed is None:
+                return self._fail(
+                    FailureKind.TABLE_MOVED,
+                    "too little of the taught table is visible around the sole to compare with: clear the table",
+                )
+            keep = high[changed]
+        else:
+            keep = high[self._colour_filter(points, footprint, high)]
+        if self.taught is None and not self.colour_filter:
             # Without the colour edge, matching halos widen the sole by 1-5 mm (simulated soles): no length.
             return self._fail(
                 FailureKind.COLOURS_TOO_SIMILAR,
@@ -181,6 +204,23 @@ class Segmentation:
         mask[y, x] = 1
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
         return cv2.erode(mask, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
+
+    def _change_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray | None:
+        """Which of the `high` points (indices) show something else than the taught table (cellctl.vision.change).
+
+        High AND changed: stereo edge fattening drags the sole's height onto table pixels next to it, but
+        those pixels still show the table's own texture, so they are unchanged against the reference.
+        """
+        assert self.taught is not None and self.cloud.rectified is not None
+        current, reference = self.cloud.rectified[0], self.taught.left
+        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
+        outside = table[~footprint.dilated(15.0).contains(points[table, :2])]
+        test = ChangeTest.fit(current, reference, np.round(self.cloud.pixels[outside]).astype(np.int64))
+        if test is None:
+            return None
+        changed = test.changed(current, reference)
+        x, y = np.round(self.cloud.pixels[high]).astype(np.int64).T
+        return changed[y, x]
 
     def _colour_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray:
         """Which of the `high` points (indices) are sole-coloured (all when the colours do not separate).
