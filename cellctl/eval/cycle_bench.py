@@ -126,9 +126,8 @@ def bench_cycles(
     pairs = [scene.render() for scene in scenes]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]
     empty = SoleScene(0, soles[0][1], calib, scenes[0].camera_pose, None).render()
-    reconstructor = SoleReconstructor(calib, depth_range_mm)
-    if reconstructor.teach(empty.left, empty.right) is None:
-        raise ValueError("no table plane found on the empty table: the simulated rig does not see the table")
+    taught = SoleReconstructor(calib, depth_range_mm).teach(empty.left, empty.right)  # `cellctl teach`
+    reconstructor = SoleReconstructor(calib, depth_range_mm, taught=taught)
     disparities = (reconstructor.min_disparity, reconstructor.num_disparities)
 
     def cycle(which: int) -> SoleMeasurement:

@@ -226,7 +226,7 @@ class Daemon:
             log.warning("warm-up skipped, no pair: %s", exc)
             return
         if self._reconstructor.table_plane is None:
-            plane = self._reconstructor.teach(frame.left, frame.right)
+            plane = self._reconstructor.learn_table(frame.left, frame.right)
             log.info("table plane %s", "learnt from the warm-up pair" if plane is not None else "NOT found")
         measure = self.config.measure
         result = measure_frame(

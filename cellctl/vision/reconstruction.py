@@ -7,7 +7,7 @@
 `SoleReconstructor.reconstruct(left, right)` runs all of it; `points_from_disparity` and `segment` are the
 two halves, so a cloud from another source (e.g. the simulator's true depth) can be segmented the same way.
 
-With a known table plane (given, or learnt once with `teach`) the cycle matches only what can be the sole
+With a known table plane (taught, given, or learnt once with `learn_table`) the cycle matches only what can be the sole
 (cellctl.vision.search_region): a coarse match finds what stands above the table, the full-resolution
 match covers that region and the band of disparities from the table to its top. Whenever that shortcut
 cannot be trusted (the table is not where it was, nothing found above it, the sole reaches the region's
@@ -78,9 +78,9 @@ class SoleReconstructor:
         self.last_region: SearchRegion | None = None  # the region the last reconstruct matched (None: whole pair)
         self.last_fallback: str = ""  # why the last reconstruct matched the whole pair, when it had a plane
 
-    def teach(self, left: np.ndarray, right: np.ndarray) -> TablePlane | None:
-        """Find the table plane on one pair (RANSAC and image refinement, the sole may lie on the table) and
-        keep it for the following cycles; None (and nothing kept) when no table is found."""
+    def learn_table(self, left: np.ndarray, right: np.ndarray) -> TablePlane | None:
+        """Without a taught table: find the table plane on one pair (RANSAC and image refinement; a sole may
+        lie on the table) and keep it for the following cycles; None (nothing kept) when no table is found."""
         self.table_plane = None
         plane = self.reconstruct(left, right).table_plane
         self.table_plane = plane
