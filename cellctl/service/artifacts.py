@@ -15,10 +15,12 @@ import collections
 import logging
 import os
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from cellctl.cameras.base import StereoFrame
 from cellctl.service.journal import CycleRecord, Journal
@@ -66,8 +68,9 @@ class ArtifactWriter:
         self._finished: collections.deque[WrittenArtifacts] = collections.deque()
         self._lock = threading.Lock()
         self._work = threading.Condition(self._lock)
-        self._idle = threading.Event()
+        self._idle = False  # the service waits for a trigger: the writer may work
         self._closing = False
+        self._writing = False
         self._thread: threading.Thread | None = None
 
     # ---- the daemon's side ------------------------------------------------------------------------
@@ -92,14 +95,13 @@ class ArtifactWriter:
                 self.dropped += 1
                 log.info("cycle %d: artifacts skipped, no idle time before newer cycles", old.cycle)
             self._start()
-            self._work.notify()
+            self._work.notify_all()
 
     def set_idle(self, idle: bool) -> None:
         """Whether the service waits for a trigger (the writer works) or runs a cycle (the writer waits)."""
-        if idle:
-            self._idle.set()
-        else:
-            self._idle.clear()
+        with self._work:
+            self._idle = idle
+            self._work.notify_all()
 
     def attach_finished(self, journal: Journal) -> None:
         """Record written artifacts in the journal and prune old ones (daemon thread, idle time)."""
@@ -116,21 +118,19 @@ class ArtifactWriter:
 
     def flush(self, timeout_s: float) -> bool:
         """Write what is pending now, whatever the idle state (at stop); True when all was written."""
-        self._idle.set()
         with self._work:
+            self._idle = True
+            self._work.notify_all()
             return self._work.wait_for(lambda: not self._pending and not self._writing, timeout_s)
 
     def close(self) -> None:
         with self._work:
             self._closing = True
-            self._work.notify()
-        self._idle.set()
+            self._work.notify_all()
         if self._thread is not None:
             self._thread.join(5.0)
 
     # ---- the writer thread --------------------------------------------------------------------------
-
-    _writing = False
 
     def _start(self) -> None:
         if self._thread is None:
@@ -144,7 +144,7 @@ class ArtifactWriter:
             log.debug("artifact writer keeps normal priority: %s", exc)
         while True:
             with self._work:
-                self._work.wait_for(lambda: self._pending or self._closing)
+                self._work.wait_for(lambda: (self._pending and self._idle) or self._closing)
                 if self._closing:
                     return
                 job = self._pending.popleft()
@@ -161,18 +161,34 @@ class ArtifactWriter:
                 self._work.notify_all()
 
     def _write(self, job: ArtifactJob) -> WrittenArtifacts:
-        """The job in steps, each started only while the service is idle."""
-        import open3d as o3d
+        """The job's steps, each started only while the service is idle."""
+        for step in self._steps(job):
+            with self._work:
+                self._work.wait_for(lambda: self._idle or self._closing)
+            step()
+        return WrittenArtifacts(job.row_id, job.cycle, *_paths(job))
 
-        self._idle.wait()
-        job.folder.mkdir(parents=True, exist_ok=True)
-        ply = job.folder / f"cycle-{job.cycle}.ply"
-        if not o3d.io.write_point_cloud(str(ply), job.reconstruction.point_cloud(), write_ascii=False):
-            raise OSError(f"Open3D could not write {ply}")
-        self._idle.wait()
-        picture = draw_on_left(job.frame.left, self.calib, job.measurement)
-        self._idle.wait()
-        overlay = job.folder / f"cycle-{job.cycle}-overlay.png"
-        if not cv2.imwrite(str(overlay), picture, PNG_FAST):
-            raise OSError(f"cannot write {overlay}")
-        return WrittenArtifacts(job.row_id, job.cycle, ply, overlay)
+    def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
+        """Short steps (tens of ms each): a trigger arriving meanwhile waits for at most one of them."""
+        ply, overlay = _paths(job)
+        picture: list[np.ndarray] = []
+
+        def write_ply() -> None:
+            import open3d as o3d
+
+            job.folder.mkdir(parents=True, exist_ok=True)
+            if not o3d.io.write_point_cloud(str(ply), job.reconstruction.point_cloud(), write_ascii=False):
+                raise OSError(f"Open3D could not write {ply}")
+
+        def draw() -> None:
+            picture.append(draw_on_left(job.frame.left, self.calib, job.measurement))
+
+        def write_png() -> None:
+            if not cv2.imwrite(str(overlay), picture[0], PNG_FAST):
+                raise OSError(f"cannot write {overlay}")
+
+        return [write_ply, draw, write_png]
+
+
+def _paths(job: ArtifactJob) -> tuple[Path, Path]:
+    return job.folder / f"cycle-{job.cycle}.ply", job.folder / f"cycle-{job.cycle}-overlay.png"

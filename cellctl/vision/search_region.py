@@ -27,11 +27,11 @@ from cellctl.vision.table import TablePlane
 
 COARSE_SCALE = 4  # the coarse match runs at 1/4 of the resolution: 1/16 of the pixels, 1/4 of the disparities
 ABOVE_TABLE_MM = 6.0  # coarse pixels this far above the plane mark the object (well above coarse noise, ~2 mm)
-REGION_MARGIN_MM = 30.0  # table kept around the object: the colour filter takes the table 10 mm out and beyond
-BAND_MARGIN_PX = 4  # disparities added below the table and above the highest coarse disparity
-COARSE_ERROR_PX = COARSE_SCALE  # one coarse disparity step in full-resolution pixels
+REGION_MARGIN_MM = 25.0  # table kept around the object: the colour and change filters take it from 10-15 mm out
+BAND_MARGIN_PX = 2  # disparities added below the table and above the highest coarse disparity
+COARSE_ERROR_PX = COARSE_SCALE // 2  # half a coarse step: the coarse map is sub-pixel, its error well below
 REGION_ALIGN_PX = 16  # region sides rounded out to this: few distinct sizes, so the matcher's buffers are reused
-BAND_ALIGN = 8  # disparity counts rounded up to this, for the same reason
+BAND_ALIGN = 4  # disparity counts rounded up to this, for the same reason
 MAX_TABLE_SHIFT_PX = 1.5  # median coarse table disparity off the plane by more: the table is not where taught
 MIN_OBJECT_PX = 50  # fewer coarse pixels above the table: nothing there (noise)
 
