@@ -28,7 +28,7 @@ from firmware_io.endpoints import TcpEndpoint
 from firmware_io.plc_sim import CycleReading, PlcSimError, PlcSimulator
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "deploy" / "cell-sim.toml"
-START_TIMEOUT_S = 120.0  # the simulated cameras render all scenes (a few s each) before READY
+START_TIMEOUT_S = 300.0  # the simulated cameras render all scenes (a few s each) and the service warms up
 HH4_RUNS = 5  # OpenCV HH4 matches timed before the cycles and again after them
 
 
