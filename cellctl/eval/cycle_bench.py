@@ -118,16 +118,24 @@ def bench_cycles(
     soles: tuple[tuple[int, str], ...] = DEFAULT_SOLES,
     depth_range_mm: tuple[float, float] = DEFAULT_DEPTH_RANGE_MM,
     progress: Callable[[str], None] | None = None,
+    whole_pair: bool = False,
 ) -> CycleBench:
-    """`cycles` cycles over the rendered soles in turn, each followed by one HH4 match of the first pair."""
+    """`cycles` cycles over the rendered soles in turn, each followed by one HH4 match of the first pair.
+
+    whole_pair: the cycle as it was before the search region (no taught table: the table found in every
+    cycle, the whole pair matched over the whole range), for comparison.
+    """
     if cycles < 1:
         raise ValueError(f"cycles must be at least 1, got {cycles}")
     scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
     pairs = [scene.render() for scene in scenes]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]
     empty = SoleScene(0, soles[0][1], calib, scenes[0].camera_pose, None).render()
-    taught = SoleReconstructor(calib, depth_range_mm).teach(empty.left, empty.right)  # `cellctl teach`
-    reconstructor = SoleReconstructor(calib, depth_range_mm, taught=taught)
+    if whole_pair:
+        reconstructor = SoleReconstructor(calib, depth_range_mm, search_region=False)
+    else:
+        taught = SoleReconstructor(calib, depth_range_mm).teach(empty.left, empty.right)  # `cellctl teach`
+        reconstructor = SoleReconstructor(calib, depth_range_mm, taught=taught)
     disparities = (reconstructor.min_disparity, reconstructor.num_disparities)
 
     def cycle(which: int) -> SoleMeasurement:
