@@ -39,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     import cv2
 
     from cellctl.vision.calibration import Calibration
-    from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
+    from cellctl.vision.defaults import DEPTH_RANGE_MM
+    from cellctl.vision.reconstruction import SoleReconstructor
     from cellctl.vision.teach import TeachError, save_taught
 
     calib = Calibration.load(args.calib)
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         if image is None:
             raise UserError(f"cannot read image {path}: give the path of a PNG or JPEG of the empty table")
         images.append(image)
-    depth_range = tuple(args.depth_range) if args.depth_range else DEFAULT_DEPTH_RANGE_MM
+    depth_range = tuple(args.depth_range) if args.depth_range else DEPTH_RANGE_MM
     try:
         taught = SoleReconstructor(calib, depth_range).teach(images[0], images[1])
     except TeachError as exc:

@@ -17,7 +17,8 @@ import numpy as np
 
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
-from cellctl.vision.measurement import GLUE_OFFSET_MM, measure_sole
+from cellctl.vision.defaults import GLUE_OFFSET_MM
+from cellctl.vision.measurement import measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
 
 
@@ -35,6 +36,8 @@ class SoleBenchRow:
     glue_height_error_max_mm: float | None
     glue_normal_error_max_deg: float | None
     seconds: float
+    variations: str = "plain"  # matrix variations of the scene, "+"-joined (cellctl.sim.look)
+    failure: str | None = None  # FailureKind value of a refusal
 
 
 def bench_soles(
@@ -43,51 +46,82 @@ def bench_soles(
     progress: Callable[[str], None] | None = None,
     taught: bool = False,
 ) -> list[SoleBenchRow]:
-    """Measure each (seed, colour) sole once and compare with its truth.
+    """Measure each (seed, colour) plain sole once and compare with its truth.
 
-    taught: teach the empty table first (its own exposure of the scene's table, not timed), as a cell
-    does once at set-up (cellctl.vision.teach); else measure without a taught table.
+    taught: teach each scene's empty table first (not timed), as a cell does once at set-up
+    (cellctl.vision.teach); else measure without a taught table.
     """
     reconstructor = SoleReconstructor(calib)
     rows = []
     for seed, color in soles:
         scene = SoleScene.random(seed, color, calib)
-        if taught:
-            empty = scene.render_empty()
-            reconstructor = SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(empty.left, empty.right))
-        pair = scene.render()
-        start = time.perf_counter()
-        reconstruction = reconstructor.reconstruct(pair.left, pair.right)
-        result = measure_sole(reconstruction)
-        seconds = time.perf_counter() - start
-        truth = scene.sole.truth()
-        row = SoleBenchRow(
-            seed, color, truth.length_mm, result.valid, result.reason, None, None, None, None, None, None, seconds
-        )
-        if result.valid:
-            row.length_error_mm = result.length_mm - truth.length_mm
-            row.heel_error_mm = result.heel_height_mm - truth.heel_height_mm
-            row.toe_error_mm = result.toe_height_mm - truth.toe_height_mm
-            transform = scene.table_from_measured(result.camera_to_table)
-            points = result.glue_path.points @ transform[:3, :3].T + transform[:3, 3]
-            normals = result.glue_path.normals @ transform[:3, :3].T
-            outline = scene.sole.outline_table(4000).astype(np.float32).reshape(-1, 1, 2)
-            inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in points[:, :2]])
-            row.glue_inset_error_max_mm = float(np.abs(inset - GLUE_OFFSET_MM).max())
-            row.glue_height_error_max_mm = float(np.abs(points[:, 2] - scene.sole.top_height_at(points[:, :2])).max())
-            cosines = np.clip(np.sum(normals * scene.sole.top_normal_at(points[:, :2]), axis=1), -1.0, 1.0)
-            row.glue_normal_error_max_deg = float(np.degrees(np.arccos(cosines)).max())
-        rows.append(row)
+        rows.append(measure_scene(taught_reconstructor(calib, scene) if taught else reconstructor, scene))
         if progress:
-            progress(_row_text(row))
+            progress(_row_text(rows[-1]))
     return rows
+
+
+def taught_reconstructor(calib: Calibration, scene: SoleScene) -> SoleReconstructor:
+    """A reconstructor with the scene's empty table taught from its own exposure (new sensor noise)."""
+    empty = scene.render_empty()
+    return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(empty.left, empty.right))
+
+
+def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain") -> SoleBenchRow:
+    """Render one scene (not timed), measure it like `cellctl measure` (timed) and compare with its truth."""
+    assert scene.sole is not None
+    pair = scene.render()
+    start = time.perf_counter()
+    reconstruction = reconstructor.reconstruct(pair.left, pair.right)
+    result = measure_sole(reconstruction)
+    seconds = time.perf_counter() - start
+    truth = scene.sole.truth()
+    row = SoleBenchRow(
+        scene.seed,
+        scene.color,
+        truth.length_mm,
+        result.valid,
+        result.reason,
+        None,
+        None,
+        None,
+        None,
+        None,
+        None,
+        seconds,
+        variations,
+        None if result.failure is None else result.failure.value,
+    )
+    if result.valid:
+        assert result.length_mm is not None and result.heel_height_mm is not None
+        assert result.toe_height_mm is not None and result.glue_path is not None
+        row.length_error_mm = result.length_mm - truth.length_mm
+        row.heel_error_mm = result.heel_height_mm - truth.heel_height_mm
+        row.toe_error_mm = result.toe_height_mm - truth.toe_height_mm
+        transform = scene.table_from_measured(result.camera_to_table)
+        points = result.glue_path.points @ transform[:3, :3].T + transform[:3, 3]
+        normals = result.glue_path.normals @ transform[:3, :3].T
+        inset, height, normal = glue_truth(scene, points[:, :2])
+        row.glue_inset_error_max_mm = float(np.abs(inset - GLUE_OFFSET_MM).max())
+        row.glue_height_error_max_mm = float(np.abs(points[:, 2] - height).max())
+        cosines = np.clip(np.sum(normals * normal, axis=1), -1.0, 1.0)
+        row.glue_normal_error_max_deg = float(np.degrees(np.arccos(cosines)).max())
+    return row
+
+
+def glue_truth(scene: SoleScene, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At table points: distance inside the true footprint outline, true top height and true surface normal."""
+    assert scene.sole is not None
+    outline = scene.sole.footprint_table().astype(np.float32).reshape(-1, 1, 2)
+    inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in xy])
+    return inset, scene.sole.top_height_at(xy), scene.sole.top_normal_at(xy)
 
 
 def _row_text(row: SoleBenchRow) -> str:
     if not row.valid:
-        return f"sole {row.seed} {row.color}: NOT MEASURED: {row.reason}"
+        return f"sole {row.seed} {row.color} {row.variations}: NOT MEASURED: {row.reason}"
     return (
-        f"sole {row.seed} {row.color}: length {row.length_error_mm:+.2f}, heel {row.heel_error_mm:+.2f}, "
+        f"sole {row.seed} {row.color} {row.variations}: length {row.length_error_mm:+.2f}, heel {row.heel_error_mm:+.2f}, "
         f"toe {row.toe_error_mm:+.2f} mm, {row.seconds:.2f} s"
     )
 

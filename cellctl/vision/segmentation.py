@@ -39,6 +39,9 @@ MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles
 BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
 FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is not quantised to a coarse grid
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
+FOOTPRINT_OPEN_MM = 1.0  # specks thinner than this go; a pointed toe's tip (radius >= 0.5 mm) stays
+WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
+EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 
 
@@ -62,6 +65,11 @@ class Reconstruction:
     calibration: Calibration | None = None
     rectified: tuple[np.ndarray, np.ndarray] | None = None  # grey float32 rectified pair
     sole_mask: np.ndarray | None = None  # bool, rectified left pixels on the sole (off its very edge)
+    # The depth step on the footprint's raster, for the outline's self-check (cellctl.vision.checks):
+    raised: Footprint | None = None  # cells where most measured points rise above the table
+    measured_cells: Footprint | None = None  # cells with any measured point
+    taught: TaughtTable | None = None  # the taught table the sole was found against, if any
+    changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
 
     @property
     def valid(self) -> bool:
@@ -96,6 +104,9 @@ class Segmentation:
         self.transform: np.ndarray | None = None
         self.colour_filter = False
         self.separation = 0.0
+        self.raised: Footprint | None = None  # cells where most measured points rise above the table
+        self.measured_cells: Footprint | None = None  # cells with any measured point
+        self.changed_right: np.ndarray | None = None
 
     def run(self) -> Reconstruction:
         if self.fraction < MIN_VALID_FRACTION:
@@ -146,6 +157,12 @@ class Segmentation:
         footprint = _footprint(raster, every, xy[high])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, no_sole)
+        high_counts = raster.counts(xy[high])
+        # The raster is finer than the pixels: cells between measured ones are filled from their neighbours.
+        self.raised = Footprint(
+            ((high_counts > 0) & (2 * high_counts >= every)).astype(np.uint8), raster.origin, raster.cell_mm
+        ).morphology(close_mm=1.5, open_mm=0.0)
+        self.measured_cells = Footprint((every > 0).astype(np.uint8), raster.origin, raster.cell_mm).dilated(0.75)
         if self.taught is not None:
             changed = self._change_filter(points, footprint, high)
             if changed is None:
@@ -153,7 +170,7 @@ class Segmentation:
                     FailureKind.TABLE_MOVED,
                     "too little of the taught table is visible around the sole to compare with: clear the table",
                 )
-            keep = high[changed]
+            keep = changed
         else:
             keep = high[self._colour_filter(points, footprint, high)]
         if self.taught is None and not self.colour_filter:
@@ -167,7 +184,7 @@ class Segmentation:
         footprint = _footprint(raster, every, xy[keep])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour")
-        index = keep[footprint.contains(xy[keep])]
+        index = keep[footprint.contains(xy[keep]) & (z[keep] > self.min_height)]  # the foot of a wall: outline only
         self.timings["background"] = time.perf_counter() - start
         start = time.perf_counter()
         index = self._without_outliers(index, points)
@@ -202,14 +219,16 @@ class Segmentation:
         mask = np.zeros((height, width), np.uint8)
         x, y = np.round(self.cloud.pixels[index]).astype(int).T
         mask[y, x] = 1
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-        return cv2.erode(mask, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
+        closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+        return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
 
     def _change_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray | None:
-        """Which of the `high` points (indices) show something else than the taught table (cellctl.vision.change).
+        """The sole's points (indices): changed against the taught table (cellctl.vision.change), and either
+        high or within EDGE_BAND_MM of the raised footprint; None if the table around is not seen.
 
-        High AND changed: stereo edge fattening drags the sole's height onto table pixels next to it, but
-        those pixels still show the table's own texture, so they are unchanged against the reference.
+        Stereo edge fattening drags the sole's height onto table pixels next to it, but those pixels still
+        show the table's own texture: unchanged, so dropped. The foot of a wall that leans out lies lower
+        than MIN_HEIGHT_MM but has changed: kept, so the outline is the footprint on the table.
         """
         assert self.taught is not None and self.cloud.rectified is not None
         current, reference = self.cloud.rectified[0], self.taught.left
@@ -219,8 +238,19 @@ class Segmentation:
         if test is None:
             return None
         changed = test.changed(current, reference)
-        x, y = np.round(self.cloud.pixels[high]).astype(np.int64).T
-        return changed[y, x]
+        # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
+        right_table = self.cloud.pixels[outside] - np.column_stack(
+            [self.cloud.disparity[outside], np.zeros(len(outside))]
+        )
+        right_test = ChangeTest.fit(self.cloud.rectified[1], self.taught.right, np.round(right_table).astype(np.int64))
+        if right_test is not None:
+            self.changed_right = right_test.changed(self.cloud.rectified[1], self.taught.right)
+        # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
+        near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= self.min_height))
+        near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
+        candidates = np.concatenate([high, near])
+        x, y = np.round(self.cloud.pixels[candidates]).astype(np.int64).T
+        return np.sort(candidates[changed[y, x]])
 
     def _colour_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray:
         """Which of the `high` points (indices) are sole-coloured (all when the colours do not separate).
@@ -287,6 +317,10 @@ class Segmentation:
             failure=failure,
             timings=self.timings,
             calibration=self.cloud.calibration,
+            raised=self.raised,
+            measured_cells=self.measured_cells,
+            taught=self.taught,
+            changed_right=self.changed_right,
             **sole,
         )
 
@@ -297,4 +331,8 @@ def _footprint(raster: Footprint, every: np.ndarray, sole_xy: np.ndarray) -> Foo
     sole = raster.counts(sole_xy)
     # A cell is sole if most of its own points are; cells without points are decided by the closing.
     mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
-    return Footprint(mask, raster.origin, raster.cell_mm).morphology(close_mm=2.0, open_mm=2.0).largest_region()
+    return (
+        Footprint(mask, raster.origin, raster.cell_mm)
+        .morphology(close_mm=2.0, open_mm=FOOTPRINT_OPEN_MM)
+        .largest_region()
+    )
