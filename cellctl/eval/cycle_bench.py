@@ -130,19 +130,17 @@ def bench_cycles(
     scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
     pairs = [scene.render() for scene in scenes]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]
-    empty = SoleScene(0, soles[0][1], calib, scenes[0].camera_pose, None).render()
-    if whole_pair:
-        reconstructor = SoleReconstructor(calib, depth_range_mm, search_region=False)
-    else:
-        taught = SoleReconstructor(calib, depth_range_mm).teach(empty.left, empty.right)  # `cellctl teach`
-        reconstructor = SoleReconstructor(calib, depth_range_mm, taught=taught)
-    disparities = (reconstructor.min_disparity, reconstructor.num_disparities)
+    # The simulator draws each scene's table texture from its seed: every scene is its own cell, taught on
+    # its own empty table (`cellctl teach`) and warmed up as the daemon does before READY.
+    reconstructors = [_reconstructor(calib, depth_range_mm, scene, whole_pair) for scene in scenes]
+    disparities = (reconstructors[0].min_disparity, reconstructors[0].num_disparities)
 
     def cycle(which: int) -> SoleMeasurement:
-        reconstruction = reconstructor.reconstruct(pairs[which].left, pairs[which].right)
+        reconstruction = reconstructors[which].reconstruct(pairs[which].left, pairs[which].right)
         return measure_sole(reconstruction, GLUE_OFFSET_MM, GLUE_SPACING_MM)
 
-    cycle(0)  # the daemon's warm-up before READY
+    for which in range(len(pairs)):
+        cycle(which)  # the warm-up
     reference = HH4Reference(calib, pairs[0].left, pairs[0].right, disparities)
     bench = CycleBench(calib.image_size, disparities)
     for index in range(cycles):
@@ -153,8 +151,8 @@ def bench_cycles(
         bench.hh4_s.append(reference.seconds())
         for name, seconds in result.timings.items():
             bench.stages_s.setdefault(name, []).append(seconds)
-        if reconstructor.last_fallback:
-            bench.whole_pair.append(reconstructor.last_fallback)
+        if reconstructors[which].last_fallback:
+            bench.whole_pair.append(reconstructors[which].last_fallback)
         if result.valid:
             truth = truths[which]
             assert result.length_mm is not None and result.heel_height_mm is not None
@@ -171,3 +169,13 @@ def bench_cycles(
         if progress:
             progress(f"cycle {index + 1}: {1000 * bench.cycles_s[-1]:.0f} ms, HH4 {1000 * bench.hh4_s[-1]:.0f} ms")
     return bench
+
+
+def _reconstructor(
+    calib: Calibration, depth_range_mm: tuple[float, float], scene: SoleScene, whole_pair: bool
+) -> SoleReconstructor:
+    if whole_pair:
+        return SoleReconstructor(calib, depth_range_mm, search_region=False)
+    empty = scene.render_empty()
+    taught = SoleReconstructor(calib, depth_range_mm).teach(empty.left, empty.right)
+    return SoleReconstructor(calib, depth_range_mm, taught=taught)
