@@ -4,9 +4,11 @@ Written after the PLC has its answer, and only while the service is idle: the PL
 soon as it has read a result, and on 2 cores artifacts written beside a cycle slowed its match by as much
 as they saved (docs/sole-benchmark.md). So `ArtifactWriter` keeps the newest few cycles' jobs and a
 low-priority thread writes them step by step, each step started only while no cycle runs; jobs that a
-busy line never leaves time for are dropped, oldest first (counted and logged). The journal is only
-touched from the daemon's thread (`attach_finished`), as SQLite connections belong to one thread. A failure
-here is logged and never fails a cycle.
+busy line never leaves time for are dropped, oldest first (counted and logged). At stop the daemon's own
+thread writes what is still pending. Files go to a staging folder renamed into state_dir/cycles/<row> when
+complete, so a job given up at stop leaves nothing behind. The journal is only touched from the daemon's
+thread (`attach_finished`), as SQLite connections belong to one thread. A failure here is logged and never
+fails a cycle.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import collections
 import logging
 import os
+import shutil
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -48,6 +51,11 @@ class ArtifactJob:
     reconstruction: Reconstruction
     measurement: SoleMeasurement
 
+    @property
+    def staging(self) -> Path:
+        """Where the files are written first: the cycle's folder appears whole (renamed) or not at all."""
+        return self.folder.parent.parent / "partial" / self.folder.name
+
 
 @dataclass(frozen=True)
 class WrittenArtifacts:
@@ -71,6 +79,7 @@ class ArtifactWriter:
         self._idle = False  # the service waits for a trigger: the writer may work
         self._closing = False
         self._writing = False
+        self._abandon = False  # the thread's job in progress was given up at stop: discard it
         self._thread: threading.Thread | None = None
 
     # ---- the daemon's side ------------------------------------------------------------------------
@@ -117,11 +126,20 @@ class ArtifactWriter:
                 log.warning("cycle %d: artifacts not recorded: %s", done.cycle, exc)
 
     def flush(self, timeout_s: float) -> bool:
-        """Write what is pending now, whatever the idle state (at stop); True when all was written."""
+        """At stop: write the pending jobs in the calling thread (normal priority: a stop must not wait on
+        the niced thread), then wait for the thread's job in progress; False (and that job given up) if it
+        does not end within `timeout_s`."""
         with self._work:
+            jobs = list(self._pending)
+            self._pending.clear()
             self._idle = True
             self._work.notify_all()
-            return self._work.wait_for(lambda: not self._pending and not self._writing, timeout_s)
+        for job in jobs:
+            self._finish(job, self._write(job, wait_idle=False))
+        with self._work:
+            done = self._work.wait_for(lambda: not self._writing, timeout_s)
+            self._abandon = not done
+            return done
 
     def close(self) -> None:
         with self._work:
@@ -149,34 +167,47 @@ class ArtifactWriter:
                     return
                 job = self._pending.popleft()
                 self._writing = True
-            try:
-                written = self._write(job)
-            except Exception as exc:
-                log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
-                written = None
-            with self._work:
-                if written is not None:
-                    self._finished.append(written)
-                self._writing = False
-                self._work.notify_all()
+            self._finish(job, self._write(job, wait_idle=True))
 
-    def _write(self, job: ArtifactJob) -> WrittenArtifacts:
-        """The job's steps, each started only while the service is idle."""
-        for step in self._steps(job):
-            with self._work:
-                self._work.wait_for(lambda: self._idle or self._closing)
-            step()
-        return WrittenArtifacts(job.row_id, job.cycle, *_paths(job))
+    def _finish(self, job: ArtifactJob, written: WrittenArtifacts | None) -> None:
+        """Publish a written job (its folder renamed into place) unless it was given up at stop."""
+        with self._work:
+            mine = threading.current_thread() is self._thread
+            if written is not None and not (mine and self._abandon):
+                try:
+                    job.folder.parent.mkdir(parents=True, exist_ok=True)
+                    shutil.rmtree(job.folder, ignore_errors=True)
+                    job.staging.rename(job.folder)
+                    self._finished.append(written)
+                except OSError as exc:
+                    log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
+            shutil.rmtree(job.staging, ignore_errors=True)
+            if mine:
+                self._writing = False
+            self._work.notify_all()
+
+    def _write(self, job: ArtifactJob, wait_idle: bool) -> WrittenArtifacts | None:
+        """The job's steps into its staging folder, each started only while the service is idle (wait_idle)."""
+        try:
+            job.staging.mkdir(parents=True, exist_ok=True)
+            for step in self._steps(job):
+                if wait_idle:
+                    with self._work:
+                        self._work.wait_for(lambda: self._idle or self._closing)
+                step()
+        except Exception as exc:
+            log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
+            return None
+        return WrittenArtifacts(job.row_id, job.cycle, *_paths(job, job.folder))
 
     def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
         """Short steps (tens of ms each): a trigger arriving meanwhile waits for at most one of them."""
-        ply, overlay = _paths(job)
+        ply, overlay = _paths(job, job.staging)
         picture: list[np.ndarray] = []
 
         def write_ply() -> None:
             import open3d as o3d
 
-            job.folder.mkdir(parents=True, exist_ok=True)
             if not o3d.io.write_point_cloud(str(ply), job.reconstruction.point_cloud(), write_ascii=False):
                 raise OSError(f"Open3D could not write {ply}")
 
@@ -190,5 +221,5 @@ class ArtifactWriter:
         return [write_ply, draw, write_png]
 
 
-def _paths(job: ArtifactJob) -> tuple[Path, Path]:
-    return job.folder / f"cycle-{job.cycle}.ply", job.folder / f"cycle-{job.cycle}-overlay.png"
+def _paths(job: ArtifactJob, folder: Path) -> tuple[Path, Path]:
+    return folder / f"cycle-{job.cycle}.ply", folder / f"cycle-{job.cycle}-overlay.png"

@@ -26,8 +26,7 @@ class StepWriter(ArtifactWriter):
     def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
         def step() -> None:
             self.step_started.set()
-            job.folder.mkdir(parents=True, exist_ok=True)
-            (job.folder / f"cycle-{job.cycle}.ply").write_text("ply")
+            (job.staging / f"cycle-{job.cycle}.ply").write_text("ply")
             self.ran.append(job.cycle)
 
         return [step]
@@ -92,3 +91,40 @@ def test_keep_zero_writes_nothing(journal: Journal) -> None:
     assert writer.flush(timeout_s=1.0)
     writer.close()
     assert writer.ran == []
+
+
+class StuckWriter(StepWriter):
+    """A writer thread that cannot finish its step until released (starved on a loaded machine)."""
+
+    def __init__(self, keep: int) -> None:
+        super().__init__(keep)
+        self.release = threading.Event()
+        self.stuck = threading.Event()
+
+    def _stuck_step(self) -> None:
+        self.stuck.set()
+        self.release.wait(30)
+
+    def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
+        steps = super()._steps(job)
+        if threading.current_thread() is not self._thread:
+            return steps  # the jobs flush writes itself
+        return [self._stuck_step, *steps]
+
+
+def test_a_job_the_thread_cannot_finish_by_stop_is_given_up_without_a_trace(journal: Journal) -> None:
+    writer = StuckWriter(keep=5)
+    writer.set_idle(True)
+    submit(writer, journal, 1)
+    assert writer.stuck.wait(10)  # the thread has taken the job and hangs in its first step
+    writer.set_idle(False)
+    submit(writer, journal, 2)  # pending: written by flush in this thread
+    assert not writer.flush(timeout_s=0.2)
+    writer.release.set()
+    writer.close()
+    writer.attach_finished(journal)
+    assert sorted(writer.ran) == [1, 2]  # the thread did finish its step, later...
+    kept = {r.cycle: r.ply_path for r in journal.last()}
+    assert kept[1] is None and kept[2] is not None  # ...but cycle 1 was given up: no folder, no row
+    assert [p.name for p in (journal.state_dir / "cycles").iterdir()] == [Path(kept[2]).parent.name]
+    assert not any((journal.state_dir / "partial").iterdir())
