@@ -27,6 +27,7 @@ from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
+MAX_UNMEASURED_FRACTION = 0.05  # of the sole's changed pixels without depth: beyond, blame the lost pixels
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
 HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
@@ -38,7 +39,7 @@ GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, ave
 # Gaussian along the outline: removes the raster's staircase (0.25 mm cells) and pixel noise; wider would cut
 # the tip of a pointed toe (a 2 mm sigma takes ~1 mm off a 35 degree wedge).
 OUTLINE_SMOOTHING_MM = 0.75
-GLUE_OUTLINE_SMOOTHING_MM = 2.0
+GLUE_OUTLINE_SMOOTHING_MM = 1.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
 @dataclass
@@ -139,6 +140,14 @@ def measure_sole(
             **base,
         )
     problem = _outline_problem(reconstruction, outline)
+    if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
+        # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
+        return _invalid(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth (glare "
+            f"or no texture), so its edge cannot be confirmed ({problem.reason})",
+            **base,
+        )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
@@ -158,10 +167,16 @@ def measure_sole(
     heel_point, toe_point = np.array([*heel_xy, heel_z]), np.array([*toe_xy, toe_z])
     base.update(heel_point=heel_point, toe_point=toe_point)
     start = time.perf_counter()
-    # The glue path follows a smoother outline than the length's: its inward normals turn with the outline's
-    # noise, and a nozzle cannot follow a tip's last millimetre anyway.
-    glue_outline = _smooth_closed(footprint.outline(), GLUE_OUTLINE_SMOOTHING_MM)
-    path, missing = glue_path(surface, glue_outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
+    # The line glue_offset_mm inside the edge, from the footprint's distance transform: exact at pointed
+    # and cusped ends too, where moving the outline along its normals would cross itself. Cell centres lie
+    # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
+    inset = footprint.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
+    if len(inset) < 3:
+        return _invalid(
+            FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide", **base
+        )
+    glue_line = _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM)
+    path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)

@@ -41,7 +41,8 @@ FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is no
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
 FOOTPRINT_OPEN_MM = 1.0  # specks thinner than this go; a pointed toe's tip (radius >= 0.5 mm) stays
 WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
-EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
+EDGE_BAND_MM = 6.0
+UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 
 
@@ -70,6 +71,7 @@ class Reconstruction:
     measured_cells: Footprint | None = None  # cells with any measured point
     taught: TaughtTable | None = None  # the taught table the sole was found against, if any
     changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
+    unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
 
     @property
     def valid(self) -> bool:
@@ -107,6 +109,7 @@ class Segmentation:
         self.raised: Footprint | None = None  # cells where most measured points rise above the table
         self.measured_cells: Footprint | None = None  # cells with any measured point
         self.changed_right: np.ndarray | None = None
+        self._changed_left: np.ndarray | None = None
 
     def run(self) -> Reconstruction:
         if self.fraction < MIN_VALID_FRACTION:
@@ -199,6 +202,7 @@ class Segmentation:
             footprint=footprint,
             rectified=self.cloud.rectified,
             sole_mask=self._sole_mask(index),
+            unmeasured_fraction=self._unmeasured_fraction(index),
         )
 
     def _without_outliers(self, index: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -222,6 +226,27 @@ class Segmentation:
         closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
         return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
 
+    def _unmeasured_fraction(self, index: np.ndarray) -> float:
+        """Share of the sole's changed pixels (taught table only) without a measured point: glare, no texture.
+
+        The sole's image region is its measured pixels closed over UNMEASURED_CLOSE_PX; where that holds
+        many changed pixels without depth, an outline that disagrees with the depth step has lost part of
+        the sole to unmeasured pixels, and that is the reason to give (cellctl.vision.measurement).
+        """
+        if self._changed_left is None or index.size == 0:
+            return 0.0
+        width, height = self.cloud.image_size
+        sole = np.zeros((height, width), np.uint8)
+        x, y = np.round(self.cloud.pixels[index]).astype(int).T
+        sole[y, x] = 1
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (UNMEASURED_CLOSE_PX, UNMEASURED_CLOSE_PX))
+        region = cv2.morphologyEx(sole, cv2.MORPH_CLOSE, kernel) > 0
+        measured = np.zeros((height, width), bool)
+        mx, my = np.round(self.cloud.pixels).astype(int).T
+        measured[my, mx] = True
+        lost = region & self._changed_left & ~measured
+        return float(np.count_nonzero(lost)) / max(float(np.count_nonzero(region)), 1.0)
+
     def _change_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray | None:
         """The sole's points (indices): changed against the taught table (cellctl.vision.change), and either
         high or within EDGE_BAND_MM of the raised footprint; None if the table around is not seen.
@@ -238,6 +263,7 @@ class Segmentation:
         if test is None:
             return None
         changed = test.changed(current, reference)
+        self._changed_left = changed
         # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
         right_table = self.cloud.pixels[outside] - np.column_stack(
             [self.cloud.disparity[outside], np.zeros(len(outside))]
