@@ -26,7 +26,9 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.table import TablePlane
 
 COARSE_SCALE = 4  # the coarse match runs at 1/4 of the resolution: 1/16 of the pixels, 1/4 of the disparities
-ABOVE_TABLE_MM = 6.0  # coarse pixels this far above the plane mark the object (well above coarse noise, ~2 mm)
+ABOVE_TABLE_MM = (
+    5.0  # coarse pixels this far above the plane mark the object (at 4 mm, patterned tables' noise joins up)
+)
 REGION_MARGIN_MM = 25.0  # table kept around the object: the colour and change filters take it from 10-15 mm out
 BAND_MARGIN_PX = 2  # disparities added below the table and above the highest coarse disparity
 COARSE_ERROR_PX = COARSE_SCALE // 2  # half a coarse step: the coarse map is sub-pixel, its error well below
@@ -34,6 +36,7 @@ REGION_ALIGN_PX = 16  # region sides rounded out to this: few distinct sizes, so
 BAND_ALIGN = 4  # disparity counts rounded up to this, for the same reason
 MAX_TABLE_SHIFT_PX = 1.5  # median coarse table disparity off the plane by more: the table is not where taught
 MIN_OBJECT_PX = 50  # fewer coarse pixels above the table: nothing there (noise)
+JOIN_PX = 9  # coarse pixels (~14 mm): pieces of one sole closer than this are joined
 
 
 @dataclass(frozen=True)
@@ -144,16 +147,22 @@ def find_region(
 
 
 def _largest_object(shape: tuple[int, ...], xs: np.ndarray, ys: np.ndarray, above: np.ndarray) -> np.ndarray:
-    """Which of the coarse pixels (xs, ys) flagged `above` belong to the largest connected object: the sole is
-    the largest region (cellctl.vision.segmentation), and scattered coarse mismatches must not widen the region."""
+    """Which of the coarse pixels (xs, ys) flagged `above` belong to the largest object: the sole is the
+    largest region (cellctl.vision.segmentation), and scattered coarse mismatches must not widen the region.
+
+    A low or weakly textured part of a sole (a thin forefoot, a cusped tip) can come out of the coarse match
+    in pieces: pieces closer than JOIN_PX are joined (closing). A sole barely taller than ABOVE_TABLE_MM may
+    still be found in part: its points then reach the region's side and the whole pair is matched.
+    """
     mask = np.zeros(shape, np.uint8)
     mask[ys[above], xs[above]] = 1
     opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))  # single-pixel mismatches
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
+    joined = cv2.morphologyEx(opened, cv2.MORPH_CLOSE, np.ones((JOIN_PX, JOIN_PX), np.uint8))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(joined, connectivity=8)
     if count < 2:
         return np.zeros(len(xs), bool)
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    return labels[ys, xs] == largest
+    return (labels[ys, xs] == largest) & above
 
 
 def _align_down(value: float) -> int:
