@@ -110,6 +110,7 @@ class Daemon:
         self._last_probe = 0.0
         self._journal: Journal | None = None
         self._artifacts = None if self.calib is None else ArtifactWriter(self.calib, config.journal.keep_artifacts)
+        self._warmed_up = False
         self.cycles_done = 0
 
     # ---- lifetime ------------------------------------------------------------------------------
@@ -234,6 +235,7 @@ class Daemon:
         )
         outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
         log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
+        self._warmed_up = True
 
     def _set_idle(self, idle: bool) -> None:
         """Artifacts are written only while waiting for a trigger; their journal rows from this thread."""
@@ -320,8 +322,9 @@ class Daemon:
         self._cameras_ok = True
         log.info("cameras ok")
         if not force:
-            self._warm_up()  # cameras back: the next trigger must not pay for the set-up work
-            self._report_health()
+            self._report_health()  # READY at once; the warm-up below only if the start could not do it
+            if not self._warmed_up:
+                self._warm_up()
 
     def _report_health(self) -> None:
         self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=self.calib is not None)
