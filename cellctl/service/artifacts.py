@@ -3,7 +3,7 @@
 Written after the PLC has its answer, and only while the service is idle: the PLC may trigger again as
 soon as it has read a result, and on 2 cores artifacts written beside a cycle slowed its match by as much
 as they saved (docs/sole-benchmark.md). So `ArtifactWriter` keeps the newest few cycles' jobs and a
-low-priority thread writes them step by step, each step started only while no cycle runs; jobs that a
+writer thread writes them step by step, each step started only while no cycle runs; jobs that a
 busy line never leaves time for are dropped, oldest first (counted and logged). At stop the daemon's own
 thread writes what is still pending. Files go to a staging folder renamed into state_dir/cycles/<row> when
 complete, so a job given up at stop leaves nothing behind. The journal is only touched from the daemon's
@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import collections
 import logging
-import os
 import shutil
 import threading
 from collections.abc import Callable
@@ -37,7 +36,9 @@ log = logging.getLogger(__name__)
 # Huffman coding only: lossless, ~20 % faster and smaller than zlib level 1 on camera images (63 vs 79 ms).
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
 MAX_PENDING = 4  # jobs kept waiting for idle time (each holds a frame pair and a cloud, ~20 MB)
-WRITER_NICE = 19  # the writer thread's niceness: the matcher's threads always win the cores
+# The writer thread keeps normal priority: a niced thread that holds the GIL (Open3D's PLY writer, numpy)
+# and is then starved by the scheduler blocks the daemon's thread behind it (seen at load 20: cycles over
+# the PLC link's 5 s liveness). Starting steps only while idle is what keeps it out of the cycles.
 
 
 @dataclass(frozen=True)
@@ -66,7 +67,7 @@ class WrittenArtifacts:
 
 
 class ArtifactWriter:
-    """Writes artifact jobs on a low-priority thread while `idle` is set; the daemon owns the journal side."""
+    """Writes artifact jobs on its thread while `idle` is set; the daemon owns the journal side."""
 
     def __init__(self, calib: Calibration, keep: int) -> None:
         self.calib = calib
@@ -126,9 +127,8 @@ class ArtifactWriter:
                 log.warning("cycle %d: artifacts not recorded: %s", done.cycle, exc)
 
     def flush(self, timeout_s: float) -> bool:
-        """At stop: write the pending jobs in the calling thread (normal priority: a stop must not wait on
-        the niced thread), then wait for the thread's job in progress; False (and that job given up) if it
-        does not end within `timeout_s`."""
+        """At stop: write the pending jobs in the calling thread, then wait for the thread's job in progress;
+        False (and that job given up) if it does not end within `timeout_s`."""
         with self._work:
             jobs = list(self._pending)
             self._pending.clear()
@@ -156,10 +156,6 @@ class ArtifactWriter:
             self._thread.start()
 
     def _run(self) -> None:
-        try:  # Linux: a thread has its own niceness (setpriority on its thread id)
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), WRITER_NICE)
-        except (OSError, AttributeError) as exc:
-            log.debug("artifact writer keeps normal priority: %s", exc)
         while True:
             with self._work:
                 self._work.wait_for(lambda: (self._pending and self._idle) or self._closing)
