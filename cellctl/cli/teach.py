@@ -23,8 +23,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("--calib", required=True, type=Path, metavar="calib.yaml", help="stereo calibration")
-    parser.add_argument("left", type=Path, metavar="LEFT", help="left image of the empty table")
-    parser.add_argument("right", type=Path, metavar="RIGHT", help="right image of the empty table")
+    parser.add_argument(
+        "images",
+        type=Path,
+        nargs="+",
+        metavar="LEFT RIGHT",
+        help="one or more left/right pairs of the empty table (several are averaged: less sensor noise)",
+    )
     parser.add_argument(
         "--depth-range",
         nargs=2,
@@ -41,18 +46,21 @@ def run(args: argparse.Namespace) -> int:
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.defaults import DEPTH_RANGE_MM
     from cellctl.vision.reconstruction import SoleReconstructor
-    from cellctl.vision.teach import TeachError, save_taught
+    from cellctl.vision.teach import TeachError, average_exposures, save_taught
 
     calib = Calibration.load(args.calib)
+    if len(args.images) % 2:
+        raise UserError(f"give the images as LEFT RIGHT pairs, got {len(args.images)} images")
     images = []
-    for path in (args.left, args.right):
+    for path in args.images:
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if image is None:
             raise UserError(f"cannot read image {path}: give the path of a PNG or JPEG of the empty table")
         images.append(image)
     depth_range = tuple(args.depth_range) if args.depth_range else DEPTH_RANGE_MM
     try:
-        taught = SoleReconstructor(calib, depth_range).teach(images[0], images[1])
+        left, right = average_exposures(images[0::2]), average_exposures(images[1::2])
+        taught = SoleReconstructor(calib, depth_range).teach(left, right)
     except TeachError as exc:
         raise UserError(f"table not taught: {exc}") from None
     arrays, meta = save_taught(taught, args.calib)

@@ -18,8 +18,11 @@ import numpy as np
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM
-from cellctl.vision.measurement import measure_sole
+from cellctl.vision.measurement import SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.teach import TeachError, average_exposures
+
+CRASHED = "measurement raised"  # reason and failure of a sole whose measurement raised an exception
 
 
 @dataclass
@@ -38,6 +41,7 @@ class SoleBenchRow:
     seconds: float
     variations: str = "plain"  # matrix variations of the scene, "+"-joined (cellctl.sim.look)
     failure: str | None = None  # FailureKind value of a refusal
+    half_area_difference_true: float | None = None  # the truth's (toe half - heel half) / area
 
 
 def bench_soles(
@@ -61,10 +65,21 @@ def bench_soles(
     return rows
 
 
+TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellctl teach` takes several pairs
+
+
 def taught_reconstructor(calib: Calibration, scene: SoleScene) -> SoleReconstructor:
-    """A reconstructor with the scene's empty table taught from its own exposure (new sensor noise)."""
-    empty = scene.render_empty()
-    return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(empty.left, empty.right))
+    """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise).
+
+    If the table cannot be taught (e.g. too noisy to match), the reconstructor is an untaught one, as the
+    service runs without a taught table.
+    """
+    shots = [scene.render_empty(shot) for shot in range(1, TEACH_SHOTS + 1)]
+    left, right = average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+    try:
+        return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
+    except TeachError:
+        return SoleReconstructor(calib)
 
 
 def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain") -> SoleBenchRow:
@@ -72,8 +87,10 @@ def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations
     assert scene.sole is not None
     pair = scene.render()
     start = time.perf_counter()
-    reconstruction = reconstructor.reconstruct(pair.left, pair.right)
-    result = measure_sole(reconstruction)
+    try:
+        result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
+    except Exception as exc:  # noqa: BLE001 - a crash is a finding of the benchmark, not the end of the run
+        result = SoleMeasurement(None, None, None, None, 0, False, f"{CRASHED}: {type(exc).__name__}: {exc}")
     seconds = time.perf_counter() - start
     truth = scene.sole.truth()
     row = SoleBenchRow(
@@ -90,7 +107,12 @@ def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations
         None,
         seconds,
         variations,
-        None if result.failure is None else result.failure.value,
+        CRASHED
+        if result.failure is None and not result.valid
+        else None
+        if result.failure is None
+        else result.failure.value,
+        truth.half_area_difference,
     )
     if result.valid:
         assert result.length_mm is not None and result.heel_height_mm is not None

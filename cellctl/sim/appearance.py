@@ -43,7 +43,7 @@ SOLE_MATERIALS: dict[str, Material] = {
     "black": Material((0.20, 0.19, 0.19), _SOLE_OCTAVES, 0.05, 20.0),
     "grey": Material((0.42, 0.43, 0.44), _SOLE_OCTAVES, 0.03, 12.0),
 }
-GLOSS = (0.55, 60.0)  # specular weight and Blinn-Phong exponent of a glossy sole
+GLOSS = (0.8, 250.0)  # specular weight and Blinn-Phong exponent of a glossy sole: small, intense highlights
 DARK_ACCENT = (0.05, 0.05, 0.06)  # rim / logo colour on a light sole
 LIGHT_ACCENT = (0.62, 0.63, 0.62)  # ... on a black sole
 PATCH_COLOURS = (
@@ -150,7 +150,7 @@ class ColourScheme:
 
     @classmethod
     def draw(cls, rng: np.random.Generator, color: str, look: SceneLook, shape: SoleShape) -> ColourScheme:
-        base = SOLE_MATERIALS[color].albedo_bgr
+        base = TABLES[look.table].albedo_bgr if look.camouflage else SOLE_MATERIALS[color].albedo_bgr
         accent = LIGHT_ACCENT if color == "black" else DARK_ACCENT
         if look.colours == "rim":
             return cls(base, float(rng.uniform(4.0, 9.0)), accent, ())

@@ -9,8 +9,9 @@ light (cast shadows), the right camera's gain and gamma, gloss, sensor noise and
 of 0.80-0.85, a tip radius, ...) from the scene's own seed, so a (seed, colour, variations) triple always
 gives the same scene. Variations that touch different fields combine: `look_for(("pointed-toe",
 "gain-low"), seed)`. Each variation also says which refusals (`FailureKind`) are a correct answer to it;
-all entries here are meant to be measurable, so most list none: a refusal of such a scene is a missed
-measurement, and its reason is judged against the kinds listed.
+the matrix's entries are meant to be measurable, so most list none: a refusal of such a scene is a missed
+measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
+False, e.g. "camouflage") are unmeasurable by design: only a refusal with one of their kinds is right.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ class SceneLook:
     gloss: bool = False  # strong view-dependent highlights: they sit at different places in the two views
     noise: str = "normal"  # NOISE_LEVELS
     rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
+    camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -76,6 +78,7 @@ class Variation:
     fields: tuple[str, ...]  # the SceneLook fields it sets: two variations setting one field do not combine
     apply: Callable[[SceneLook, np.random.Generator], SceneLook]
     refusals: frozenset[FailureKind] = field(default_factory=frozenset)
+    in_matrix: bool = True  # False: unmeasurable by design, only run when named
 
 
 def _set(**values: object) -> Callable[[SceneLook, np.random.Generator], SceneLook]:
@@ -140,6 +143,14 @@ VARIATIONS: dict[str, Variation] = {
             "gloss", "glossy sole: highlights differ between the views", ("gloss",), _set(gloss=True), _SURFACE_LOST
         ),
         Variation("heavy-noise", "heavy sensor noise", ("noise",), _set(noise="heavy"), _SURFACE_LOST),
+        Variation(
+            "camouflage",
+            "sole coloured like the grey table: unmeasurable by design",
+            ("table", "colours", "camouflage"),
+            _set(table="grey", camouflage=True),
+            frozenset({FailureKind.COLOURS_TOO_SIMILAR}),
+            in_matrix=False,
+        ),
         Variation(
             "distorted-rig", "wide-angle rig: strong distortion, 2 degree misalignment", ("rig",), _set(rig="distorted")
         ),

@@ -16,7 +16,8 @@ from cellctl.errors import FailureKind
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
 
 MATRIX_COLOURS = ("white", "black", "grey")
-END_VARIATIONS = tuple(name for name, v in VARIATIONS.items() if set(v.fields) & {"toe", "heel"})
+MATRIX_ENTRIES = tuple(name for name, v in VARIATIONS.items() if v.in_matrix)
+END_VARIATIONS = tuple(name for name in MATRIX_ENTRIES if set(VARIATIONS[name].fields) & {"toe", "heel"})
 
 
 @dataclass(frozen=True)
@@ -45,8 +46,8 @@ class MatrixSole:
 
 
 def matrix_soles(count: int, first_seed: int = 0, entries: tuple[str, ...] | None = None) -> list[MatrixSole]:
-    """`count` soles spread over the matrix `entries` (default: every variation), colours and ends mixed."""
-    names = tuple(entries or VARIATIONS)
+    """`count` soles spread over the matrix `entries` (default: MATRIX_ENTRIES), colours and ends mixed."""
+    names = tuple(entries or MATRIX_ENTRIES)
     for name in names:
         if name not in VARIATIONS:
             raise ValueError(f"unknown variation {name!r}: choose from {', '.join(VARIATIONS)}")
@@ -60,8 +61,8 @@ def matrix_soles(count: int, first_seed: int = 0, entries: tuple[str, ...] | Non
         if rng.random() < 0.5:
             _add_compatible(chosen, END_VARIATIONS, rng)
         if rng.random() < 0.35:
-            _add_compatible(chosen, tuple(n for n in VARIATIONS if n not in END_VARIATIONS), rng)
-        colour = MATRIX_COLOURS[(i + round_) % len(MATRIX_COLOURS)]
+            _add_compatible(chosen, tuple(n for n in MATRIX_ENTRIES if n not in END_VARIATIONS), rng)
+        colour = MATRIX_COLOURS[(i % len(names) + round_) % len(MATRIX_COLOURS)]
         soles.append(MatrixSole(seed, colour, tuple(c for c in chosen if c != "plain" or c == primary)))
     return soles
 

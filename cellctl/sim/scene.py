@@ -25,6 +25,10 @@ from cellctl.vision.reconstruction import StereoCloud
 
 VIEW_MARGIN_PX = 40  # a random sole keeps this far from the edges of both images
 PLACEMENT_ATTEMPTS = 200
+# Soles whose toe and heel halves differ by less than this (fraction of the area; the measurement refuses
+# below 4 %) are drawn again: a scene should be measurable, and toe and heel tellable apart, by design.
+MEASURABLE_HALF_AREA_DIFFERENCE = 0.07
+SHAPE_ATTEMPTS = 30
 
 
 @dataclass
@@ -54,7 +58,11 @@ class SoleScene:
 
             calib = rig_for(look.rig)
         rng = np.random.default_rng(seed)
-        shape = SoleShape.random(rng, look)
+        for _ in range(SHAPE_ATTEMPTS):  # a plain sole always passes at once: the plain scenes stay as they were
+            shape = SoleShape.random(rng, look)
+            upright = SoleModel(shape, SolePose(0.0, 0.0, 0.0, False))
+            if upright.truth().half_area_difference >= MEASURABLE_HALF_AREA_DIFFERENCE:
+                break
         camera_pose = rig_pose(calib)
         for _ in range(PLACEMENT_ATTEMPTS):
             yaw = rng.uniform(-35.0, 35.0) + (180.0 if rng.random() < 0.5 else 0.0)
@@ -72,7 +80,9 @@ class SoleScene:
         if self.sole is None:
             return True
         outline = self.sole.outline_table(400)
-        top = self.sole.top_height_at(outline)
+        # The top without its edge profile: at least as high as the sole anywhere near the outline.
+        uv = self.sole.pose.to_sole(outline, self.sole.shape.length)
+        top = self.sole.shape.top_height(uv[:, 0], uv[:, 1])
         corners = np.vstack([np.column_stack([outline, np.zeros(len(outline))]), np.column_stack([outline, top])])
         width, height = self.calib.image_size
         for side in ("left", "right"):
@@ -123,7 +133,7 @@ class SoleScene:
                 raise ValueError(f"cannot write {out / name}: check the directory is writable")
         np.save(out / "depth_left.npy", pair.depth_left)
         if self.sole is not None:
-            np.save(out / "outline.npy", self.sole.outline_table(2000))
+            np.save(out / "outline.npy", self.sole.footprint_table(2000))
         (out / "truth.json").write_text(json.dumps(self.truth(), indent=2) + "\n")
         self.calib.save(out / "calib.yaml")
         return out

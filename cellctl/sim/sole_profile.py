@@ -3,7 +3,9 @@
 Ends: the half-width of the sole near a tip is the plain profile times a cap factor of t = distance from the
 tip / cap length: an ellipse for a round end, a superellipse for a square one, the ellipse to the power 1.5
 for a cusp (concave sides meeting in a point of zero radius). A pointed end is a wedge of a given full angle
-whose apex is rounded with a given tip radius, blended into the plain profile with a smooth minimum.
+whose apex is rounded with a given tip radius; behind the apex its sides curve out (an ogive, reaching
+OGIVE_HALF_WIDTH_MM at `reach` from the tip, as a pointed shoe's forefoot does) and blend into the plain
+profile with a smooth minimum.
 
 Edge: the top surface near the outline, as a function of the exact distance `dist` from the outline
 (inside), the local top height T and underside height U. A vertical wall rises from U; a sloped wall rises
@@ -23,6 +25,8 @@ FOOT_MM = 4.0  # vertical wall kept at the bottom of every edge profile: above t
 SQUARE_POWER = (4.0, 6.0)  # superellipse exponents of a square end
 POINTED_WEDGE_DEG = (35.0, 60.0)  # full angle of a pointed end
 POINTED_TIP_RADIUS_MM = (1.0, 5.0)
+POINTED_REACH_MM = (40.0, 65.0)  # distance from the tip where a pointed end's ogive is OGIVE_HALF_WIDTH_MM wide
+OGIVE_HALF_WIDTH_MM = 45.0
 BLEND_MM = 6.0  # smooth-minimum width where a wedge meets the plain profile
 
 
@@ -35,6 +39,7 @@ class EndShape:
     wedge_deg: float = 0.0  # pointed: full angle of the wedge
     tip_radius: float = 0.0  # pointed: radius of the rounded apex
     cap_scale: float = 1.0  # cap length relative to the plain shape's
+    reach: float = 0.0  # pointed: distance from the tip where the ogive is OGIVE_HALF_WIDTH_MM wide
 
     @classmethod
     def draw(cls, kind: str, rng: np.random.Generator) -> EndShape:
@@ -43,6 +48,7 @@ class EndShape:
                 kind,
                 wedge_deg=float(rng.uniform(*POINTED_WEDGE_DEG)),
                 tip_radius=float(rng.uniform(*POINTED_TIP_RADIUS_MM)),
+                reach=float(rng.uniform(*POINTED_REACH_MM)),
             )
         if kind == "square":
             return cls(kind, power=float(rng.uniform(*SQUARE_POWER)), cap_scale=float(rng.uniform(0.35, 0.6)))
@@ -70,7 +76,11 @@ class EndShape:
         # Apex circle centred r behind the tip, tangent to the wedge's sides where d = r (1 - sin(half)).
         tangent = r * (1.0 - np.sin(half))
         circle = np.sqrt(np.clip(r * r - (r - np.minimum(d, tangent)) ** 2, 0.0, None))
-        wedge = np.where(d <= tangent, circle, r * np.cos(half) + (d - tangent) * np.tan(half))
+        # Behind the apex: the wedge's line plus a quadratic that widens it to an ogive (same slope at the apex).
+        run = self.reach - tangent
+        bow = max(0.0, OGIVE_HALF_WIDTH_MM - r * np.cos(half) - run * np.tan(half)) / run**2
+        behind = np.clip(d - tangent, 0.0, None)
+        wedge = np.where(d <= tangent, circle, r * np.cos(half) + behind * np.tan(half) + bow * behind**2)
         return _smooth_min(width, wedge, BLEND_MM)
 
 

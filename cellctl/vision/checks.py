@@ -48,12 +48,23 @@ class CheckFailure:
 
 
 def check_outline_depth(
-    outline: np.ndarray, outward: np.ndarray, raised: Footprint, measured: Footprint
+    outline: np.ndarray,
+    outward: np.ndarray,
+    raised: Footprint,
+    measured: Footprint,
+    footprint: Footprint | None = None,
 ) -> CheckFailure | None:
-    """The outline (N x 2, table mm) against the depth step (cells where most points rise above the table)."""
+    """The outline (N x 2, table mm) against the depth step (cells where most points rise above the table).
+
+    With the `footprint` the outline bounds, points whose test positions fall on the wrong side of it (past
+    a pointed tip, across a narrow waist) are not tested: there the offset along the normal means nothing.
+    """
     inside = outline - OUTLINE_INSIDE_MM * outward
     outside = outline + OUTLINE_OUTSIDE_MM * outward
     in_known, out_known = measured.contains(inside), measured.contains(outside)
+    if footprint is not None:
+        in_known &= footprint.contains(inside)
+        out_known &= ~footprint.contains(outside)
     in_ok = raised.contains(inside)
     out_ok = ~raised.contains(outside)
     testable = in_known & out_known

@@ -40,6 +40,7 @@ BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras
 FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is not quantised to a coarse grid
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
 FOOTPRINT_OPEN_MM = 1.0  # specks thinner than this go; a pointed toe's tip (radius >= 0.5 mm) stays
+COLOUR_OPEN_MM = 2.0  # the same without a taught table: the colour edge's noise needs the wider opening
 WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
 EDGE_BAND_MM = 6.0
 UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare  # low points this close to the raised footprint may be sole (a leaning wall's foot)
@@ -152,14 +153,14 @@ class Segmentation:
         high = np.flatnonzero((z > self.min_height) & (z < MAX_HEIGHT_MM))
         no_sole = f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table"
         if high.size == 0:
-            return self._fail(FailureKind.NO_SOLE, no_sole)
+            return self._no_sole(points, no_sole)
         # One raster for both footprints, over the high points only (cells elsewhere cannot be sole); its
         # cells lie on the same lattice whatever it covers (Footprint.empty_like).
         raster = Footprint.empty_like(xy[high], FOOTPRINT_CELL_MM)
         every = raster.counts(xy)  # all measured points per cell: "most of a cell's points" needs them
         footprint = _footprint(raster, every, xy[high])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
-            return self._fail(FailureKind.NO_SOLE, no_sole)
+            return self._no_sole(points, no_sole)
         high_counts = raster.counts(xy[high])
         # The raster is finer than the pixels: cells between measured ones are filled from their neighbours.
         self.raised = Footprint(
@@ -184,7 +185,9 @@ class Segmentation:
                 f"{self.separation:.1f} standard deviations, need {MIN_COLOUR_SEPARATION:g}): use a table "
                 "surface that contrasts with the sole",
             )
-        footprint = _footprint(raster, every, xy[keep])
+        # The colour edge is noisier than the change edge (a black sole's colour noise): it keeps the coarser
+        # opening it was tuned with; the change edge keeps a pointed toe's tip.
+        footprint = _footprint(raster, every, xy[keep], FOOTPRINT_OPEN_MM if self.taught else COLOUR_OPEN_MM)
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour")
         index = keep[footprint.contains(xy[keep]) & (z[keep] > self.min_height)]  # the foot of a wall: outline only
@@ -225,6 +228,32 @@ class Segmentation:
         mask[y, x] = 1
         closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
         return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
+
+    def _no_sole(self, points: np.ndarray, reason: str) -> Reconstruction:
+        """NO_SOLE, unless the taught table shows a sole-sized change that depth did not measure.
+
+        Heavy sensor noise or glare on a dark sole can leave too few matched points to raise a sole-sized
+        footprint: the sole is there, and "no sole in view" would send the operator looking for nothing.
+        """
+        if self.taught is None or self.cloud.rectified is None or self.plane is None:
+            return self._fail(FailureKind.NO_SOLE, reason)
+        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
+        current = self.cloud.rectified[0]
+        test = ChangeTest.fit(current, self.taught.left, np.round(self.cloud.pixels[table]).astype(np.int64))
+        if test is None:
+            return self._fail(FailureKind.NO_SOLE, reason)
+        changed = test.changed(current, self.taught.left).astype(np.uint8)
+        count, _, stats, _ = cv2.connectedComponentsWithStats(changed, connectivity=8)
+        largest = int(stats[1:, cv2.CC_STAT_AREA].max()) if count > 1 else 0
+        pixel_mm = self.plane.offset / self.cloud.calibration.focal_px if self.cloud.calibration else 0.0
+        area = largest * pixel_mm**2
+        if area < MIN_SOLE_AREA_MM2:
+            return self._fail(FailureKind.NO_SOLE, reason)
+        return self._fail(
+            FailureKind.TOO_FEW_POINTS,
+            f"something sole-sized lies on the table ({area:.0f} mm^2 changed against the taught table) but too "
+            "little of it was measured in depth (sensor noise, glare or no texture): check lighting and exposure",
+        )
 
     def _unmeasured_fraction(self, index: np.ndarray) -> float:
         """Share of the sole's changed pixels (taught table only) without a measured point: glare, no texture.
@@ -351,14 +380,12 @@ class Segmentation:
         )
 
 
-def _footprint(raster: Footprint, every: np.ndarray, sole_xy: np.ndarray) -> Footprint:
+def _footprint(
+    raster: Footprint, every: np.ndarray, sole_xy: np.ndarray, open_mm: float = FOOTPRINT_OPEN_MM
+) -> Footprint:
     """Largest region of `raster` where most measured points of a cell (`every`, per cell) are sole points
     (`sole_xy`), closed and hole-free."""
     sole = raster.counts(sole_xy)
     # A cell is sole if most of its own points are; cells without points are decided by the closing.
     mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
-    return (
-        Footprint(mask, raster.origin, raster.cell_mm)
-        .morphology(close_mm=2.0, open_mm=FOOTPRINT_OPEN_MM)
-        .largest_region()
-    )
+    return Footprint(mask, raster.origin, raster.cell_mm).morphology(close_mm=2.0, open_mm=open_mm).largest_region()

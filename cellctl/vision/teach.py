@@ -89,6 +89,14 @@ class Drift:
     problem: str | None
 
 
+def average_exposures(images: list[np.ndarray]) -> np.ndarray:
+    """Several exposures of the same static view averaged (uint8): sensor noise falls by sqrt(count)."""
+    if not images or any(image.shape != images[0].shape for image in images):
+        raise TeachError("teaching needs one or more images of the same size per camera")
+    mean = np.asarray(np.mean(np.stack([image.astype(np.float32) for image in images]), axis=0))
+    return np.asarray(np.clip(np.round(mean), 0, 255), np.uint8)
+
+
 def calibration_fingerprint(calib: Calibration) -> str:
     """Hash of everything that places a rectified pixel in space: a taught table is only valid with it."""
     digest = hashlib.sha256()
