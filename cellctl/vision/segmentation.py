@@ -102,9 +102,8 @@ class Segmentation:
         self.plane = table_plane
         self.min_height = min_height_mm
         self.timings = dict(cloud.timings)
-        width, height = cloud.image_size
         self.measured = len(cloud.points)
-        self.fraction = self.measured / float(width * height)
+        self.fraction = self.measured / float(cloud.matched_area)  # of the pixels matched (a search region)
         self.transform: np.ndarray | None = None
         self.colour_filter = False
         self.separation = 0.0

@@ -61,7 +61,7 @@ class Service:
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
-        assert self.daemon.wait_started(60), f"service did not start: {self.error}"
+        assert self.daemon.wait_started(300), f"service did not start: {self.error}"  # warm-up on a loaded machine
 
     def _run(self) -> None:
         try:
