@@ -7,8 +7,6 @@ import time
 from pathlib import Path
 
 from cellctl.errors import UserError
-from cellctl.sim.render import SOLE_MATERIALS
-from cellctl.vision.calibration import Calibration
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -20,9 +18,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     same sole, pose and noise. --variations adds entries of the variation matrix (`cellctl bench-sole
     --matrix --variations list` names them), e.g. pointed-toe,rim,gain-low.
     """
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="directory to write the scene to")
+    parser.add_argument("-o", "--out", required=True, type=Path, metavar="DIR", help="directory to write the scene to")
     parser.add_argument("--seed", type=int, default=0, help="sole shape, pose and noise (default 0)")
-    parser.add_argument("--color", default="white", choices=sorted(SOLE_MATERIALS), help="sole colour (default white)")
+    # Checked in run(): the colours live with the renderer, which imports Open3D (slow for `--help`).
+    parser.add_argument("--color", default="white", help="sole colour: white (default), black or grey")
     parser.add_argument(
         "--variations", metavar="NAME,...", default="", help="variation matrix entries to apply (default none)"
     )
@@ -37,8 +36,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from cellctl.sim.look import look_for
+    from cellctl.sim.render import SOLE_MATERIALS
     from cellctl.sim.scene import SoleScene
+    from cellctl.vision.calibration import Calibration
 
+    if args.color not in SOLE_MATERIALS:
+        raise UserError(f"--color {args.color!r} is not one of {', '.join(sorted(SOLE_MATERIALS))}")
     calib = Calibration.load(args.calib) if args.calib else None
     start = time.perf_counter()
     try:
