@@ -33,6 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--first-seed", type=int, default=0, help="seed of the first sole (default 0)")
     parser.add_argument("--calib", metavar="calib.yaml", help="rig to simulate (default: the built-in simulated rig)")
+    parser.add_argument(
+        "--taught", action="store_true", help="teach each scene's empty table first (as `cellctl teach` at set-up)"
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of markdown")
     parser.set_defaults(func=run)
 
@@ -51,11 +54,14 @@ def run(args: argparse.Namespace) -> int:
     calib = Calibration.load(args.calib) if args.calib else default_rig()
     # Alternate colours over consecutive seeds, so both colours see every kind of shape and pose.
     soles = [(args.first_seed + i, "white" if i % 2 == 0 else "black") for i in range(args.soles)]
-    rows = bench_sole.bench_soles(calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr))
+    rows = bench_sole.bench_soles(
+        calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught
+    )
     if args.json:
         print(json.dumps(bench_sole.as_json(rows), indent=2))
     else:
         command = f"cellctl bench-sole --soles {args.soles} --first-seed {args.first_seed}"
+        command += " --taught" if args.taught else ""
         print(bench_sole.to_markdown(rows, command + (f" --calib {args.calib}" if args.calib else "")))
     return 0
 
@@ -76,12 +82,15 @@ def _run_matrix(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(str(exc)) from None
     calib = Calibration.load(args.calib) if args.calib else None
-    results = sole_matrix.bench_matrix(soles, calib, progress=lambda text: print(f"  {text}", file=sys.stderr))
+    results = sole_matrix.bench_matrix(
+        soles, calib, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught
+    )
     if args.json:
         print(json.dumps(sole_matrix.as_json(results), indent=2))
     else:
         command = f"cellctl bench-sole --matrix --soles {args.soles} --first-seed {args.first_seed}"
         command += f" --variations {args.variations}" if args.variations else ""
         command += f" --calib {args.calib}" if args.calib else ""
+        command += " --taught" if args.taught else ""
         print(sole_matrix.matrix_markdown(results, command))
     return 0 if sole_matrix.acceptance(results).passed else 1

@@ -20,6 +20,7 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.measurement import SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.teach import TeachError, average_exposures
 
 CRASHED = "measurement raised"  # reason and failure of a sole whose measurement raised an exception
 
@@ -44,16 +45,41 @@ class SoleBenchRow:
 
 
 def bench_soles(
-    calib: Calibration, soles: list[tuple[int, str]], progress: Callable[[str], None] | None = None
+    calib: Calibration,
+    soles: list[tuple[int, str]],
+    progress: Callable[[str], None] | None = None,
+    taught: bool = False,
 ) -> list[SoleBenchRow]:
-    """Measure each (seed, colour) plain sole once and compare with its truth."""
+    """Measure each (seed, colour) plain sole once and compare with its truth.
+
+    taught: teach each scene's empty table first (not timed), as a cell does once at set-up
+    (cellctl.vision.teach); else measure without a taught table.
+    """
     reconstructor = SoleReconstructor(calib)
     rows = []
     for seed, color in soles:
-        rows.append(measure_scene(reconstructor, SoleScene.random(seed, color, calib)))
+        scene = SoleScene.random(seed, color, calib)
+        rows.append(measure_scene(taught_reconstructor(calib, scene) if taught else reconstructor, scene))
         if progress:
             progress(_row_text(rows[-1]))
     return rows
+
+
+TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellctl teach` takes several pairs
+
+
+def taught_reconstructor(calib: Calibration, scene: SoleScene) -> SoleReconstructor:
+    """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise).
+
+    If the table cannot be taught (e.g. too noisy to match), the reconstructor is an untaught one, as the
+    service runs without a taught table.
+    """
+    shots = [scene.render_empty(shot) for shot in range(1, TEACH_SHOTS + 1)]
+    left, right = average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+    try:
+        return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
+    except TeachError:
+        return SoleReconstructor(calib)
 
 
 def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain") -> SoleBenchRow:

@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import CRASHED, SoleBenchRow, measure_scene
+from cellctl.eval.sole_bench import CRASHED, SoleBenchRow, measure_scene, taught_reconstructor
 from cellctl.sim.matrix import MatrixSole
 from cellctl.sim.rig import rig_for
 from cellctl.sim.scene import SoleScene
@@ -70,9 +70,15 @@ def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
 
 
 def bench_matrix(
-    soles: list[MatrixSole], calib: Calibration | None = None, progress: Callable[[str], None] | None = None
+    soles: list[MatrixSole],
+    calib: Calibration | None = None,
+    progress: Callable[[str], None] | None = None,
+    taught: bool = False,
 ) -> list[MatrixRow]:
-    """Render, measure and judge every sole; `calib` replaces the looks' rigs (default: each look's own rig)."""
+    """Render, measure and judge every sole; `calib` replaces the looks' rigs (default: each look's own rig).
+
+    taught: teach each scene's empty table first (not timed), as the cell does once at set-up.
+    """
     reconstructors: dict[str, SoleReconstructor] = {}
     rows = []
     for sole in soles:
@@ -82,6 +88,8 @@ def bench_matrix(
             reconstructors[key] = SoleReconstructor(calib if calib is not None else rig_for(look.rig))
         reconstructor = reconstructors[key]
         scene = SoleScene.random(sole.seed, sole.color, reconstructor.calib, look)
+        if taught:
+            reconstructor = taught_reconstructor(reconstructor.calib, scene)
         result = judge(sole, measure_scene(reconstructor, scene, sole.label))
         rows.append(result)
         if progress:

@@ -100,6 +100,7 @@ class SceneRenderer:
         color: str = "white",
         seed: int = 0,
         look: SceneLook | None = None,
+        noise_seed: int | None = None,
     ) -> None:
         if color not in SOLE_MATERIALS:
             raise ValueError(f"sole colour must be one of {', '.join(SOLE_MATERIALS)}, got {color!r}")
@@ -116,7 +117,8 @@ class SceneRenderer:
         self._colours = (
             None if sole is None else ColourScheme.draw(np.random.default_rng([seed, 13]), color, self.look, sole.shape)
         )
-        self._noise_rng = np.random.default_rng([seed, 11])
+        # The sensor noise may come from its own seed: the same table (textures from `seed`) shot again.
+        self._noise_rng = np.random.default_rng([seed if noise_seed is None else noise_seed, 11])
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(_table_mesh())  # geometry id 0 = TABLE_GEOMETRY
         self._parts = np.zeros(0, np.int32)

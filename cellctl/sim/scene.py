@@ -104,6 +104,11 @@ class SoleScene:
     def render(self) -> RenderedPair:
         return SceneRenderer(self.calib, self.camera_pose, self.sole, self.color, self.seed, self.look).render()
 
+    def render_empty(self, shot: int = 1) -> RenderedPair:
+        """The same table without the sole, as `cellctl teach` sees it: same textures, new sensor noise (`shot`)."""
+        noise_seed = self.seed + 7919 * shot  # any seed other than the scene's own: another exposure
+        return SceneRenderer(self.calib, self.camera_pose, None, self.color, self.seed, self.look, noise_seed).render()
+
     def truth(self) -> dict[str, object]:
         """truth.json contents: the three measurements from the model, and everything needed to rebuild it."""
         data: dict[str, object] = {"seed": self.seed, "color": self.color, "look": asdict(self.look)}
