@@ -2,14 +2,20 @@
 
 The sole is described in its own plane coordinates: u runs along the sole from the heel tip (u = 0) to the
 toe tip (u = L), v across it. The outline is a medial and a lateral half-width profile around a slightly
-bent centre line, with elliptical caps at both ends, so the forefoot is wider than the heel and the arch is
-cut in deeper on the medial side. The top (gluing) surface is a height field over (u, v): heel thickness
-blending into forefoot thickness, toe spring lifting the front of the sole, and a slight cross curvature.
-The side walls are vertical, so the footprint on the table is exactly the outline.
+bent centre line, with caps at both ends (elliptical unless a SceneLook asks for pointed, square or cusped
+ones), so the forefoot is wider than the heel and the arch is cut in deeper on the medial side. The top
+(gluing) surface is a height field over (u, v): heel thickness blending into forefoot thickness, toe spring
+lifting the front of the sole, and a slight cross curvature; near the outline an optional edge profile
+(sloped wall, rounded top edge) lowers it. Every wall is vertical for at least its bottom 4 mm, so the
+footprint on the table is exactly the outline.
 
 `SoleModel.truth()` computes length, heel height and toe height from this definition (polygon moments of
 the densely sampled outline, exact height-field evaluation) following docs/measurements.md, without any of
 the measuring code, so the simulator can judge the measurement.
+
+The end shapes and the edge profile (sloped walls, rounded top edges) are in sole_profile.py. This module
+is over 350 lines because the outline, the surface with its profile, the truth and the mesh of one model
+are read together: each is defined in terms of the others.
 """
 
 from __future__ import annotations

@@ -183,4 +183,4 @@ def test_simulate_sole_command_writes_the_scene(tmp_path: Path, capsys: pytest.C
 
 def test_simulate_sole_rejects_an_unknown_colour(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["simulate", "sole", "--out", str(tmp_path), "--color", "red"]) == 2
-    assert "--color 'red' is not one of black, white" in capsys.readouterr().err
+    assert "--color 'red' is not one of black, grey, white" in capsys.readouterr().err
