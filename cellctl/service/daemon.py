@@ -35,13 +35,16 @@ from cellctl.service.artifacts import keep_artifacts
 from cellctl.service.codes import FAILURE_CODES
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
+from cellctl.service.glue_output import GlueOutput, thinned
 from cellctl.service.journal import CycleRecord, Journal
+from cellctl.service.outcome import CycleOutcome, OutcomeListener
+from cellctl.service.recipes import Recipe, RecipeBook
 from cellctl.service.sdnotify import SystemdNotifier
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.reconstruction import SoleReconstructor
-from firmware_io.handshake import Trigger
-from firmware_io.registers import MAX_GLUE_POINTS, ErrorCode
+from firmware_io.handshake import Inspection, PathInfo, Trigger
+from firmware_io.registers import ErrorCode, FeatureBit
 from firmware_io.server import PlcLink
 
 log = logging.getLogger(__name__)
@@ -92,10 +95,17 @@ class Daemon:
             word_order=plc.word_order,
             heartbeat_period_s=plc.heartbeat_period_s,
             liveness_timeout_s=plc.liveness_timeout_s,
+            map_version=plc.map_version,
         )
-        self._reconstructor = (
-            None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
-        )
+        self.recipes = RecipeBook.load(config.recipes.directory, config.measure)
+        self.glue_output = GlueOutput.from_config(config)
+        #: Called with each finished cycle after the PLC has its answer (OPC UA, station); must not block.
+        self.listeners: list[OutcomeListener] = []
+        self.active_recipe: Recipe | None = self.recipes.get(0)
+        self._reconstructors: dict[tuple[float, float], SoleReconstructor] = {}
+        if self.calib is not None:
+            depth = config.measure.depth_range_mm
+            self._reconstructors[depth] = SoleReconstructor(self.calib, depth)
         self._stop = threading.Event()
         self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
@@ -167,9 +177,15 @@ class Daemon:
         timings: dict[str, float] = {}
         frame: StereoFrame | None = None
         result: Measured | None = None
+        recipe = self.recipes.get(trigger.recipe)
         try:
+            if recipe is None:
+                raise CycleFailed.of(
+                    FailureKind.RECIPE_UNKNOWN, f"recipe {trigger.recipe} selected by the PLC is not loaded"
+                )
+            self.active_recipe = recipe
             frame = self._grab(timings)
-            result = self._measure(frame, timings)
+            result = self._measure(frame, timings, recipe)
             code, reason = ErrorCode.NONE, None
         except CycleFailed as failure:
             code, reason = failure.code, str(failure)
@@ -181,8 +197,9 @@ class Daemon:
         record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
         assert self._journal is not None
         self._journal.record(record)  # durable before the PLC hears of it
-        self._publish(trigger.cycle, code, cycle_time_ms, measurement)
+        failed = self._publish(trigger.cycle, code, cycle_time_ms, measurement, recipe)
         self._report_health()
+        self._tell_listeners(record, trigger.recipe, recipe, failed)
         self.cycles_done += 1
         if code is ErrorCode.NONE:
             log.info(
@@ -221,31 +238,61 @@ class Daemon:
         self._cameras_ok = True
         return frame
 
-    def _measure(self, frame: StereoFrame, timings: dict[str, float]) -> Measured:
-        if self.calib is None or self._reconstructor is None:
+    def _measure(self, frame: StereoFrame, timings: dict[str, float], recipe: Recipe) -> Measured:
+        if self.calib is None:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
-        measure = self.config.measure
-        result = measure_frame(
-            frame, self._reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
-        )
+        reconstructor = self._reconstructors.get(recipe.depth_range_mm)
+        if reconstructor is None:  # one per depth range: its matcher's disparity range depends on it
+            reconstructor = SoleReconstructor(self.calib, recipe.depth_range_mm)
+            self._reconstructors[recipe.depth_range_mm] = reconstructor
+        result = measure_frame(frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm))
         timings.update(result.timings)
         if isinstance(result, Refused):
             raise CycleFailed.of(result.failure, result.reason)
         return result
 
-    def _publish(self, cycle: int, code: ErrorCode, cycle_time_ms: float, measurement: SoleMeasurement | None) -> None:
-        if code is not ErrorCode.NONE or measurement is None:
+    def _publish(
+        self,
+        cycle: int,
+        code: ErrorCode,
+        cycle_time_ms: float,
+        measurement: SoleMeasurement | None,
+        recipe: Recipe | None,
+    ) -> FeatureBit | None:
+        """Answer the PLC; the features out of tolerance (None when nothing was checked)."""
+        if code is not ErrorCode.NONE or measurement is None or recipe is None:
             self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
-            return
+            return None
         assert measurement.glue_path is not None
+        failed = (
+            recipe.inspect(measurement.length_mm, measurement.heel_height_mm, measurement.toe_height_mm)
+            if recipe.checks_tolerances
+            else None
+        )
+        out = self.glue_output.prepare(measurement.glue_path.points, measurement.glue_path.normals)
         self.link.publish_result(
             cycle,
             heel_height_mm=float(measurement.heel_height_mm),
             toe_height_mm=float(measurement.toe_height_mm),
             length_mm=float(measurement.length_mm),
             cycle_time_ms=cycle_time_ms,
-            glue_points=_published_points(measurement.glue_path.points),
+            glue_points=out.points,
+            path=PathInfo(out.normals, out.frame, out.nozzle_offset_mm, recipe.glue_offset_mm),
+            inspection=None if failed is None else Inspection(failed),
         )
+        return failed
+
+    def _tell_listeners(
+        self, record: CycleRecord, selected: int, recipe: Recipe | None, failed: FeatureBit | None
+    ) -> None:
+        if not self.listeners:
+            return
+        outcome = _outcome(self.config.opcua.cell_name, record, selected, recipe, failed)
+        for listener in self.listeners:
+            try:
+                listener(outcome)
+            except Exception:  # a listener's fault never stops the line
+                log.exception("cycle %d: result listener %r failed", record.cycle, listener)
 
     def _abort(self, trigger: Trigger) -> None:
         reason = "the service is stopping"
@@ -295,11 +342,31 @@ def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | Non
 
 
 def _published_points(points: np.ndarray) -> np.ndarray:
-    """The glue path as the PLC gets it: at most MAX_GLUE_POINTS, evenly thinned if longer."""
-    if len(points) <= MAX_GLUE_POINTS:
-        return points
-    keep = np.linspace(0, len(points), MAX_GLUE_POINTS, endpoint=False).astype(int)
-    return points[keep]
+    """The glue path as the journal keeps it: table frame, thinned as for the PLC."""
+    return points[thinned(len(points))]
+
+
+def _outcome(
+    cell: str, record: CycleRecord, selected: int, recipe: Recipe | None, failed: FeatureBit | None
+) -> CycleOutcome:
+    code = ErrorCode(record.error_code)
+    nan = math.nan
+    return CycleOutcome(
+        result_id=f"{cell}-{int(record.triggered_at * 1000)}-{record.cycle}",
+        cycle=record.cycle,
+        triggered_at=record.triggered_at,
+        recipe=selected,
+        recipe_name="" if recipe is None else recipe.name,
+        error_code=int(code),
+        error_name=code.name,
+        length_mm=nan if record.length_mm is None else record.length_mm,
+        heel_height_mm=nan if record.heel_height_mm is None else record.heel_height_mm,
+        toe_height_mm=nan if record.toe_height_mm is None else record.toe_height_mm,
+        cycle_time_ms=record.cycle_time_ms,
+        glue_points=len(record.glue_path),
+        in_tolerance=None if failed is None else not failed,
+        failed_features=() if failed is None else tuple(bit.name or "" for bit in FeatureBit if failed & bit),
+    )
 
 
 def _record(
