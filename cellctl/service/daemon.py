@@ -103,6 +103,7 @@ class Daemon:
         self.listeners: list[OutcomeListener] = []
         self.active_recipe: Recipe | None = self.recipes.get(0)
         self._reconstructors: dict[tuple[float, float], SoleReconstructor] = {}
+        self.opcua = None  # the OPC UA server while running, if [opcua] enabled
         if self.calib is not None:
             depth = config.measure.depth_range_mm
             self._reconstructors[depth] = SoleReconstructor(self.calib, depth)
@@ -133,6 +134,7 @@ class Daemon:
             # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
             self._probe_cameras(force=True)
             self.link.start()
+            opcua = self._start_opcua()
             try:
                 self._report_health()
                 self.notifier.notify(READY=1, STATUS=self._status_text())
@@ -141,11 +143,33 @@ class Daemon:
                 self._serve()
             finally:
                 self.notifier.notify(STOPPING=1, STATUS="stopping")
+                if opcua is not None:
+                    opcua.stop()
                 self.link.stop()
         finally:
             self.source.close()
             self._journal.close()
             log.info("stopped after %d cycles", self.cycles_done)
+
+    def _start_opcua(self):  # noqa: ANN202 - OpcUaServer | None; asyncua is imported only when enabled
+        if not self.config.opcua.enabled:
+            return None
+        from cellctl.service.opcua import OpcUaServer
+
+        def active() -> tuple[int, str]:
+            recipe = self.active_recipe
+            return (0, "") if recipe is None else (recipe.number, recipe.name)
+
+        server = OpcUaServer(
+            self.config.opcua,
+            status=lambda: self.link.status,
+            recipes=[(r.number, r.name) for r in self.recipes],
+            active_recipe=active,
+        )
+        server.start()
+        self.listeners.append(server.publish)
+        self.opcua = server
+        return server
 
     def _serve(self) -> None:
         while not self._stop.is_set():
