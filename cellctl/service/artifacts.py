@@ -1,4 +1,5 @@
-"""What a cycle leaves for people: the sole's cloud as PLY and the left image with the glue path drawn.
+"""What a cycle leaves for people and robot tools: the sole's cloud as PLY with normals, the glue path as CSV
+and PLY polyline (table frame, cellctl.vision.export), and the left image with the glue path drawn.
 
 Written after the PLC has its answer; a failure here is logged and never fails the cycle.
 """
@@ -12,6 +13,7 @@ import cv2
 from cellctl.cameras.base import StereoFrame
 from cellctl.service.journal import CycleRecord, Journal
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.export import cloud_normals, write_cloud_ply, write_glue_csv, write_glue_ply
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.overlay import draw_on_left
 from cellctl.vision.reconstruction import Reconstruction
@@ -39,10 +41,12 @@ def keep_artifacts(
         folder = journal.artifact_dir(record.id)
         folder.mkdir(parents=True, exist_ok=True)
         ply = folder / f"cycle-{record.cycle}.ply"
-        import open3d as o3d
-
-        if not o3d.io.write_point_cloud(str(ply), reconstruction.point_cloud(), write_ascii=False):
-            raise OSError(f"Open3D could not write {ply}")
+        points = reconstruction.sole_points
+        write_cloud_ply(ply, points, cloud_normals(points), reconstruction.sole_colors[:, ::-1], frame="table")
+        path = measurement.glue_path
+        if path is not None:
+            write_glue_csv(folder / f"cycle-{record.cycle}-glue.csv", path.points, path.normals)
+            write_glue_ply(folder / f"cycle-{record.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
         overlay = folder / f"cycle-{record.cycle}-overlay.png"
         if not cv2.imwrite(str(overlay), draw_on_left(frame.left, calib, measurement), PNG_FAST):
             raise OSError(f"cannot write {overlay}")
