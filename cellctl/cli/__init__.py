@@ -26,6 +26,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "bench_sole",
     "results",
     "run",
+    "teach_robot",
 )
 
 

@@ -130,3 +130,56 @@ def test_the_file_round_trips_and_refuses_other_files(tmp_path: Path) -> None:
     other.write_text('{"K1": 1}')
     with pytest.raises(ValueError, match="teach-robot"):
         load_robot_frame(other)
+
+
+# ---- cellctl teach-robot -------------------------------------------------------------------------------
+
+
+def write_teach_csv(path: Path, robot: np.ndarray, cell: np.ndarray) -> Path:
+    rows = ["# touched with the glue nozzle tip, 2026-11-28", "robot_x,robot_y,robot_z,cell_x,cell_y,cell_z"]
+    rows += [",".join(f"{v:.4f}" for v in (*r, *c)) for r, c in zip(robot, cell)]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_teach_then_check_then_a_bump_is_caught(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cellctl.cli import main
+
+    robot = SimulatedRobot(11)
+    measured, touched = robot.teach(8, 0.05, 0.05)
+    touched[5] += 6.0
+    frame = tmp_path / "robot-frame.json"
+    assert (
+        main(["teach-robot", str(write_teach_csv(tmp_path / "teach.csv", touched, measured)), "--frame", str(frame)])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "REJECTED" in out and "rejected point(s) 6" in out
+    position_mm, angle_deg = transform_error(load_robot_frame(frame), robot.truth, measured)
+    assert position_mm < 0.1 and angle_deg < 0.05
+    # After a bump: the same check points, once as they were and once with the table moved 2 mm.
+    again, touched_again = robot.teach(5, 0.05, 0.05)
+    check = write_teach_csv(tmp_path / "check.csv", touched_again, again)
+    assert main(["teach-robot", str(check), "--frame", str(frame), "--check"]) == 0
+    assert "robot frame ok" in capsys.readouterr().out
+    bumped = write_teach_csv(tmp_path / "bumped.csv", touched_again, again + np.array([2.0, 0.0, 0.0]))
+    assert main(["teach-robot", str(bumped), "--frame", str(frame), "--check"]) == 1
+    assert "MOVED" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("content", "words"),
+    [
+        ("robot_x,robot_y\n1,2\n", "lacks column(s) robot_z"),
+        ("robot_x,robot_y,robot_z,cell_x,cell_y,cell_z\n1,2,3,4,5,x\n", "row 2"),
+    ],
+)
+def test_a_bad_teach_file_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str, words: str
+) -> None:
+    from cellctl.cli import main
+
+    (tmp_path / "bad.csv").write_text(content)
+    assert main(["teach-robot", str(tmp_path / "bad.csv"), "--frame", str(tmp_path / "f.json")]) == 2
+    err = capsys.readouterr().err
+    assert words in err and len(err.strip().splitlines()) == 1
