@@ -133,23 +133,28 @@ class Daemon:
             # Cameras first: preparing them may take long (the simulator renders its scenes), and the
             # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
             self._probe_cameras(force=True)
-            self.link.start()
-            opcua = self._start_opcua()
+            opcua = self._start_opcua()  # before the link too: asyncua loads its address space for seconds
             try:
-                self._report_health()
-                self.notifier.notify(READY=1, STATUS=self._status_text())
-                log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self._cameras_ok else "NOT ok")
-                self._started.set()
-                self._serve()
+                self._serve_link()
             finally:
-                self.notifier.notify(STOPPING=1, STATUS="stopping")
                 if opcua is not None:
                     opcua.stop()
-                self.link.stop()
         finally:
             self.source.close()
             self._journal.close()
             log.info("stopped after %d cycles", self.cycles_done)
+
+    def _serve_link(self) -> None:
+        self.link.start()
+        try:
+            self._report_health()
+            self.notifier.notify(READY=1, STATUS=self._status_text())
+            log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self._cameras_ok else "NOT ok")
+            self._started.set()
+            self._serve()
+        finally:
+            self.notifier.notify(STOPPING=1, STATUS="stopping")
+            self.link.stop()
 
     def _start_opcua(self):  # noqa: ANN202 - OpcUaServer | None; asyncua is imported only when enabled
         if not self.config.opcua.enabled:
