@@ -102,11 +102,11 @@ class Daemon:
         #: Called with each finished cycle after the PLC has its answer (OPC UA, station); must not block.
         self.listeners: list[OutcomeListener] = []
         self.active_recipe: Recipe | None = self.recipes.get(0)
-        self._reconstructors: dict[tuple[float, float], SoleReconstructor] = {}
         self.opcua = None  # the OPC UA server while running, if [opcua] enabled
-        if self.calib is not None:
-            depth = config.measure.depth_range_mm
-            self._reconstructors[depth] = SoleReconstructor(self.calib, depth)
+        self._reconstructor = (
+            None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
+        )
+        self._recipe_reconstructors: dict[tuple[float, float], SoleReconstructor] = {}  # other depth ranges
         self._stop = threading.Event()
         self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
@@ -270,10 +270,13 @@ class Daemon:
     def _measure(self, frame: StereoFrame, timings: dict[str, float], recipe: Recipe) -> Measured:
         if self.calib is None:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
-        reconstructor = self._reconstructors.get(recipe.depth_range_mm)
-        if reconstructor is None:  # one per depth range: its matcher's disparity range depends on it
-            reconstructor = SoleReconstructor(self.calib, recipe.depth_range_mm)
-            self._reconstructors[recipe.depth_range_mm] = reconstructor
+        reconstructor = self._reconstructor
+        if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
+            # One per depth range: the matcher's disparity range follows from it.
+            reconstructor = self._recipe_reconstructors.get(recipe.depth_range_mm)
+            if reconstructor is None:
+                reconstructor = SoleReconstructor(self.calib, recipe.depth_range_mm)
+                self._recipe_reconstructors[recipe.depth_range_mm] = reconstructor
         result = measure_frame(frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm))
         timings.update(result.timings)
         if isinstance(result, Refused):
