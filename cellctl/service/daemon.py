@@ -27,17 +27,15 @@ import math
 import threading
 import time
 
-import numpy as np
-
 from cellctl.cameras import CameraError, FrameSource, StereoFrame, open_frame_source
 from cellctl.errors import FailureKind
 from cellctl.service.artifacts import keep_artifacts
 from cellctl.service.codes import FAILURE_CODES
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
-from cellctl.service.glue_output import GlueOutput, thinned
+from cellctl.service.glue_output import GlueOutput
 from cellctl.service.journal import CycleRecord, Journal
-from cellctl.service.outcome import CycleOutcome, OutcomeListener
+from cellctl.service.outcome import OutcomeListener, journal_record, outcome_of
 from cellctl.service.recipes import Recipe, RecipeBook
 from cellctl.service.sdnotify import SystemdNotifier
 from cellctl.vision.calibration import Calibration
@@ -223,7 +221,7 @@ class Daemon:
             code, reason = ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}"
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         measurement = None if result is None else result.measurement
-        record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
+        record = journal_record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
         assert self._journal is not None
         self._journal.record(record)  # durable before the PLC hears of it
         failed = self._publish(trigger.cycle, code, cycle_time_ms, measurement, recipe)
@@ -319,7 +317,7 @@ class Daemon:
     ) -> None:
         if not self.listeners:
             return
-        outcome = _outcome(self.config.opcua.cell_name, record, selected, recipe, failed)
+        outcome = outcome_of(self.config.opcua.cell_name, record, selected, recipe, failed)
         for listener in self.listeners:
             try:
                 listener(outcome)
@@ -332,7 +330,7 @@ class Daemon:
         triggered_at = time.time() - (time.monotonic() - trigger.received_at)
         assert self._journal is not None
         self._journal.record(
-            _record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
+            journal_record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
         )
         self.link.publish_error(trigger.cycle, ErrorCode.CYCLE_ABORTED, cycle_time_ms=cycle_time_ms)
         log.warning("cycle %d: aborted, %s", trigger.cycle, reason)
@@ -371,61 +369,3 @@ def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | Non
     except (OSError, ValueError) as exc:
         log.error("calibration %s not usable: %s", config.calibration.path, exc)
         return None, str(exc)
-
-
-def _published_points(points: np.ndarray) -> np.ndarray:
-    """The glue path as the journal keeps it: table frame, thinned as for the PLC."""
-    return points[thinned(len(points))]
-
-
-def _outcome(
-    cell: str, record: CycleRecord, selected: int, recipe: Recipe | None, failed: FeatureBit | None
-) -> CycleOutcome:
-    code = ErrorCode(record.error_code)
-    nan = math.nan
-    return CycleOutcome(
-        result_id=f"{cell}-{int(record.triggered_at * 1000)}-{record.cycle}",
-        cycle=record.cycle,
-        triggered_at=record.triggered_at,
-        recipe=selected,
-        recipe_name="" if recipe is None else recipe.name,
-        error_code=int(code),
-        error_name=code.name,
-        length_mm=nan if record.length_mm is None else record.length_mm,
-        heel_height_mm=nan if record.heel_height_mm is None else record.heel_height_mm,
-        toe_height_mm=nan if record.toe_height_mm is None else record.toe_height_mm,
-        cycle_time_ms=record.cycle_time_ms,
-        glue_points=len(record.glue_path),
-        in_tolerance=None if failed is None else not failed,
-        failed_features=() if failed is None else tuple(bit.name or "" for bit in FeatureBit if failed & bit),
-    )
-
-
-def _record(
-    cycle: int,
-    triggered_at: float,
-    code: ErrorCode,
-    reason: str | None,
-    cycle_time_ms: float,
-    timings: dict[str, float],
-    measurement: SoleMeasurement | None,
-    frame: StereoFrame | None,
-) -> CycleRecord:
-    ok = code is ErrorCode.NONE and measurement is not None and measurement.glue_path is not None
-    return CycleRecord(
-        cycle=cycle,
-        triggered_at=triggered_at,
-        status="ok" if ok else "error",
-        error_code=int(code),
-        reason=reason,
-        cycle_time_ms=cycle_time_ms,
-        length_mm=float(measurement.length_mm) if ok else None,
-        heel_height_mm=float(measurement.heel_height_mm) if ok else None,
-        toe_height_mm=float(measurement.toe_height_mm) if ok else None,
-        timings={k: round(v, 5) for k, v in timings.items()},
-        # float32 as published: the journal holds exactly the numbers the PLC reads.
-        glue_path=_published_points(measurement.glue_path.points).astype(np.float32).astype(float).tolist()
-        if ok
-        else [],
-        source={} if frame is None else {**frame.info, "skew_ms": round(frame.skew_s * 1000.0, 3)},
-    )
