@@ -204,3 +204,16 @@ def test_mbpoll_reads_the_v2_header_and_points(link: PlcLink) -> None:
         assert mbpoll(port, "-t", "4:float", "-r", "20", "-c", "2") == {20: 1.5, 22: 2.0}
     else:
         assert decoded.shape[1] == 3 and header[7] == header[8] == header[9] == 0
+
+
+def test_the_plc_tag_list_names_every_register_at_its_address() -> None:
+    import csv
+    from pathlib import Path
+
+    tags = Path(__file__).resolve().parents[2] / "docs" / "plc" / "tags.csv"
+    with tags.open(newline="") as source:
+        rows = list(csv.DictReader(source))
+    addresses = {int(row["address"]) for row in rows}
+    assert {int(register) for register in Register} <= addresses
+    v1_only = {int(row["address"]) for row in rows if row["map_version"] == "1"}
+    assert Register.RECIPE_SELECT not in v1_only and Register.GLUE_FRAME not in v1_only
