@@ -7,7 +7,7 @@ from pathlib import Path
 
 import cv2
 
-from cellctl.calib.zhang import find_pairs
+from cellctl.calib.pairs import find_pairs
 from cellctl.cameras.base import CameraMissing, StereoFrame
 
 

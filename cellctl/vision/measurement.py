@@ -20,18 +20,14 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM, PLAUSIBLE_HEIGHT_MM, PLAUSIBLE_LENGTH_MM
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
-# Results outside these ranges are no sole on this cell: refused, never published.
-PLAUSIBLE_LENGTH_MM = (100.0, 400.0)
-PLAUSIBLE_HEIGHT_MM = (0.5, 150.0)
 HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
-GLUE_OFFSET_MM = 2.0
-GLUE_SPACING_MM = 2.0
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
 GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
