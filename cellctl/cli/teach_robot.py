@@ -2,7 +2,9 @@
 
 The teach file is a CSV with a header row and one row per point the robot touched (or presented its target
 at): robot_x, robot_y, robot_z (the robot's reading in its base frame, mm) and cell_x, cell_y, cell_z (the
-same point measured by the cell in its table frame, mm). docs/robot-frame.md describes the procedure.
+same point measured by the cell in its table frame, mm). `--locate` measures the cell's side: it finds the
+ArUco teach markers in a stereo pair (cellctl.vision.teach_target) and writes that CSV with the robot
+columns left empty for the operator. docs/robot-frame.md describes the procedure.
 """
 
 from __future__ import annotations
@@ -30,13 +32,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "(exit 1 if the cell or robot moved)."
         ),
     )
-    parser.add_argument("points", type=Path, metavar="POINTS.csv", help="touched points, see above")
+    parser.add_argument("points", type=Path, metavar="POINTS.csv", help="touched points (with --locate: written)")
     parser.add_argument("--config", type=Path, help="cell config: the transform goes beside its calibration")
     parser.add_argument("--frame", type=Path, metavar="robot-frame.json", help="transform file (overrides --config)")
     parser.add_argument(
         "--tolerance", type=float, default=None, metavar="MM", help="largest residual of a good point (default 1.0)"
     )
     parser.add_argument("--check", action="store_true", help="re-check the stored transform, change nothing")
+    parser.add_argument(
+        "--locate",
+        nargs=2,
+        type=Path,
+        metavar=("LEFT", "RIGHT"),
+        help="measure the teach markers in this raw stereo pair and write POINTS.csv for the robot's readings",
+    )
     parser.set_defaults(func=run)
 
 
@@ -46,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
     tolerance = DEFAULT_TOLERANCE_MM if args.tolerance is None else args.tolerance
     if tolerance <= 0:
         raise UserError(f"--tolerance {tolerance:g} mm must be positive")
+    if args.locate:
+        return _locate(args)
     frame_path = _frame_path(args)
     robot, cell = read_points(args.points)
     if args.check:
@@ -82,11 +93,61 @@ def read_points(path: Path) -> tuple[np.ndarray, np.ndarray]:
             try:
                 rows.append([float(row[c]) for c in COLUMNS])
             except (TypeError, ValueError):
-                raise UserError(f"{path}: row {number} has a value that is not a number: {row}") from None
+                raise UserError(
+                    f"{path}: data row {number - 1} has an empty or non-numeric value (fill in every robot_* "
+                    f"and cell_* column): {dict(row)}"
+                ) from None
     values = np.array(rows, dtype=float).reshape(-1, 6)
     if not np.all(np.isfinite(values)):
         raise UserError(f"{path}: a coordinate is not finite")
     return values[:, :3], values[:, 3:]
+
+
+def _locate(args: argparse.Namespace) -> int:
+    """Find the markers, write the teach CSV with the cell's coordinates filled in."""
+    import cv2
+
+    from cellctl.vision.calibration import Calibration
+    from cellctl.vision.reconstruction import SoleReconstructor
+    from cellctl.vision.table import find_table
+    from cellctl.vision.teach_target import locate_markers
+
+    if args.config is None:
+        raise UserError("--locate needs --config: the calibration and depth range of the cell")
+    from cellctl.service.config import CellConfig
+
+    config = CellConfig.load(args.config)
+    calib = Calibration.load(config.calibration.path)
+    images = []
+    for side, path in zip(("LEFT", "RIGHT"), args.locate):
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise UserError(f"{side} image {path} does not exist or is not an image")
+        try:
+            calib.check_image(image)
+        except ValueError as exc:
+            raise UserError(f"{side} image {path}: {exc}") from None
+        images.append(image)
+    cloud = SoleReconstructor(calib, config.measure.depth_range_mm).points_from_disparity(*images)
+    table = find_table(cloud.points)
+    if table is None:
+        print("cellctl teach-robot: the table was not found in the pair: clear the view and check the depth range")
+        return 1
+    targets = locate_markers(calib, images[0], images[1], table)
+    if not targets:
+        print("cellctl teach-robot: no teach marker (ArUco 4x4, ids 0..49) seen by both cameras")
+        return 1
+    with args.points.open("w", encoding="utf-8") as out:
+        out.write("# cell_*: measured by the cameras; fill in robot_* with the robot's reading at each marker centre\n")
+        out.write("marker," + ",".join(COLUMNS) + "\n")
+        for target in targets:
+            x, y, z = target.table_xyz
+            out.write(f"{target.marker_id},,,,{x:.3f},{y:.3f},{z:.3f}\n")
+    for target in targets:
+        x, y, z = target.table_xyz
+        print(f" marker {target.marker_id:3d}: cell x={x:9.3f} y={y:9.3f} z={z:8.3f} mm")
+    print(f"{len(targets)} markers written to {args.points}: add the robot's readings, then run teach-robot on it")
+    return 0
 
 
 def _frame_path(args: argparse.Namespace) -> Path:

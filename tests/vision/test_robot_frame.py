@@ -171,7 +171,7 @@ def test_teach_then_check_then_a_bump_is_caught(tmp_path: Path, capsys: pytest.C
     ("content", "words"),
     [
         ("robot_x,robot_y\n1,2\n", "lacks column(s) robot_z"),
-        ("robot_x,robot_y,robot_z,cell_x,cell_y,cell_z\n1,2,3,4,5,x\n", "row 2"),
+        ("robot_x,robot_y,robot_z,cell_x,cell_y,cell_z\n1,2,3,4,5,x\n", "data row 1"),
     ],
 )
 def test_a_bad_teach_file_is_one_line_and_exit_2(
