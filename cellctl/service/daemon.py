@@ -18,6 +18,10 @@ Stopping (request_stop, e.g. SIGTERM): a cycle triggered before the stop request
 (it takes a second or two, far below systemd's stop timeout, and the PLC gets its answer); a trigger that
 arrives once stopping has begun is answered with CYCLE_ABORTED. The link then keeps serving for
 STOP_LINGER_S, so the PLC can read that last answer, and closes.
+
+Longer than most modules (~370 lines): the order of one cycle (journal, PLC, listeners, artifacts) and of
+start and stop is the service's contract, and it reads best in one place. Recipes, the glue path's frame,
+the outcome records and the OPC UA server live in their own modules.
 """
 
 from __future__ import annotations
@@ -329,10 +333,12 @@ class Daemon:
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         triggered_at = time.time() - (time.monotonic() - trigger.received_at)
         assert self._journal is not None
-        self._journal.record(
-            journal_record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
+        record = journal_record(
+            trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None
         )
+        self._journal.record(record)
         self.link.publish_error(trigger.cycle, ErrorCode.CYCLE_ABORTED, cycle_time_ms=cycle_time_ms)
+        self._tell_listeners(record, trigger.recipe, self.recipes.get(trigger.recipe), None)
         log.warning("cycle %d: aborted, %s", trigger.cycle, reason)
 
     # ---- health --------------------------------------------------------------------------------

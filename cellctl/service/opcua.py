@@ -178,10 +178,10 @@ class OpcUaServer:
         self._started.set()
         try:
             while not self._stop.is_set():
-                await self._state.write_value(system_state(self._status(), self._stopping))
-                number, name = self._active_recipe()
-                await self._active_id.write_value(ua.Variant(number, ua.VariantType.UInt16))
-                await self._active_name.write_value(name)
+                try:
+                    await self._follow_state()
+                except Exception:  # a failed update must not end the server; the next tick tries again
+                    log.exception("OPC UA: updating the state failed")
                 try:
                     await asyncio.wait_for(self._stop.wait(), STATE_PERIOD_S)
                 except TimeoutError:
@@ -189,6 +189,12 @@ class OpcUaServer:
             await self._state.write_value("Halted")
         finally:
             await server.stop()
+
+    async def _follow_state(self) -> None:
+        await self._state.write_value(system_state(self._status(), self._stopping))
+        number, name = self._active_recipe()
+        await self._active_id.write_value(ua.Variant(number, ua.VariantType.UInt16))
+        await self._active_name.write_value(name)
 
     async def _build(self) -> Server:
         cfg = self.config
