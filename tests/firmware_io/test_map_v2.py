@@ -217,3 +217,26 @@ def test_the_plc_tag_list_names_every_register_at_its_address() -> None:
     assert {int(register) for register in Register} <= addresses
     v1_only = {int(row["address"]) for row in rows if row["map_version"] == "1"}
     assert Register.RECIPE_SELECT not in v1_only and Register.GLUE_FRAME not in v1_only
+
+
+def test_cellctl_plc_sim_reads_v2_with_a_recipe(capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from cellctl.cli import main
+
+    with PlcLink(TcpEndpoint("127.0.0.1", 0), map_version=2) as link, FakeController(link):
+        port = str(link.endpoint.port)  # type: ignore[union-attr]
+        common = ["plc-sim", "--port", port, "--cycles", "1", "--interval", "0", "--map-version", "2"]
+        assert main([*common, "--recipe", "2"]) == 0
+        line = capsys.readouterr().out.strip()
+        assert "recipe=2 tolerance=FAIL LENGTH|TOE_HEIGHT frame=robot_base normals=" in line, line
+        assert main([*common, "--recipe", "1", "--json"]) == 0
+        record = json.loads(capsys.readouterr().out)
+        assert record["map_version"] == 2 and record["in_tolerance"] is True and record["glue_frame"] == "robot_base"
+        assert len(record["glue_normals"]) == record["glue_point_count"] and record["nozzle_offset_mm"] == 1.5
+        assert main([*common, "--recipe", "70000"]) == 2  # one line, no traceback
+        assert "--recipe 70000" in capsys.readouterr().err
+    with PlcLink(TcpEndpoint("127.0.0.1", 0), map_version=1) as link, FakeController(link):
+        port = str(link.endpoint.port)  # type: ignore[union-attr]
+        assert main(["plc-sim", "--port", port, "--cycles", "1", "--map-version", "2"]) == 1
+        assert "programmed for 2" in capsys.readouterr().err
