@@ -220,14 +220,6 @@ class PlcHandshake:
         with self._changed:
             self._finish(cycle, measurement, [], code)
 
-    def _path_registers(self, path: PathInfo, inspection: Inspection | None) -> dict[int, list[int]]:
-        offsets = self._map.encode_floats([path.nozzle_offset_mm, path.glue_offset_mm], what="offset")
-        return {
-            Register.GLUE_FRAME: [int(GlueFrame(path.frame))],
-            Register.NOZZLE_OFFSET_MM: offsets,
-            Register.FEATURE_FAILS: [0 if inspection is None else int(inspection.failed)],
-        }
-
     def close(self) -> None:
         """Wake any wait_trigger() so the controller can stop."""
         with self._changed:
@@ -292,6 +284,15 @@ class PlcHandshake:
         if self.layout.version >= 2:
             image[Register.RESULT_RECIPE] = image[Register.FEATURE_FAILS] = image[Register.GLUE_FRAME] = 0
             image[Register.NOZZLE_OFFSET_MM : Register.GLUE_OFFSET_MM + 2] = self._map.encode_floats([_NAN] * 2)
+
+    def _path_registers(self, path: PathInfo, inspection: Inspection | None) -> dict[int, list[int]]:
+        """Map v2's registers besides the points: frame, nozzle and glue offsets (20-23), feature bits."""
+        offsets = self._map.encode_floats([path.nozzle_offset_mm, path.glue_offset_mm], what="offset")
+        return {
+            Register.GLUE_FRAME: [int(GlueFrame(path.frame))],
+            Register.NOZZLE_OFFSET_MM: offsets,
+            Register.FEATURE_FAILS: [0 if inspection is None else int(inspection.failed)],
+        }
 
     def _set_flag(self, bit: StatusBit, on: bool) -> None:
         self._flags = (self._flags | bit) if on else (self._flags & ~bit)

@@ -10,6 +10,9 @@ It speaks the map version the controller announces in register 6 (or insists on 
 does): version 1 reads 0..18 and x, y, z per point, version 2 reads 0..23 and x, y, z, nx, ny, nz.
 
 and on every poll it feeds a heartbeat watchdog that fails when register 0 stops changing.
+
+Longer than most modules (~460 lines): it is one PLC program, and what it reads (header, reading, their
+text for `cellctl plc-sim`) is kept beside the reading so a change of the map is one edit here.
 """
 
 from __future__ import annotations
