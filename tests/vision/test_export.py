@@ -77,3 +77,26 @@ def test_bad_input_is_refused(tmp_path: Path) -> None:
         write_glue_csv(tmp_path / "x.csv", points, normals[:-1])
     with pytest.raises(ValueError, match="frame"):
         write_glue_ply(tmp_path / "x.ply", points, normals, frame="camera")
+
+
+@pytest.mark.slow  # one render and measurement at half size
+def test_measure_export_writes_the_three_files_of_one_pair(tmp_path: Path) -> None:
+    from cellctl.cli import main
+    from cellctl.sim.scene import SoleScene
+    from tests.sim_rig import half_size_rig, write_half_size_rig
+
+    scene = SoleScene.random(1, "white", half_size_rig())
+    scene.write(tmp_path, scene.render())
+    calib = write_half_size_rig(tmp_path)
+    out = tmp_path / "export"
+    out.mkdir()
+    args = ["measure", "--calib", str(calib), str(tmp_path / "left.png"), str(tmp_path / "right.png")]
+    assert main([*args, "--export", str(out)]) == 0
+    table = np.loadtxt(out / "glue-path.csv", delimiter=",", skiprows=1)
+    assert len(table) > 100 and np.allclose(np.linalg.norm(table[:, 4:], axis=1), 1.0, atol=1e-5)
+    lines = o3d.io.read_line_set(str(out / "glue-path.ply"))
+    np.testing.assert_allclose(np.asarray(lines.points), table[:, 1:4], atol=1e-3)
+    cloud = o3d.io.read_point_cloud(str(out / "cloud.ply"))
+    assert len(cloud.points) > 10_000 and cloud.has_normals() and cloud.has_colors()
+    assert np.median(np.asarray(cloud.normals)[:, 2]) > 0.9  # the sole's top faces the cameras
+    assert main([*args, "--export", str(tmp_path / "missing")]) == 2
