@@ -32,11 +32,14 @@ from typing import Any
 from asyncua import Node, Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 
+from cellctl.errors import UserError
 from cellctl.service.config import OpcUaConfig
 from cellctl.service.outcome import CycleOutcome
 from firmware_io.registers import StatusBit
 
 log = logging.getLogger(__name__)
+# asyncua reports every connection and endpoint at INFO; the service log keeps its warnings and errors.
+logging.getLogger("asyncua").setLevel(logging.WARNING)
 
 NAMESPACE = "urn:cellctl:machinevision"
 #: How often CurrentState follows the PLC link's status register.
@@ -130,9 +133,13 @@ class OpcUaServer:
         self._thread = threading.Thread(target=self._run, name="opcua", daemon=True)
         self._thread.start()
         if not self._started.wait(timeout_s):
-            raise RuntimeError(f"OPC UA server on {self.config.endpoint} did not start within {timeout_s} s")
+            self.stop()
+            raise UserError(f"OPC UA server on {self.config.endpoint} did not start within {timeout_s} s")
         if self._start_error is not None:
-            raise RuntimeError(f"cannot serve OPC UA on {self.config.endpoint}: {self._start_error}")
+            raise UserError(
+                f"cannot serve OPC UA on {self.config.endpoint}: {self._start_error} (is the port in use by another "
+                "cellctl, and is the address local to this PC? set [opcua] endpoint)"
+            )
         log.info("OPC UA serving %s", self.endpoint)
 
     def stop(self, timeout_s: float = 10.0) -> None:

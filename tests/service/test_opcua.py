@@ -173,3 +173,23 @@ def test_publishing_never_blocks_the_controller_thread(server: OpcUaServer) -> N
 
     threading.Thread(target=controller).start()
     assert done.wait(5)
+
+
+def test_a_port_in_use_is_one_clear_error() -> None:
+    import socket
+
+    from cellctl.errors import UserError
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        server = OpcUaServer(
+            OpcUaConfig(enabled=True, endpoint=f"opc.tcp://127.0.0.1:{port}/cellctl/", allow_anonymous=True),
+            status=lambda: HEALTHY,
+            recipes=[],
+            active_recipe=lambda: (0, ""),
+        )
+        with pytest.raises(UserError, match=f"cannot serve OPC UA on opc.tcp://127.0.0.1:{port}/cellctl/"):
+            server.start()
+        server.stop()
