@@ -167,9 +167,9 @@ def test_recipe_select_is_taken_when_the_trigger_is_accepted() -> None:
 # ---- mbpoll: a Modbus master written by others -----------------------------------------------------
 
 
-def mbpoll(port: int, *args: str, write: tuple[str, ...] = ()) -> dict[int, float]:
-    """Run mbpoll once (0-based addresses, high word first) and parse its `[address]: value` lines."""
-    options = ["-m", "tcp", "-p", str(port), "-a", "1", "-0", "-1", "-B", "-o", "5", *args]
+def mbpoll(port: int, *args: str, write: tuple[str, ...] = (), high_first: bool = True) -> dict[int, float]:
+    """Run mbpoll once (0-based addresses) and parse its `[address]: value` lines; -B: high word first."""
+    options = ["-m", "tcp", "-p", str(port), "-a", "1", "-0", "-1", *(["-B"] if high_first else []), "-o", "5", *args]
     command = ["mbpoll", *options, "127.0.0.1", *write]
     done = subprocess.run(command, capture_output=True, text=True, timeout=30)
     assert done.returncode == 0, done.stdout + done.stderr
@@ -240,3 +240,17 @@ def test_cellctl_plc_sim_reads_v2_with_a_recipe(capsys: pytest.CaptureFixture[st
         port = str(link.endpoint.port)  # type: ignore[union-attr]
         assert main(["plc-sim", "--port", port, "--cycles", "1", "--map-version", "2"]) == 1
         assert "programmed for 2" in capsys.readouterr().err
+
+
+def test_mbpoll_reads_v2_floats_in_low_word_first_order_too() -> None:
+    """mbpoll's own default is the low word first ("CDAB"): a controller configured so reads right without -B."""
+    with PlcLink(TcpEndpoint("127.0.0.1", 0), map_version=2, word_order=WordOrder.LOW_FIRST) as link:
+        with FakeController(link), PlcSimulator(link.endpoint, word_order=WordOrder.LOW_FIRST) as plc:  # type: ignore[arg-type]
+            reading = plc.run_cycle(recipe=1)
+        port = link.endpoint.port  # type: ignore[union-attr]
+        assert mbpoll(port, "-t", "4:float", "-r", "10", "-c", "4", high_first=False)[14] == 250.0 + reading.cycle
+        values = mbpoll(port, "-t", "4:float", "-r", "100", "-c", "6", high_first=False)
+        points, normals = path(reading.cycle)
+        np.testing.assert_allclose(
+            [values[100 + 2 * k] for k in range(6)], np.hstack([points[0], normals[0]]), rtol=2e-6, atol=1e-3
+        )
