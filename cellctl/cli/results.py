@@ -26,6 +26,9 @@ CSV_FIELDS = (
     "glue_points",
     "ply_path",
     "overlay_path",
+    "recipe",
+    "in_tolerance",
+    "failed_features",
 )
 
 
@@ -72,7 +75,7 @@ def describe(record: CycleRecord) -> str:
         return (
             head
             + f"ok length={record.length_mm:.2f} heel={record.heel_height_mm:.2f} toe={record.toe_height_mm:.2f} mm "
-            f"points={len(record.glue_path)} {record.cycle_time_ms:.0f} ms"
+            f"points={len(record.glue_path)} {record.cycle_time_ms:.0f} ms" + _verdict(record)
         )
     return head + f"error {record.error_code} ({record.reason}) {record.cycle_time_ms:.0f} ms"
 
@@ -83,4 +86,13 @@ def _write_csv(records: list[CycleRecord]) -> None:
     for record in records:
         row = {name: getattr(record, name, None) for name in CSV_FIELDS}
         row["glue_points"] = len(record.glue_path)
+        row["failed_features"] = "|".join(record.failed_features)
         writer.writerow(row)
+
+
+def _verdict(record: CycleRecord) -> str:
+    """ " recipe N pass|FAIL features" when a recipe was selected or checked; "" for plain recipe-0 cycles."""
+    if record.in_tolerance is None:
+        return f" recipe={record.recipe}" if record.recipe else ""
+    verdict = "pass" if record.in_tolerance else "FAIL " + "|".join(record.failed_features)
+    return f" recipe={record.recipe} {verdict}"

@@ -225,12 +225,24 @@ class Daemon:
             code, reason = ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}"
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         measurement = None if result is None else result.measurement
-        record = journal_record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
+        failed = _inspect(recipe, measurement) if code is ErrorCode.NONE else None
+        record = journal_record(
+            trigger.cycle,
+            triggered_at,
+            code,
+            reason,
+            cycle_time_ms,
+            timings,
+            measurement,
+            frame,
+            trigger.recipe,
+            failed,
+        )
         assert self._journal is not None
         self._journal.record(record)  # durable before the PLC hears of it
-        failed = self._publish(trigger.cycle, code, cycle_time_ms, measurement, recipe)
+        self._publish(trigger.cycle, code, cycle_time_ms, measurement, recipe, failed)
         self._report_health()
-        self._tell_listeners(record, trigger.recipe, recipe, failed)
+        self._tell_listeners(record, recipe)
         self.cycles_done += 1
         if code is ErrorCode.NONE:
             log.info(
@@ -292,17 +304,13 @@ class Daemon:
         cycle_time_ms: float,
         measurement: SoleMeasurement | None,
         recipe: Recipe | None,
-    ) -> FeatureBit | None:
-        """Answer the PLC; the features out of tolerance (None when nothing was checked)."""
+        failed: FeatureBit | None,
+    ) -> None:
+        """Answer the PLC; `failed`: the features out of tolerance (None when nothing was checked)."""
         if code is not ErrorCode.NONE or measurement is None or recipe is None:
             self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
-            return None
+            return
         assert measurement.glue_path is not None
-        failed = (
-            recipe.inspect(measurement.length_mm, measurement.heel_height_mm, measurement.toe_height_mm)
-            if recipe.checks_tolerances
-            else None
-        )
         out = self.glue_output.prepare(measurement.glue_path.points, measurement.glue_path.normals)
         self.link.publish_result(
             cycle,
@@ -314,14 +322,11 @@ class Daemon:
             path=PathInfo(out.normals, out.frame, out.nozzle_offset_mm, recipe.glue_offset_mm),
             inspection=None if failed is None else Inspection(failed),
         )
-        return failed
 
-    def _tell_listeners(
-        self, record: CycleRecord, selected: int, recipe: Recipe | None, failed: FeatureBit | None
-    ) -> None:
+    def _tell_listeners(self, record: CycleRecord, recipe: Recipe | None) -> None:
         if not self.listeners:
             return
-        outcome = outcome_of(self.config.opcua.cell_name, record, selected, recipe, failed)
+        outcome = outcome_of(self.config.opcua.cell_name, record, recipe)
         for listener in self.listeners:
             try:
                 listener(outcome)
@@ -333,12 +338,13 @@ class Daemon:
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         triggered_at = time.time() - (time.monotonic() - trigger.received_at)
         assert self._journal is not None
+        code = ErrorCode.CYCLE_ABORTED
         record = journal_record(
-            trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None
+            trigger.cycle, triggered_at, code, reason, cycle_time_ms, {}, None, None, trigger.recipe
         )
         self._journal.record(record)
         self.link.publish_error(trigger.cycle, ErrorCode.CYCLE_ABORTED, cycle_time_ms=cycle_time_ms)
-        self._tell_listeners(record, trigger.recipe, self.recipes.get(trigger.recipe), None)
+        self._tell_listeners(record, self.recipes.get(trigger.recipe))
         log.warning("cycle %d: aborted, %s", trigger.cycle, reason)
 
     # ---- health --------------------------------------------------------------------------------
@@ -375,3 +381,10 @@ def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | Non
     except (OSError, ValueError) as exc:
         log.error("calibration %s not usable: %s", config.calibration.path, exc)
         return None, str(exc)
+
+
+def _inspect(recipe: Recipe | None, measurement: SoleMeasurement | None) -> FeatureBit | None:
+    """Features of a measured sole outside the recipe's tolerances; None when the recipe checks nothing."""
+    if recipe is None or measurement is None or not recipe.checks_tolerances:
+        return None
+    return recipe.inspect(measurement.length_mm, measurement.heel_height_mm, measurement.toe_height_mm)

@@ -51,18 +51,15 @@ class CycleOutcome:
 OutcomeListener = Callable[[CycleOutcome], None]
 
 
-def outcome_of(
-    cell: str, record: CycleRecord, selected: int, recipe: Recipe | None, failed: FeatureBit | None
-) -> CycleOutcome:
-    """The outcome of a journaled cycle: `selected` is the recipe number the PLC asked for, `failed` the
-    features out of tolerance (None: nothing checked)."""
+def outcome_of(cell: str, record: CycleRecord, recipe: Recipe | None) -> CycleOutcome:
+    """The outcome of a journaled cycle; `recipe` is the one its number named (None: unknown number)."""
     code = ErrorCode(record.error_code)
     nan = math.nan
     return CycleOutcome(
         result_id=f"{cell}-{int(record.triggered_at * 1000)}-{record.cycle}",
         cycle=record.cycle,
         triggered_at=record.triggered_at,
-        recipe=selected,
+        recipe=record.recipe,
         recipe_name="" if recipe is None else recipe.name,
         error_code=int(code),
         error_name=code.name,
@@ -71,8 +68,8 @@ def outcome_of(
         toe_height_mm=nan if record.toe_height_mm is None else record.toe_height_mm,
         cycle_time_ms=record.cycle_time_ms,
         glue_points=len(record.glue_path),
-        in_tolerance=None if failed is None else not failed,
-        failed_features=() if failed is None else tuple(bit.name or "" for bit in FeatureBit if failed & bit),
+        in_tolerance=record.in_tolerance,
+        failed_features=tuple(record.failed_features),
     )
 
 
@@ -85,10 +82,14 @@ def journal_record(
     timings: dict[str, float],
     measurement: SoleMeasurement | None,
     frame: StereoFrame | None,
+    recipe: int = 0,
+    failed: FeatureBit | None = None,
 ) -> CycleRecord:
-    """The journal row of a finished cycle (measurements only when it was measured)."""
+    """The journal row of a finished cycle (measurements only when it was measured); `recipe` the number the
+    PLC selected, `failed` the features out of tolerance (None: nothing checked)."""
     record = CycleRecord(
         cycle=cycle,
+        recipe=recipe,
         triggered_at=triggered_at,
         status="error",
         error_code=int(code),
@@ -101,6 +102,9 @@ def journal_record(
     if code is not ErrorCode.NONE or measurement is None or path is None:
         return record
     record.status = "ok"
+    if failed is not None:
+        record.in_tolerance = not failed
+        record.failed_features = [bit.name or "" for bit in FeatureBit if failed & bit]
     record.length_mm = _number(measurement.length_mm)
     record.heel_height_mm = _number(measurement.heel_height_mm)
     record.toe_height_mm = _number(measurement.toe_height_mm)

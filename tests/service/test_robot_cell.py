@@ -25,6 +25,7 @@ from asyncua import Client
 from cellctl.cli import main
 from cellctl.service.config import CellConfig
 from cellctl.service.daemon import Daemon
+from cellctl.service.journal import Journal
 from cellctl.service.opcua import NAMESPACE
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
@@ -198,3 +199,12 @@ def test_recipes_by_register_robot_frame_points_and_one_opcua_event_per_cycle(ce
     assert unknown.error_code == ErrorCode.RECIPE_UNKNOWN and unknown.recipe == 99 and not unknown.ok
     assert math.isnan(unknown.length_mm)
     assert cell.daemon.active_recipe is not None and cell.daemon.active_recipe.number == 2
+    # The journal keeps the same: durable before the PLC heard of it.
+    journal = Journal.open(cell.config.journal.state_dir, readonly=True)
+    rows = [journal.find(reading.cycle) for reading in (good, long, unknown)]
+    assert [(r.recipe, r.in_tolerance, r.failed_features) for r in rows if r is not None] == [
+        (1, True, []),
+        (2, False, ["LENGTH"]),
+        (99, None, []),
+    ]
+    journal.close()
