@@ -46,6 +46,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar=("LEFT", "RIGHT"),
         help="measure the teach markers in this raw stereo pair and write POINTS.csv for the robot's readings",
     )
+    parser.add_argument(
+        "--locate-live",
+        action="store_true",
+        help="as --locate, with a pair grabbed from the config's cameras (stop the service first)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -55,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     tolerance = DEFAULT_TOLERANCE_MM if args.tolerance is None else args.tolerance
     if tolerance <= 0:
         raise UserError(f"--tolerance {tolerance:g} mm must be positive")
-    if args.locate:
+    if args.locate or args.locate_live:
         return _locate(args)
     frame_path = _frame_path(args)
     robot, cell = read_points(args.points)
@@ -118,8 +123,8 @@ def _locate(args: argparse.Namespace) -> int:
 
     config = CellConfig.load(args.config)
     calib = Calibration.load(config.calibration.path)
-    images = []
-    for side, path in zip(("LEFT", "RIGHT"), args.locate):
+    images = _grab(config, calib) if args.locate_live else []
+    for side, path in zip(("LEFT", "RIGHT"), args.locate or []):
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if image is None:
             raise UserError(f"{side} image {path} does not exist or is not an image")
@@ -148,6 +153,21 @@ def _locate(args: argparse.Namespace) -> int:
         print(f" marker {target.marker_id:3d}: cell x={x:9.3f} y={y:9.3f} z={z:8.3f} mm")
     print(f"{len(targets)} markers written to {args.points}: add the robot's readings, then run teach-robot on it")
     return 0
+
+
+def _grab(config, calib) -> list[np.ndarray]:  # noqa: ANN001 - CellConfig, Calibration (imported lazily)
+    """One synchronised pair from the cell's own cameras."""
+    from cellctl.cameras import CameraError, open_frame_source
+
+    source = open_frame_source(config.cameras, calib)
+    try:
+        source.open()
+        frame = source.grab_pair()
+    except CameraError as exc:
+        raise UserError(f"cannot grab a pair: {exc} (is `cellctl run` still holding the cameras?)") from None
+    finally:
+        source.close()
+    return [frame.left, frame.right]
 
 
 def _frame_path(args: argparse.Namespace) -> Path:

@@ -91,3 +91,16 @@ def test_locate_then_teach_through_the_cli(table_with_markers, tmp_path: Path) -
     solved = load_robot_frame(frame)
     error = np.linalg.norm(solved.apply(where) - RigidTransform.from_matrix(truth_table_to_robot).apply(where), axis=1)
     assert error.max() < 0.5, error.max()
+
+
+def test_locate_live_grabs_from_the_configured_cameras(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.sim_rig import write_half_size_rig
+
+    config = tmp_path / "cell.toml"
+    config.write_text(
+        f'[cameras]\nbackend = "simulated"\n[cameras.simulated]\nseeds = [1]\n'
+        f'[calibration]\npath = "{write_half_size_rig(tmp_path)}"\n[journal]\nstate_dir = "{tmp_path / "state"}"\n'
+    )
+    # The simulated cell shows a sole and no markers: grabbed, matched, table found, and said so.
+    assert main(["teach-robot", str(tmp_path / "teach.csv"), "--config", str(config), "--locate-live"]) == 1
+    assert "no teach marker" in capsys.readouterr().out and not (tmp_path / "teach.csv").exists()
