@@ -108,7 +108,9 @@ class Daemon:
         self._reconstructor = (
             None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
         )
-        self._recipe_reconstructors: dict[tuple[float, float], SoleReconstructor] = {}  # other depth ranges
+        # At most one more, for a recipe's own depth range: each matcher keeps its cost volume (~0.5 GB at
+        # 1280x1024), so a line switching among several depth ranges re-allocates rather than piling them up.
+        self._recipe_reconstructor: SoleReconstructor | None = None
         self._stop = threading.Event()
         self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
@@ -286,11 +288,12 @@ class Daemon:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
         reconstructor = self._reconstructor
         if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
-            # One per depth range: the matcher's disparity range follows from it.
-            reconstructor = self._recipe_reconstructors.get(recipe.depth_range_mm)
-            if reconstructor is None:
+            # The matcher's disparity range follows from the depth range.
+            reconstructor = self._recipe_reconstructor
+            if reconstructor is None or reconstructor.depth_range_mm != recipe.depth_range_mm:
+                self._recipe_reconstructor = None  # release the old buffers before allocating new ones
                 reconstructor = SoleReconstructor(self.calib, recipe.depth_range_mm)
-                self._recipe_reconstructors[recipe.depth_range_mm] = reconstructor
+                self._recipe_reconstructor = reconstructor
         result = measure_frame(frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm))
         timings.update(result.timings)
         if isinstance(result, Refused):

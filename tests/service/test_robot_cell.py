@@ -101,6 +101,7 @@ class Cell:
             f'number = 2\nname = "Runner 44"\n[glue]\noffset_mm = 4.0\n'
             f"[length_mm]\nnominal = {t.length_mm + 12:.2f}\nminus = 2.0\nplus = 2.0\n"
         )
+        (recipes / "deep.toml").write_text('number = 3\nname = "Platform"\ndepth_range_mm = [430.0, 670.0]\n')
         path = directory / "cell.toml"
         # liveness_timeout_s 30: a full-size cycle can pass the default 5 s on the shared, loaded test machine,
         # and the heartbeat would then stop by design; this test is about recipes, frames and OPC UA.
@@ -173,7 +174,7 @@ def test_recipes_by_register_robot_frame_points_and_one_opcua_event_per_cycle(ce
             await subscription.subscribe_events(client.nodes.server, event_type)
             readings = []
             with PlcSimulator(cell.daemon.link.endpoint, map_version=2) as plc:  # type: ignore[arg-type]
-                for recipe in (1, 2, 99):
+                for recipe in (1, 2, 3, 99):
                     readings.append(await asyncio.to_thread(plc.run_cycle, None, 20.0, recipe=recipe))
                     event = await asyncio.wait_for(events.queue.get(), 10)
                     assert event.Cycle == readings[-1].cycle and event.RecipeId == recipe
@@ -186,7 +187,7 @@ def test_recipes_by_register_robot_frame_points_and_one_opcua_event_per_cycle(ce
             assert values["ResultState"] == "Error" and values["IsPass"] is False
             return readings
 
-    good, long, unknown = asyncio.run(scenario())
+    good, long, deep, unknown = asyncio.run(scenario())
     # Recipe 1: in tolerance, 2 mm glue offset, points and normals in the robot's base frame.
     assert good.ok and good.in_tolerance is True and good.feature_fails == FeatureBit(0)
     assert good.glue_frame == GlueFrame.ROBOT_BASE and good.glue_offset_mm == 2.0 and good.nozzle_offset_mm == 0.0
@@ -195,16 +196,20 @@ def test_recipes_by_register_robot_frame_points_and_one_opcua_event_per_cycle(ce
     assert long.ok and long.in_tolerance is False and long.feature_fails == FeatureBit.LENGTH
     assert long.status & StatusBit.OUT_OF_TOLERANCE and long.glue_offset_mm == 4.0
     check_against_the_sole(cell, long, 4.0)
+    # Recipe 3: its own depth range (a second matcher), no tolerances: measured, nothing checked.
+    assert deep.ok and deep.in_tolerance is None and deep.recipe == 3 and deep.glue_offset_mm == 2.0
+    check_against_the_sole(cell, deep, 2.0)
     # An unknown recipe number: the documented error code, and the number echoed.
     assert unknown.error_code == ErrorCode.RECIPE_UNKNOWN and unknown.recipe == 99 and not unknown.ok
     assert math.isnan(unknown.length_mm)
-    assert cell.daemon.active_recipe is not None and cell.daemon.active_recipe.number == 2
+    assert cell.daemon.active_recipe is not None and cell.daemon.active_recipe.number == 3
     # The journal keeps the same: durable before the PLC heard of it.
     journal = Journal.open(cell.config.journal.state_dir, readonly=True)
-    rows = [journal.find(reading.cycle) for reading in (good, long, unknown)]
+    rows = [journal.find(reading.cycle) for reading in (good, long, deep, unknown)]
     assert [(r.recipe, r.in_tolerance, r.failed_features) for r in rows if r is not None] == [
         (1, True, []),
         (2, False, ["LENGTH"]),
+        (3, None, []),
         (99, None, []),
     ]
     journal.close()
