@@ -102,6 +102,10 @@ class PlcLink:
         self._started = threading.Event()
         self._start_error: BaseException | None = None
         self._bound: Endpoint = endpoint
+        # For the operator station and /metrics (read from other threads; ints are replaced atomically).
+        self.connected_clients = 0  # TCP connections open now (RTU: 1 while the serial line is open)
+        self.heartbeat_stalls = 0  # times the heartbeat stopped because the controller went silent
+        self.heartbeat_stalled = False
 
     # ---- lifetime ------------------------------------------------------------------------------
 
@@ -271,13 +275,17 @@ class PlcLink:
     def _on_connection(self, connected: bool) -> None:
         """pymodbus trace_connect hook: a TCP client came or went, or the serial line opened or failed."""
         log.debug("Modbus %s: connection %s", self._endpoint, "opened" if connected else "closed")
+        self.connected_clients = max(0, self.connected_clients + (1 if connected else -1))
         stopping = self._stop_requested is not None and self._stop_requested.is_set()
         if not connected and isinstance(self._endpoint, SerialEndpoint) and not stopping:
             self._line_lost.set()
 
     async def _heartbeat(self) -> None:
         while True:
-            self._handshake.beat(self._liveness_timeout_s)
+            beating = self._handshake.beat(self._liveness_timeout_s)
+            if not beating and not self.heartbeat_stalled:
+                self.heartbeat_stalls += 1
+            self.heartbeat_stalled = not beating
             await asyncio.sleep(self._heartbeat_period_s)
 
     def _make_server(self) -> ModbusBaseServer:

@@ -8,11 +8,12 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-
-import cv2
-import numpy as np
+from typing import TYPE_CHECKING
 
 from cellctl.errors import UserError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -55,6 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import cv2
+
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
     from cellctl.vision.measurement import measure_sole
@@ -91,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(path: Path, name: str) -> np.ndarray:
+    import cv2
+
     if not path.is_file():
         raise UserError(f"{name} image {path} does not exist")
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)

@@ -12,10 +12,12 @@ from __future__ import annotations
 import argparse
 import csv
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from cellctl.errors import UserError
+
+if TYPE_CHECKING:  # numpy is imported where used: `cellctl --help` loads no heavy library
+    import numpy as np
 
 COLUMNS = ("robot_x", "robot_y", "robot_z", "cell_x", "cell_y", "cell_z")
 
@@ -55,6 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from cellctl.vision.robot_frame import DEFAULT_TOLERANCE_MM, FrameFitFailed, solve_robot_frame
 
     tolerance = DEFAULT_TOLERANCE_MM if args.tolerance is None else args.tolerance
@@ -86,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
 
 def read_points(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Robot and cell points (N x 3 each) from a teach CSV; UserError naming the row and column."""
+    import numpy as np
+
     if not path.is_file():
         raise UserError(f"teach file {path} does not exist")
     with path.open(newline="", encoding="utf-8") as source:
@@ -181,6 +187,8 @@ def _frame_path(args: argparse.Namespace) -> Path:
 
 
 def _check(frame_path: Path, robot: np.ndarray, cell: np.ndarray, tolerance: float) -> int:
+    import numpy as np
+
     from cellctl.vision.robot_frame import load_robot_frame
 
     if not frame_path.is_file():

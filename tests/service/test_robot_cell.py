@@ -10,9 +10,11 @@ of deploy/sim-calib.yaml where the measurement's 1.3 mm tolerance is defined (te
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import shutil
 import threading
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -27,6 +29,7 @@ from cellctl.service.config import CellConfig
 from cellctl.service.daemon import Daemon
 from cellctl.service.journal import Journal
 from cellctl.service.opcua import NAMESPACE
+from cellctl.service.station import Station
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.reconstruction import SoleReconstructor
@@ -57,6 +60,7 @@ class Cell:
         self.truth_table_to_robot = RigidTransform.from_matrix(ROBOT_FROM_SCENE.matrix @ measured_to_scene)
         self.config = CellConfig.load(self._write_config(directory, calib_path))
         self.daemon = Daemon(self.config)
+        self.station = Station.attach(self.daemon, port=0)  # the operator station shows the active recipe
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
@@ -118,6 +122,7 @@ class Cell:
     def stop(self) -> None:
         self.daemon.request_stop()
         self.thread.join(30)
+        self.station.stop()
         assert not self.thread.is_alive() and self.error is None
 
 
@@ -203,6 +208,13 @@ def test_recipes_by_register_robot_frame_points_and_one_opcua_event_per_cycle(ce
     assert unknown.error_code == ErrorCode.RECIPE_UNKNOWN and unknown.recipe == 99 and not unknown.ok
     assert math.isnan(unknown.length_mm)
     assert cell.daemon.active_recipe is not None and cell.daemon.active_recipe.number == 3
+    # The station shows the active recipe (the last valid one) and the last cycle's recipe number.
+    url = cell.station.url
+    assert url is not None
+    with urllib.request.urlopen(url.rstrip("/") + "/api/state", timeout=10) as reply:
+        assert json.loads(reply.read())["recipe"] == [3, "Platform"]
+    with urllib.request.urlopen(url.rstrip("/") + "/fragments/last", timeout=10) as reply:
+        assert '<td id="last-recipe">99</td>' in reply.read().decode()
     # The journal keeps the same: durable before the PLC heard of it.
     journal = Journal.open(cell.config.journal.state_dir, readonly=True)
     rows = [journal.find(reading.cycle) for reading in (good, long, deep, unknown)]
