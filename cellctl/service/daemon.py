@@ -19,7 +19,7 @@ Stopping (request_stop, e.g. SIGTERM): a cycle triggered before the stop request
 arrives once stopping has begun is answered with CYCLE_ABORTED. The link then keeps serving for
 STOP_LINGER_S, so the PLC can read that last answer, and closes.
 
-Longer than most modules (~370 lines): the order of one cycle (journal, PLC, listeners, artifacts) and of
+Longer than most modules (~420 lines): the order of one cycle (journal, PLC, listeners, artifacts) and of
 start and stop is the service's contract, and it reads best in one place. Recipes, the glue path's frame,
 the outcome records and the OPC UA server live in their own modules.
 """
