@@ -23,6 +23,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "rectify",
     "simulate",
     "measure",
+    "teach",
     "bench_sole",
     "results",
     "run",
