@@ -6,8 +6,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # Compiler and headers for the C core; libgomp for its threads; libusb for Open3D; chromium and its
-# driver for the operator station's browser tests.
-APT_PACKAGES := python3-venv python3-dev gcc libc6-dev libgomp1 libusb-1.0-0 chromium chromium-driver
+# driver for the operator station's browser tests; mbpoll, a Modbus master nobody here wrote, reads the
+# register map in tests/firmware_io.
+APT_PACKAGES := python3-venv python3-dev gcc libc6-dev libgomp1 libusb-1.0-0 chromium chromium-driver mbpoll
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 SANITIZE := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 

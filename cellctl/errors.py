@@ -32,6 +32,7 @@ class FailureKind(enum.Enum):
     CAMERA_MISSING = "camera_missing"  #: a camera is not connected or cannot be opened
     FRAME_TIMEOUT = "frame_timeout"  #: a camera delivered no frame in time
     CAMERAS_OUT_OF_SYNC = "cameras_out_of_sync"  #: the two frames were taken too far apart
+    RECIPE_UNKNOWN = "recipe_unknown"  #: the PLC selected a recipe number this cell has no recipe for
 
 
 class MeasurementInputError(ValueError):

@@ -15,6 +15,11 @@ Handshake (docs/modbus.md has the timing diagram):
    the status bits (RESULT_VALID or ERROR, BUSY=0), all in one locked update.
 4. The PLC polls RESULT_CYCLE until it equals N, then reads status, error code and data.
 
+Map version 2 adds a second PLC-writable register, RECIPE_SELECT: its value when a trigger is accepted is
+the recipe of that cycle (Trigger.recipe) and is echoed in RESULT_RECIPE with the result; the controller
+decides what a number means. Normals, frame and offsets of the glue path (PathInfo) and the tolerance
+check (Inspection) are published in version 2 only; a version 1 map ignores them.
+
 Writes to TRIGGER that start nothing: 0 (the PLC resetting its trigger), the number of the previous
 or running cycle (a repeated or retried write). A *different* number while a cycle runs is refused
 with Modbus exception 0x06 SERVER DEVICE BUSY and counted in REFUSED_TRIGGERS; the running cycle
@@ -33,11 +38,11 @@ from numpy.typing import ArrayLike
 from pymodbus.constants import ExcCodes
 
 from firmware_io.registers import (
-    MAP_SIZE,
-    MAP_VERSION,
     MAX_GLUE_POINTS,
-    REGISTERS_PER_POINT,
     ErrorCode,
+    FeatureBit,
+    GlueFrame,
+    MapLayout,
     Register,
     RegisterMap,
     StatusBit,
@@ -53,18 +58,38 @@ class Trigger:
 
     cycle: int  #: the number the PLC wrote, 1..65535
     received_at: float  #: time.monotonic() when the trigger write arrived; cycle time counts from here
+    recipe: int = 0  #: RECIPE_SELECT when the trigger was accepted (map v2; always 0 in version 1)
+
+
+@dataclass(frozen=True)
+class PathInfo:
+    """What map version 2 publishes about the glue path besides its points."""
+
+    normals: ArrayLike  #: N x 3 unit normals, one per glue point, in the same frame as the points
+    frame: GlueFrame = GlueFrame.TABLE
+    nozzle_offset_mm: float = 0.0  #: how far the points were moved along their normals
+    glue_offset_mm: float = _NAN  #: inset of the path from the sole's edge
+
+
+@dataclass(frozen=True)
+class Inspection:
+    """The result cycle's tolerance check (map v2); features in `failed` are outside their tolerance."""
+
+    failed: FeatureBit = FeatureBit(0)
 
 
 class PlcHandshake:
     """Register image plus handshake state, shared by the Modbus server thread and the controller."""
 
-    def __init__(self, register_map: RegisterMap) -> None:
+    def __init__(self, register_map: RegisterMap, layout: MapLayout | None = None) -> None:
         self._map = register_map
+        self.layout = MapLayout.of(1) if layout is None else layout
         self._changed = threading.Condition()  # its lock guards everything below
-        self._image = [0] * MAP_SIZE
-        self._image[Register.MAP_VERSION] = MAP_VERSION
+        self._image = [0] * self.layout.size
+        self._image[Register.MAP_VERSION] = self.layout.version
         self._flags = StatusBit(0)  # RESULT_VALID, ERROR, CAMERAS_OK, CALIBRATION_OK; the rest is derived
         self._running: int | None = None
+        self._running_recipe = 0
         self._last_accepted = 0
         self._pending: Trigger | None = None
         self._closed = False
@@ -85,8 +110,13 @@ class PlcHandshake:
         Writes to read-only registers never get here: the server refuses them first (pymodbus'
         read-only flag, exception 0x02), so anything else is a bug in the server wiring.
         """
-        if address != Register.TRIGGER or len(values) != 1:
-            raise ValueError(f"only the trigger register is writable, got {len(values)} values at {address}")
+        if address not in self.layout.plc_writable or len(values) != 1:
+            also = " (and recipe select, map v2)" if self.layout.version >= 2 else ""
+            raise ValueError(f"only the trigger register is writable{also}, got {len(values)} values at {address}")
+        if address == Register.RECIPE_SELECT:
+            with self._changed:
+                self._image[Register.RECIPE_SELECT] = int(values[0])
+            return None
         cycle = int(values[0])
         with self._changed:
             if cycle == 0 or cycle == self._last_accepted:
@@ -152,8 +182,14 @@ class PlcHandshake:
         length_mm: float,
         cycle_time_ms: float,
         glue_points: ArrayLike,
+        path: PathInfo | None = None,
+        inspection: Inspection | None = None,
     ) -> None:
-        """Hand the PLC the measurement of `cycle`; refuses values that are not finite."""
+        """Hand the PLC the measurement of `cycle`; refuses values that are not finite.
+
+        Map version 2 needs `path` (normals); `inspection` None means no tolerances were checked (neither
+        tolerance bit set). Version 1 publishes neither.
+        """
         values = {
             "heel_height_mm": heel_height_mm,
             "toe_height_mm": toe_height_mm,
@@ -165,9 +201,15 @@ class PlcHandshake:
                 raise ValueError(f"{name} is {value}: publish_error(cycle, ErrorCode.MEASUREMENT_INVALID) instead")
         # Encode before taking the lock: a refused value leaves the map untouched.
         measurement = self._map.encode_floats(list(values.values()), what="measurement")
-        points = self._map.encode_points(glue_points)
+        if not self.layout.has_normals:
+            points, extra = self._map.encode_points(glue_points), {}
+        else:
+            if path is None:
+                raise ValueError("register map version 2 publishes normals: pass path=PathInfo(normals, ...)")
+            points = self._map.encode_path(glue_points, path.normals)
+            extra = self._path_registers(path, inspection)
         with self._changed:
-            self._finish(cycle, measurement, points, ErrorCode.NONE)
+            self._finish(cycle, measurement, points, ErrorCode.NONE, extra, inspection)
 
     def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> None:
         """Tell the PLC that `cycle` ended with `code`; measurements read NaN and no glue points."""
@@ -191,10 +233,19 @@ class PlcHandshake:
         self._running = self._last_accepted = cycle
         self._clear_result()
         self._update_status()
-        self._pending = Trigger(cycle, time.monotonic())
+        self._running_recipe = self._image[Register.RECIPE_SELECT] if self.layout.version >= 2 else 0
+        self._pending = Trigger(cycle, time.monotonic(), self._running_recipe)
         self._changed.notify_all()
 
-    def _finish(self, cycle: int, measurement: list[int], points: list[int], code: ErrorCode) -> None:
+    def _finish(
+        self,
+        cycle: int,
+        measurement: list[int],
+        points: list[int],
+        code: ErrorCode,
+        extra: dict[int, list[int]] | None = None,
+        inspection: Inspection | None = None,
+    ) -> None:
         self._controller_seen_at = time.monotonic()
         if cycle != self._running:
             raise RuntimeError(
@@ -203,13 +254,20 @@ class PlcHandshake:
             )
         image = self._image
         image[Register.HEEL_HEIGHT_MM : Register.GLUE_POINT_COUNT] = measurement
-        image[Register.GLUE_POINT_COUNT] = len(points) // REGISTERS_PER_POINT
+        image[Register.GLUE_POINT_COUNT] = len(points) // self.layout.registers_per_point
         image[Register.GLUE_POINTS : Register.GLUE_POINTS + len(points)] = points
+        for address, registers in (extra or {}).items():
+            image[address : address + len(registers)] = registers
         image[Register.ERROR_CODE] = code
+        if self.layout.version >= 2:
+            image[Register.RESULT_RECIPE] = self._running_recipe
         # Last: the cycle number and the flags that tell the PLC the result is complete.
         image[Register.RESULT_CYCLE] = cycle
         self._set_flag(StatusBit.RESULT_VALID, code is ErrorCode.NONE)
         self._set_flag(StatusBit.ERROR, code is not ErrorCode.NONE)
+        checked = code is ErrorCode.NONE and inspection is not None
+        self._set_flag(StatusBit.IN_TOLERANCE, checked and inspection is not None and not inspection.failed)
+        self._set_flag(StatusBit.OUT_OF_TOLERANCE, checked and inspection is not None and bool(inspection.failed))
         self._running = None
         self._update_status()
 
@@ -217,18 +275,30 @@ class PlcHandshake:
         image = self._image
         image[Register.RESULT_CYCLE] = 0
         image[Register.ERROR_CODE] = ErrorCode.NONE
-        self._flags &= ~(StatusBit.RESULT_VALID | StatusBit.ERROR)
+        self._flags &= ~(StatusBit.RESULT_VALID | StatusBit.ERROR | StatusBit.IN_TOLERANCE | StatusBit.OUT_OF_TOLERANCE)
         nan4 = self._map.encode_floats([_NAN] * 4)
         assert len(nan4) == _MEASUREMENT_REGISTERS
         image[Register.HEEL_HEIGHT_MM : Register.GLUE_POINT_COUNT] = nan4
         image[Register.GLUE_POINT_COUNT] = 0
-        image[Register.GLUE_POINTS :] = [0] * (REGISTERS_PER_POINT * MAX_GLUE_POINTS)
+        image[Register.GLUE_POINTS :] = [0] * (self.layout.registers_per_point * MAX_GLUE_POINTS)
+        if self.layout.version >= 2:
+            image[Register.RESULT_RECIPE] = image[Register.FEATURE_FAILS] = image[Register.GLUE_FRAME] = 0
+            image[Register.NOZZLE_OFFSET_MM : Register.GLUE_OFFSET_MM + 2] = self._map.encode_floats([_NAN] * 2)
+
+    def _path_registers(self, path: PathInfo, inspection: Inspection | None) -> dict[int, list[int]]:
+        """Map v2's registers besides the points: frame, nozzle and glue offsets (20-23), feature bits."""
+        offsets = self._map.encode_floats([path.nozzle_offset_mm, path.glue_offset_mm], what="offset")
+        return {
+            Register.GLUE_FRAME: [int(GlueFrame(path.frame))],
+            Register.NOZZLE_OFFSET_MM: offsets,
+            Register.FEATURE_FAILS: [0 if inspection is None else int(inspection.failed)],
+        }
 
     def _set_flag(self, bit: StatusBit, on: bool) -> None:
         self._flags = (self._flags | bit) if on else (self._flags & ~bit)
 
     def _update_status(self) -> None:
-        status = self._flags
+        status = self._flags & self.layout.status_bits
         healthy = StatusBit.CAMERAS_OK | StatusBit.CALIBRATION_OK
         if self._running is not None:
             status |= StatusBit.BUSY

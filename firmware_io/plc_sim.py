@@ -4,13 +4,20 @@ Used by `cellctl plc-sim`, by `make demo` and as a test fixture. It speaks only 
 protocol (docs/modbus.md), through pymodbus' synchronous client, because a PLC program is a
 sequential poll loop too:
 
-    write TRIGGER = N  ->  poll registers 0..18 until RESULT_CYCLE == N  ->  read glue points
+    [write RECIPE_SELECT = r]  ->  write TRIGGER = N  ->  poll the header until RESULT_CYCLE == N  ->  read glue points
+
+It speaks the map version the controller announces in register 6 (or insists on one, as a programmed PLC
+does): version 1 reads 0..18 and x, y, z per point, version 2 reads 0..23 and x, y, z, nx, ny, nz.
 
 and on every poll it feeds a heartbeat watchdog that fails when register 0 stops changing.
+
+Longer than most modules (~460 lines): it is one PLC program, and what it reads (header, reading, their
+text for `cellctl plc-sim`) is kept beside the reading so a change of the map is one edit here.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -23,18 +30,19 @@ from pymodbus.framer import FramerType
 
 from firmware_io.endpoints import Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
 from firmware_io.registers import (
-    HEADER_SIZE,
-    MAP_VERSION,
-    REGISTERS_PER_POINT,
     ErrorCode,
+    FeatureBit,
+    GlueFrame,
+    MapLayout,
     Register,
     RegisterMap,
     StatusBit,
     WordOrder,
 )
 
-#: Glue points per read request: 20 points = 120 registers, under Modbus' 125-register limit.
-POINTS_PER_READ = 20
+#: Registers per read request for the glue points: 120, under Modbus' 125-register limit (20 points of
+#: version 1, 10 of version 2).
+REGISTERS_PER_READ = 120
 
 
 class PlcSimError(Exception):
@@ -103,6 +111,13 @@ class PlcHeader:
     length_mm: float
     cycle_time_ms: float
     glue_point_count: int
+    # Map version 2 (0 or NaN in version 1):
+    recipe_select: int = 0
+    result_recipe: int = 0
+    feature_fails: int = 0
+    glue_frame: int = 0
+    nozzle_offset_mm: float = math.nan
+    glue_offset_mm: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -118,11 +133,25 @@ class CycleReading:
     cycle_time_ms: float
     glue_points: np.ndarray = field(repr=False)
     latency_s: float  #: from the trigger write to the PLC seeing RESULT_CYCLE == cycle
+    map_version: int = 1
+    glue_normals: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 3), np.float32))
+    recipe: int = 0
+    feature_fails: FeatureBit = FeatureBit(0)
+    glue_frame: int = GlueFrame.TABLE
+    nozzle_offset_mm: float = math.nan
+    glue_offset_mm: float = math.nan
 
     @property
     def ok(self) -> bool:
         """True if the cycle delivered a valid measurement."""
         return bool(self.status & StatusBit.RESULT_VALID) and self.error_code == ErrorCode.NONE
+
+    @property
+    def in_tolerance(self) -> bool | None:
+        """Map v2: True/False from the tolerance bits, None when no tolerances were checked."""
+        if self.status & StatusBit.OUT_OF_TOLERANCE:
+            return False
+        return True if self.status & StatusBit.IN_TOLERANCE else None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly view (NaN becomes None)."""
@@ -143,6 +172,14 @@ class CycleReading:
             "glue_point_count": len(self.glue_points),
             "glue_points": np.round(self.glue_points.astype(float), 4).tolist(),
             "latency_s": round(self.latency_s, 4),
+            "map_version": self.map_version,
+            "glue_normals": np.round(self.glue_normals.astype(float), 5).tolist(),
+            "recipe": self.recipe,
+            "in_tolerance": self.in_tolerance,
+            "feature_fails": [bit.name for bit in FeatureBit if self.feature_fails & bit],
+            "glue_frame": _frame_name(self.glue_frame),
+            "nozzle_offset_mm": number(self.nozzle_offset_mm),
+            "glue_offset_mm": number(self.glue_offset_mm),
         }
 
 
@@ -158,7 +195,11 @@ class PlcSimulator:
         response_timeout_s: float = 1.0,
         heartbeat_limit_s: float = 1.5,
         poll_interval_s: float = 0.01,
+        map_version: int | None = None,
     ) -> None:
+        """map_version: the version this "PLC" is programmed for (refuses another); None takes the controller's."""
+        self._expected_version = None if map_version is None else MapLayout.of(map_version).version
+        self.layout = MapLayout.of(1)
         self._endpoint = endpoint
         self._unit_id = check_unit_id(unit_id, endpoint)
         self._map = RegisterMap(word_order)
@@ -173,11 +214,17 @@ class PlcSimulator:
         """Connect, check the map version and continue cycle numbering after the controller's last one."""
         if not self._client.connect():
             raise PlcSimError(f"cannot connect to the controller at {self._endpoint} (is `cellctl run` running?)")
-        header = self.read_header()
-        if header.map_version != MAP_VERSION:
+        version = self.read_registers(Register.MAP_VERSION, 1)[0]
+        if self._expected_version is not None and version != self._expected_version:
             raise PlcSimError(
-                f"controller register map version {header.map_version}, this simulator knows {MAP_VERSION}"
+                f"controller serves register map version {version}, this PLC is programmed for "
+                f"{self._expected_version}: set [plc] map_version in the controller's config"
             )
+        try:
+            self.layout = MapLayout.of(version)
+        except ValueError as exc:
+            raise PlcSimError(f"controller: {exc}") from None
+        header = self.read_header()
         self._last_cycle = max(header.trigger, header.result_cycle)
 
     def close(self) -> None:
@@ -194,13 +241,25 @@ class PlcSimulator:
     # ---- PLC operations ------------------------------------------------------------------------
 
     def read_header(self) -> PlcHeader:
-        """Read registers 0..18 in one request and feed the heartbeat watchdog."""
-        regs = self.read_registers(0, HEADER_SIZE)
+        """Read the header (0..18, or 0..23 in map v2) in one request and feed the heartbeat watchdog."""
+        regs = self.read_registers(0, self.layout.header_size)
         self.watchdog.observe(regs[Register.HEARTBEAT])
         heel, toe, length, cycle_time = self._map.decode_floats(
             regs[Register.HEEL_HEIGHT_MM : Register.GLUE_POINT_COUNT]
         )
+        extra: dict[str, Any] = {}
+        if self.layout.version >= 2:
+            nozzle, glue = self._map.decode_floats(regs[Register.NOZZLE_OFFSET_MM : Register.GLUE_OFFSET_MM + 2])
+            extra = dict(
+                recipe_select=regs[Register.RECIPE_SELECT],
+                result_recipe=regs[Register.RESULT_RECIPE],
+                feature_fails=regs[Register.FEATURE_FAILS],
+                glue_frame=regs[Register.GLUE_FRAME],
+                nozzle_offset_mm=nozzle,
+                glue_offset_mm=glue,
+            )
         return PlcHeader(
+            **extra,
             heartbeat=regs[Register.HEARTBEAT],
             status=StatusBit(regs[Register.STATUS]),
             trigger=regs[Register.TRIGGER],
@@ -247,9 +306,19 @@ class PlcSimulator:
                 )
             time.sleep(self._poll_interval_s)
 
-    def run_cycle(self, cycle: int | None = None, timeout_s: float = 5.0) -> CycleReading:
-        """Trigger one cycle (the next number by default) and wait for its result."""
+    def select_recipe(self, recipe: int) -> None:
+        """Write RECIPE_SELECT (map v2): the recipe the next trigger measures with."""
+        if self.layout.version < 2:
+            raise PlcSimError("recipes need register map version 2; the controller serves version 1")
+        if not 0 <= recipe <= 0xFFFF:
+            raise ValueError(f"recipe number {recipe} must be 0..65535")
+        self.write_register(Register.RECIPE_SELECT, recipe)
+
+    def run_cycle(self, cycle: int | None = None, timeout_s: float = 5.0, *, recipe: int | None = None) -> CycleReading:
+        """Trigger one cycle (the next number by default), after selecting `recipe` if given; wait for its result."""
         cycle = self.next_cycle_number() if cycle is None else cycle
+        if recipe is not None:
+            self.select_recipe(recipe)
         started_at = time.monotonic()
         self.trigger(cycle)
         return self.wait_result(cycle, timeout_s, started_at=started_at)
@@ -293,8 +362,19 @@ class PlcSimulator:
             raise PlcSimError(f"no answer from the controller at {self._endpoint}: {exc}") from exc
 
     def _reading(self, cycle: int, header: PlcHeader, latency_s: float) -> CycleReading:
-        points = self._read_points(header.glue_point_count)
+        registers = self._read_point_registers(header.glue_point_count)
+        if self.layout.has_normals:
+            points, normals = self._map.decode_path(registers)
+        else:
+            points, normals = self._map.decode_points(registers), np.zeros((0, 3), np.float32)
         return CycleReading(
+            map_version=self.layout.version,
+            glue_normals=normals,
+            recipe=header.result_recipe,
+            feature_fails=FeatureBit(header.feature_fails),
+            glue_frame=header.glue_frame,
+            nozzle_offset_mm=header.nozzle_offset_mm,
+            glue_offset_mm=header.glue_offset_mm,
             cycle=cycle,
             status=header.status,
             error_code=header.error_code,
@@ -306,13 +386,14 @@ class PlcSimulator:
             latency_s=latency_s,
         )
 
-    def _read_points(self, count: int) -> np.ndarray:
+    def _read_point_registers(self, count: int) -> list[int]:
+        per_point = self.layout.registers_per_point
+        per_read = REGISTERS_PER_READ // per_point
         registers: list[int] = []
-        for first in range(0, count, POINTS_PER_READ):
-            n = min(POINTS_PER_READ, count - first)
-            address = Register.GLUE_POINTS + first * REGISTERS_PER_POINT
-            registers += self.read_registers(address, n * REGISTERS_PER_POINT)
-        return self._map.decode_points(registers)
+        for first in range(0, count, per_read):
+            n = min(per_read, count - first)
+            registers += self.read_registers(Register.GLUE_POINTS + first * per_point, n * per_point)
+        return registers
 
 
 def _make_client(endpoint: Endpoint, timeout_s: float) -> ModbusTcpClient | ModbusSerialClient:
@@ -343,6 +424,13 @@ def _error_name(code: int) -> str:
     return known.name if known is not None else f"UNKNOWN_{code}"
 
 
+def _frame_name(frame: int) -> str:
+    try:
+        return GlueFrame(frame).name.lower()
+    except ValueError:
+        return f"unknown_{frame}"
+
+
 def _status_text(status: StatusBit) -> str:
     names = [bit.name for bit in StatusBit if status & bit and bit.name]
     return "|".join(names) or "0"
@@ -351,11 +439,19 @@ def _status_text(status: StatusBit) -> str:
 def describe(reading: CycleReading) -> str:
     """One human line per cycle, as `cellctl plc-sim` prints it."""
     if reading.ok:
-        return (
+        line = (
             f"cycle {reading.cycle}: ok heel={reading.heel_height_mm:.2f} mm toe={reading.toe_height_mm:.2f} mm "
             f"length={reading.length_mm:.2f} mm points={len(reading.glue_points)} "
             f"cycle_time={reading.cycle_time_ms:.1f} ms latency={reading.latency_s * 1000:.1f} ms"
         )
+        if reading.map_version >= 2:
+            verdict = {True: "pass", False: "FAIL", None: "not checked"}[reading.in_tolerance]
+            fails = "|".join(bit.name or "" for bit in FeatureBit if reading.feature_fails & bit)
+            line += (
+                f" recipe={reading.recipe} tolerance={verdict}{' ' + fails if fails else ''} "
+                f"frame={_frame_name(reading.glue_frame)} normals={len(reading.glue_normals)}"
+            )
+        return line
     code = reading.error_code
     known = _known_error(code)
     meaning = known.meaning if known is not None else "unknown error code"

@@ -17,7 +17,20 @@ Everything the PLC sees is a holding register (function codes 3, 6, 16, 23), 0-b
     100..    glue points          N x (x, y, z) float32 in the table frame, mm, 6 registers each
 
 Registers that are not listed (7-9, 19-99) are reserved: they read 0 and refuse writes.
-docs/modbus.md is the operator-facing version of this table.
+
+Map version 2 (selected in the config; version 1 stays the default for PLCs already programmed) keeps
+every address above and adds recipes, inspection results and the path's frame and normals:
+
+    7        recipe select        uint16, PLC-writable: recipe number the next trigger measures with
+    8        result recipe        uint16, recipe the result cycle was measured with
+    9        feature fails        uint16 bit field, see FeatureBit (0 = every checked feature in tolerance)
+    19       glue frame           uint16, GlueFrame: the frame the glue points are given in
+    20-21    nozzle offset mm     float32, distance the points were moved along their normals
+    22-23    glue offset mm       float32, inset of the path from the sole's edge
+    100..    glue points          N x (x, y, z, nx, ny, nz) float32, 12 registers each
+
+and status bits 6 (IN_TOLERANCE) and 7 (OUT_OF_TOLERANCE).
+docs/modbus.md is the operator-facing version of these tables.
 """
 
 from __future__ import annotations
@@ -33,6 +46,7 @@ from numpy.typing import ArrayLike
 from pymodbus.client.mixin import ModbusClientMixin
 
 #: Bumped whenever an address or an encoding changes, so a PLC can refuse a controller it does not know.
+#: The constants below without a version in their name describe this version 1 (MapLayout: either).
 MAP_VERSION = 1
 
 #: Fixed upper bound of the glue path so the register map has a fixed size (100 + 6 * 2000 = 12100
@@ -60,6 +74,13 @@ class Register(enum.IntEnum):
     CYCLE_TIME_MS = 16
     GLUE_POINT_COUNT = 18
     GLUE_POINTS = 100
+    # Map version 2 only (reserved, reading 0, in version 1):
+    RECIPE_SELECT = 7
+    RESULT_RECIPE = 8
+    FEATURE_FAILS = 9
+    GLUE_FRAME = 19
+    NOZZLE_OFFSET_MM = 20
+    GLUE_OFFSET_MM = 22
 
 
 #: First register after the fixed header the PLC normally reads in one request (0..18).
@@ -81,6 +102,51 @@ class StatusBit(enum.IntFlag):
     ERROR = 1 << 3  #: the result cycle ended with an error; register 4 says which
     CAMERAS_OK = 1 << 4  #: both cameras deliver synchronised frames
     CALIBRATION_OK = 1 << 5  #: a calibration matching the cameras is loaded
+    IN_TOLERANCE = 1 << 6  #: map v2: the result cycle's sole is within every tolerance of its recipe
+    OUT_OF_TOLERANCE = 1 << 7  #: map v2: a feature is outside its tolerance; register 9 says which
+
+
+class FeatureBit(enum.IntFlag):
+    """Bits of the feature-fails register (9, map v2): a set bit is a feature outside its recipe tolerance."""
+
+    LENGTH = 1 << 0
+    HEEL_HEIGHT = 1 << 1
+    TOE_HEIGHT = 1 << 2
+
+
+class GlueFrame(enum.IntEnum):
+    """Value of the glue-frame register (19, map v2)."""
+
+    TABLE = 0  #: the cell's table frame (origin under the left camera, z up from the table), as in version 1
+    ROBOT_BASE = 1  #: the robot's base frame, through the taught transform (`cellctl teach-robot`)
+
+
+@dataclass(frozen=True)
+class MapLayout:
+    """What differs between the map versions: header, point size, writable registers, status bits."""
+
+    version: int
+    header_size: int  #: registers 0 .. header_size - 1 are the header a PLC reads in one request
+    registers_per_point: int  #: 6 (x, y, z) or 12 (x, y, z, nx, ny, nz)
+    plc_writable: frozenset[int]
+    status_bits: StatusBit  #: bits this version may set; the rest read 0
+
+    @property
+    def size(self) -> int:
+        """Total number of registers: every address below this is readable, none above."""
+        return Register.GLUE_POINTS + self.registers_per_point * MAX_GLUE_POINTS
+
+    @property
+    def has_normals(self) -> bool:
+        return self.registers_per_point == 2 * REGISTERS_PER_POINT
+
+    @classmethod
+    def of(cls, version: int) -> MapLayout:
+        """The layout of a map version; ValueError for a version this controller does not serve."""
+        try:
+            return _LAYOUTS[version]
+        except KeyError:
+            raise ValueError(f"register map version {version} unknown: this controller serves 1 and 2") from None
 
 
 class ErrorCode(enum.IntEnum):
@@ -102,6 +168,7 @@ class ErrorCode(enum.IntEnum):
     TABLE_MOVED = 37
     OUTLINE_INCONSISTENT = 38
     GLUE_PATH_INCONSISTENT = 39
+    RECIPE_UNKNOWN = 40
     CYCLE_ABORTED = 90
     INTERNAL_ERROR = 99
 
@@ -179,6 +246,11 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
         "The glue path leaves the sole's surface (height jump, out of the sole's height range, or tilted normal).",
         "Re-trigger; if it repeats for this sole, check lighting for glare and call the line engineer.",
     ),
+    ErrorCode.RECIPE_UNKNOWN: (
+        "The recipe number in register 7 names no recipe loaded on this cell (map version 2).",
+        "Write the number of an installed recipe before triggering (0 = the cell's default settings), "
+        "or install the recipe file and restart the service.",
+    ),
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",
         "Re-trigger once the heartbeat runs again.",
@@ -255,9 +327,45 @@ class RegisterMap:
             raise ValueError(f"glue points need 6 registers each, got {len(registers)} registers")
         return np.asarray(self.decode_floats(registers), dtype=np.float32).reshape(-1, 3)
 
+    def encode_path(self, points: ArrayLike, normals: ArrayLike) -> list[int]:
+        """Registers (12 per point, map v2) for x, y, z in mm and the unit normal nx, ny, nz of each point."""
+        array, directions = np.asarray(points, dtype=float), np.asarray(normals, dtype=float)
+        if array.shape != directions.shape:
+            raise ValueError(f"glue points {array.shape} and normals {directions.shape} must have the same shape")
+        if array.size == 0:
+            return []
+        if array.ndim != 2 or array.shape[1] != 3 or len(array) > MAX_GLUE_POINTS:
+            self.encode_points(array)  # raises with the reason
+        lengths = np.linalg.norm(directions, axis=1)
+        if not np.all(np.abs(lengths - 1.0) < 1e-3):
+            raise ValueError("glue normals must be unit vectors (length 1 within 1e-3)")
+        return self.encode_floats(np.hstack([array, directions]).ravel().tolist(), what="glue point or normal")
+
+    def decode_path(self, registers: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) points and (N, 3) normals, float32, from registers (12 per point, map v2)."""
+        if len(registers) % (2 * REGISTERS_PER_POINT):
+            raise ValueError(f"glue points with normals need 12 registers each, got {len(registers)} registers")
+        values = np.asarray(self.decode_floats(registers), dtype=np.float32).reshape(-1, 6)
+        return values[:, :3].copy(), values[:, 3:].copy()
+
 
 def _float32(value: float, what: str) -> float:
     number = float(value)
     if math.isfinite(number) and abs(number) > _FLOAT32_MAX:
         raise ValueError(f"{what} = {number!r} is too large for a float32 (max {_FLOAT32_MAX:.3g})")
     return number
+
+
+_V1_BITS = StatusBit(0b111111)
+_LAYOUTS: dict[int, MapLayout] = {
+    1: MapLayout(1, HEADER_SIZE, REGISTERS_PER_POINT, PLC_WRITABLE, _V1_BITS),
+    2: MapLayout(
+        2,
+        Register.GLUE_OFFSET_MM + 2,
+        2 * REGISTERS_PER_POINT,
+        frozenset({Register.TRIGGER, Register.RECIPE_SELECT}),
+        _V1_BITS | StatusBit.IN_TOLERANCE | StatusBit.OUT_OF_TOLERANCE,
+    ),
+}
+#: The newest version: what a new installation should configure.
+LATEST_MAP_VERSION = max(_LAYOUTS)

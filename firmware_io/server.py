@@ -33,8 +33,8 @@ from pymodbus.server import ModbusBaseServer, ModbusSerialServer, ModbusTcpServe
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from firmware_io.endpoints import Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
-from firmware_io.handshake import PlcHandshake, Trigger
-from firmware_io.registers import MAP_SIZE, PLC_WRITABLE, ErrorCode, RegisterMap, StatusBit, WordOrder
+from firmware_io.handshake import Inspection, PathInfo, PlcHandshake, Trigger
+from firmware_io.registers import ErrorCode, MapLayout, RegisterMap, StatusBit, WordOrder
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +72,7 @@ class PlcLink:
         word_order: WordOrder = WordOrder.HIGH_FIRST,
         heartbeat_period_s: float = 0.25,
         liveness_timeout_s: float | None = 5.0,
+        map_version: int = 1,
     ) -> None:
         """Configure the link; nothing is opened until start().
 
@@ -81,6 +82,7 @@ class PlcLink:
         liveness_timeout_s: the heartbeat stops when the controller has made no PlcLink call (a
             waiting wait_trigger() counts) for this long, so the PLC sees a hung controller.
             None keeps it beating whenever the link runs.
+        map_version: register map layout served (docs/modbus.md): 1, or 2 with recipes and normals.
         """
         if not 0 < heartbeat_period_s < 0.5:
             raise ValueError(f"heartbeat period {heartbeat_period_s} s must be above 0 and below 0.5 s")
@@ -91,7 +93,8 @@ class PlcLink:
         self._map = RegisterMap(word_order)
         self._heartbeat_period_s = heartbeat_period_s
         self._liveness_timeout_s = liveness_timeout_s
-        self._handshake = PlcHandshake(self._map)
+        self._layout = MapLayout.of(map_version)
+        self._handshake = PlcHandshake(self._map, self._layout)
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_requested: asyncio.Event | None = None
@@ -154,6 +157,11 @@ class PlcLink:
         """The status register as the PLC reads it now."""
         return self._handshake.status
 
+    @property
+    def layout(self) -> MapLayout:
+        """The register map version served."""
+        return self._layout
+
     def wait_trigger(self, timeout_s: float | None = None) -> Trigger | None:
         """Block until the PLC starts a new cycle; None on timeout or when the link stops."""
         slice_s = self._heartbeat_period_s if self._liveness_timeout_s is None else self._liveness_timeout_s / 2
@@ -172,8 +180,13 @@ class PlcLink:
         length_mm: float,
         cycle_time_ms: float,
         glue_points: ArrayLike,
+        path: PathInfo | None = None,
+        inspection: Inspection | None = None,
     ) -> None:
-        """Publish the measurement of `cycle` atomically; glue_points is (N, 3) mm, N <= 2000."""
+        """Publish the measurement of `cycle` atomically; glue_points is (N, 3) mm, N <= 2000.
+
+        Map version 2 also publishes `path` (normals, frame, offsets; required) and `inspection`.
+        """
         self._handshake.publish_result(
             cycle,
             heel_height_mm=heel_height_mm,
@@ -181,6 +194,8 @@ class PlcLink:
             length_mm=length_mm,
             cycle_time_ms=cycle_time_ms,
             glue_points=glue_points,
+            path=path,
+            inspection=inspection,
         )
 
     def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> None:
@@ -274,7 +289,7 @@ class PlcLink:
             await asyncio.sleep(self._heartbeat_period_s)
 
     def _make_server(self) -> ModbusBaseServer:
-        device = SimDevice(id=self._unit_id, simdata=_map_blocks(), action=self._on_request)
+        device = SimDevice(id=self._unit_id, simdata=_map_blocks(self._layout), action=self._on_request)
         if isinstance(self._endpoint, SerialEndpoint):
             ep = self._endpoint
             server: ModbusBaseServer = ModbusSerialServer(
@@ -344,14 +359,15 @@ class _SingleUnit:
         return [self._unit_id]
 
 
-def _map_blocks() -> list[SimData]:
+def _map_blocks(layout: MapLayout) -> list[SimData]:
     """The whole map as register blocks: PLC-writable ones read-write, every other one read-only."""
     blocks: list[SimData] = []
     start = 0
-    while start < MAP_SIZE:
-        writable = start in PLC_WRITABLE
+    size, plc_writable = layout.size, layout.plc_writable
+    while start < size:
+        writable = start in plc_writable
         end = start + 1
-        while end < MAP_SIZE and (end in PLC_WRITABLE) == writable:
+        while end < size and (end in plc_writable) == writable:
             end += 1
         blocks.append(
             SimData(address=start, count=end - start, values=0, datatype=DataType.REGISTERS, readonly=not writable)

@@ -29,6 +29,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "run",
     "capture",
     "check",
+    "teach_robot",
 )
 
 

@@ -44,6 +44,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--ply", type=Path, metavar="out.ply", help="write the sole's point cloud (table frame, colours)"
     )
     parser.add_argument(
+        "--export",
+        type=Path,
+        metavar="DIR",
+        help="write glue-path.csv, glue-path.ply (polyline with normals) and cloud.ply (with normals), table frame",
+    )
+    parser.add_argument(
         "--png", type=Path, metavar="overlay.png", help="write the left image with edge, glue path and points"
     )
     parser.set_defaults(func=run)
@@ -78,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     result = measure_sole(reconstruction, offset, spacing)
     if args.ply:
         _write_ply(args.ply, reconstruction)
+    if args.export:
+        _export(args.export, reconstruction, result)
     if args.png:
         from cellctl.vision.overlay import draw_overlay
 
@@ -108,6 +116,20 @@ def _write_ply(path: Path, reconstruction) -> None:  # noqa: ANN001 - Reconstruc
         raise UserError(f"no sole points to write to {path}: {reconstruction.reason}")
     if not o3d.io.write_point_cloud(str(path), reconstruction.point_cloud()):
         raise UserError(f"cannot write {path}: check the directory exists and is writable")
+
+
+def _export(directory: Path, reconstruction, result) -> None:  # noqa: ANN001 - imported lazily
+    from cellctl.vision.export import cloud_normals, write_cloud_ply, write_glue_csv, write_glue_ply
+
+    if not directory.is_dir():
+        raise UserError(f"--export {directory} is not a directory: create it first")
+    points = reconstruction.sole_points
+    if len(points):
+        write_cloud_ply(directory / "cloud.ply", points, cloud_normals(points), reconstruction.sole_colors[:, ::-1])
+    if result.glue_path is not None:
+        path = result.glue_path
+        write_glue_csv(directory / "glue-path.csv", path.points, path.normals)
+        write_glue_ply(directory / "glue-path.ply", path.points, path.normals, "table", path.closed)
 
 
 def _summary(result) -> str:  # noqa: ANN001 - SoleMeasurement

@@ -37,6 +37,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--heartbeat-limit", type=float, default=1.5, help="fail if the heartbeat is stuck this long (default 1.5 s)"
     )
+    parser.add_argument(
+        "--map-version",
+        type=int,
+        choices=(1, 2),
+        help="register map version this PLC is programmed for (default: the one the controller announces)",
+    )
+    parser.add_argument("--recipe", type=int, help="map v2: write this recipe number (register 7) before every trigger")
     parser.add_argument("--json", action="store_true", help="print one JSON object per cycle instead of text")
     parser.set_defaults(func=run)
 
@@ -55,18 +62,21 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--interval {args.interval} must not be negative")
     if args.timeout <= 0:
         raise ValueError(f"--timeout {args.timeout} must be positive")
+    if args.recipe is not None and not 0 <= args.recipe <= 0xFFFF:
+        raise ValueError(f"--recipe {args.recipe} must be 0..65535")
     simulator = PlcSimulator(
         endpoint,
         unit_id=args.unit,
         word_order=WordOrder(args.word_order),
         heartbeat_limit_s=args.heartbeat_limit,
+        map_version=args.map_version,
     )
     try:
         with simulator:
             for index in range(args.cycles):
                 if index:
                     simulator.watch_heartbeat(args.interval)
-                reading = simulator.run_cycle(timeout_s=args.timeout)
+                reading = simulator.run_cycle(timeout_s=args.timeout, recipe=args.recipe)
                 print(json.dumps(reading.as_dict()) if args.json else describe(reading), flush=True)
     except PlcSimError as exc:
         print(f"cellctl plc-sim: handshake failed: {exc}", file=sys.stderr)

@@ -25,6 +25,9 @@ CSV_FIELDS = (
     "glue_points",
     "ply_path",
     "overlay_path",
+    "recipe",
+    "in_tolerance",
+    "failed_features",
 )
 
 
@@ -77,7 +80,7 @@ def describe(record: CycleRecord) -> str:
         return (
             head
             + f"ok length={record.length_mm:.2f} heel={record.heel_height_mm:.2f} toe={record.toe_height_mm:.2f} mm "
-            f"points={len(record.glue_path)} {record.cycle_time_ms:.0f} ms"
+            f"points={len(record.glue_path)} {record.cycle_time_ms:.0f} ms" + _verdict(record)
         )
     return head + f"error {record.error_code} ({record.reason}) {record.cycle_time_ms:.0f} ms"
 
@@ -89,4 +92,13 @@ def _write_csv(records: list[CycleRecord]) -> None:
         row = {name: getattr(record, name, None) for name in CSV_FIELDS}
         row["glue_points"] = len(record.glue_path)
         row["triggered_at"] = iso_time(record.triggered_at)
+        row["failed_features"] = "|".join(record.failed_features)
         writer.writerow(row)
+
+
+def _verdict(record: CycleRecord) -> str:
+    """' recipe=N pass' or ' recipe=N FAIL LENGTH|...' when tolerances were checked; '' for recipe 0 unchecked."""
+    if record.in_tolerance is None:
+        return f" recipe={record.recipe}" if record.recipe else ""
+    verdict = "pass" if record.in_tolerance else "FAIL " + "|".join(record.failed_features)
+    return f" recipe={record.recipe} {verdict}"

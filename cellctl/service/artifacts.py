@@ -1,4 +1,5 @@
-"""What a cycle leaves for people: the sole's cloud as PLY and the left image with the glue path drawn.
+"""What a cycle leaves for people and robot tools: the sole's cloud as PLY with normals, the glue path as CSV
+and PLY polyline (table frame, cellctl.vision.export), and the left image with the glue path drawn.
 
 Written after the PLC has its answer, and only while the service is idle: the PLC may trigger again as
 soon as it has read a result, and on 2 cores artifacts written beside a cycle slowed its match by as much
@@ -27,6 +28,7 @@ import numpy as np
 from cellctl.cameras.base import StereoFrame
 from cellctl.service.journal import CycleRecord, Journal
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.export import cloud_normals, write_cloud_ply, write_glue_csv, write_glue_ply
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.overlay import draw_on_left
 from cellctl.vision.reconstruction import Reconstruction
@@ -202,10 +204,16 @@ class ArtifactWriter:
         picture: list[np.ndarray] = []
 
         def write_ply() -> None:
-            import open3d as o3d
+            points = job.reconstruction.sole_points
+            colours = job.reconstruction.sole_colors[:, ::-1]
+            write_cloud_ply(ply, points, cloud_normals(points), colours, frame="table")
 
-            if not o3d.io.write_point_cloud(str(ply), job.reconstruction.point_cloud(), write_ascii=False):
-                raise OSError(f"Open3D could not write {ply}")
+        def write_glue() -> None:
+            path = job.measurement.glue_path
+            if path is not None:
+                folder = ply.parent
+                write_glue_csv(folder / f"cycle-{job.cycle}-glue.csv", path.points, path.normals)
+                write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
 
         def draw() -> None:
             picture.append(draw_on_left(job.frame.left, self.calib, job.measurement))
@@ -214,7 +222,7 @@ class ArtifactWriter:
             if not cv2.imwrite(str(overlay), picture[0], PNG_FAST):
                 raise OSError(f"cannot write {overlay}")
 
-        return [write_ply, draw, write_png]
+        return [write_ply, write_glue, draw, write_png]
 
 
 def _paths(job: ArtifactJob, folder: Path) -> tuple[Path, Path]:

@@ -26,4 +26,5 @@ FAILURE_CODES: dict[FailureKind, ErrorCode] = {
     FailureKind.CAMERA_MISSING: ErrorCode.CAMERA_MISSING,
     FailureKind.FRAME_TIMEOUT: ErrorCode.FRAME_TIMEOUT,
     FailureKind.CAMERAS_OUT_OF_SYNC: ErrorCode.CAMERAS_OUT_OF_SYNC,
+    FailureKind.RECIPE_UNKNOWN: ErrorCode.RECIPE_UNKNOWN,
 }

@@ -8,6 +8,9 @@ Every problem is a ConfigError naming the file, the section and key, what is wro
 instead: unknown keys (a typo must not silently fall back to a default), wrong types, impossible values and
 files that do not exist. Relative paths are taken relative to the config file, so a config and its
 calibration can be moved together.
+
+Longer than most modules on purpose: every section's checks sit beside the one table reader, so each key
+of the file is refused the same way and its defaults have one home.
 """
 
 from __future__ import annotations
@@ -138,6 +141,7 @@ class PlcConfig:
     word_order: WordOrder = WordOrder.HIGH_FIRST
     heartbeat_period_s: float = 0.25
     liveness_timeout_s: float = 5.0
+    map_version: int = 1  # docs/modbus.md; 2 adds recipes, normals, frame; 1 for PLCs programmed for it
 
     def endpoint(self) -> Endpoint:
         """Where PlcLink serves."""
@@ -151,6 +155,29 @@ class PlcConfig:
 class JournalConfig:
     state_dir: Path
     keep_artifacts: int = 500  # cycles whose PLY and overlay PNG are kept; the SQLite rows are all kept
+
+
+@dataclass(frozen=True)
+class RecipesConfig:
+    directory: Path | None = None  # one TOML per shoe model (cellctl.service.recipes); None: recipe 0 only
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    frame_file: Path | None = None  # table -> robot transform from `cellctl teach-robot`; None: beside calibration
+    publish_frame: str = "table"  # "table" or "robot": the frame of the glue points the PLC gets
+    nozzle_offset_mm: float = 0.0  # glue points moved this far along their normals (nozzle stand-off)
+
+
+@dataclass(frozen=True)
+class OpcUaConfig:
+    enabled: bool = False
+    endpoint: str = "opc.tcp://0.0.0.0:4840/cellctl/"
+    cell_name: str = "cell"
+    allow_anonymous: bool = False
+    username: str | None = None
+    password_file: Path | None = None  # file holding the password (0600), never the password in the config
+    history: int = 100  # results kept for history reads and the ResultHistory variable
 
 
 @dataclass(frozen=True)
@@ -183,6 +210,14 @@ class CellConfig:
     journal: JournalConfig
     station: StationConfig = StationConfig()
     image_log: ImageLogConfig = ImageLogConfig()
+    recipes: RecipesConfig = RecipesConfig()
+    robot: RobotConfig = RobotConfig()
+    opcua: OpcUaConfig = OpcUaConfig()
+
+    @property
+    def robot_frame_path(self) -> Path:
+        """Where the taught table -> robot transform lives: configured, or beside the calibration."""
+        return self.robot.frame_file or self.calibration.path.with_name("robot-frame.json")
 
     @classmethod
     def load(cls, path: str | Path) -> CellConfig:
@@ -203,7 +238,10 @@ class CellConfig:
         root = _Table(data, "top level", source)
         sections = {
             name: root.table(name)
-            for name in ("cameras", "calibration", "measure", "plc", "journal", "station", "image_log")
+            for name in (
+                *("cameras", "calibration", "measure", "plc", "journal", "station", "image_log"),
+                *("recipes", "robot", "opcua"),
+            )
         }
         for name in ("cameras", "calibration", "journal"):
             if name not in data:
@@ -220,6 +258,9 @@ class CellConfig:
             journal=_journal(sections["journal"]),
             station=_station(sections["station"]),
             image_log=_image_log(sections["image_log"]),
+            recipes=_recipes(sections["recipes"]),
+            robot=_robot(sections["robot"]),
+            opcua=_opcua(sections["opcua"]),
         )
         return config
 
@@ -320,6 +361,7 @@ def _plc(t: _Table) -> PlcConfig:
         word_order=WordOrder(t.choice("word_order", tuple(w.value for w in WordOrder), "high_first")),
         heartbeat_period_s=t.number("heartbeat_period_s", 0.25, above=0, high=0.49),
         liveness_timeout_s=t.number("liveness_timeout_s", 5.0, above=0.5, high=600),
+        map_version=int(t.number("map_version", 1, low=1, high=2)),
     )
     t.finish()
     if transport == "rtu" and not config.serial_port:
@@ -366,4 +408,45 @@ def _image_log(t: _Table) -> ImageLogConfig:
         max_mb=t.number("max_mb", 500.0, low=0),
     )
     t.finish()
+    return config
+
+
+def _recipes(t: _Table) -> RecipesConfig:
+    directory = t.path("dir", None)
+    t.finish()
+    if directory is not None and not directory.is_dir():
+        raise t.fail("dir", f"recipe directory {directory} does not exist (examples: deploy/recipes/)")
+    return RecipesConfig(directory)
+
+
+def _robot(t: _Table) -> RobotConfig:
+    config = RobotConfig(
+        frame_file=t.path("frame_file", None),
+        publish_frame=t.choice("publish_frame", ("table", "robot"), "table"),
+        nozzle_offset_mm=t.number("nozzle_offset_mm", 0.0, low=-50, high=50),
+    )
+    t.finish()
+    return config
+
+
+def _opcua(t: _Table) -> OpcUaConfig:
+    config = OpcUaConfig(
+        enabled=t.get("enabled", bool, False),
+        endpoint=t.get("endpoint", str, OpcUaConfig.endpoint),
+        cell_name=t.get("cell_name", str, "cell"),
+        allow_anonymous=t.get("allow_anonymous", bool, False),
+        username=t.get("username", str, None),
+        password_file=t.path("password_file", None),
+        history=int(t.number("history", 100, low=1, high=100000)),
+    )
+    t.finish()
+    if not config.endpoint.startswith("opc.tcp://"):
+        raise t.fail("endpoint", f"{config.endpoint!r} is not an opc.tcp:// URL, e.g. opc.tcp://0.0.0.0:4840/cellctl/")
+    if config.enabled and not config.allow_anonymous and (config.username is None or config.password_file is None):
+        raise t.fail(
+            "username",
+            "OPC UA without anonymous access needs username and password_file (or allow_anonymous = true)",
+        )
+    if config.password_file is not None and not config.password_file.is_file():
+        raise t.fail("password_file", f"{config.password_file} does not exist")
     return config

@@ -22,6 +22,10 @@ Stopping (request_stop, e.g. SIGTERM): a cycle triggered before the stop request
 (it takes a second or two, far below systemd's stop timeout, and the PLC gets its answer); a trigger that
 arrives once stopping has begun is answered with CYCLE_ABORTED. The link then keeps serving for
 STOP_LINGER_S, so the PLC can read that last answer, and closes.
+
+Longer than most modules (~420 lines): the order of one cycle (journal, PLC, listeners, artifacts) and of
+start and stop is the service's contract, and it reads best in one place. Recipes, the glue path's frame,
+the outcome records and the OPC UA server live in their own modules.
 """
 
 from __future__ import annotations
@@ -31,8 +35,6 @@ import math
 import threading
 import time
 
-import numpy as np
-
 from cellctl.cameras import CameraError, FrameSource, StereoFrame, open_frame_source
 from cellctl.errors import FailureKind
 from cellctl.service.artifacts import ArtifactWriter
@@ -40,14 +42,17 @@ from cellctl.service.codes import FAILURE_CODES
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
 from cellctl.service.events import CellEvents, CellState, CycleDone
+from cellctl.service.glue_output import GlueOutput
 from cellctl.service.journal import CycleRecord, Journal
+from cellctl.service.outcome import OutcomeListener, journal_record, outcome_of
+from cellctl.service.recipes import Recipe, RecipeBook
 from cellctl.service.sdnotify import SystemdNotifier
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.teach import TaughtTable, TeachError, load_taught
-from firmware_io.handshake import Trigger
-from firmware_io.registers import MAX_GLUE_POINTS, ErrorCode
+from firmware_io.handshake import Inspection, PathInfo, Trigger
+from firmware_io.registers import ErrorCode, FeatureBit
 from firmware_io.server import PlcLink
 
 log = logging.getLogger(__name__)
@@ -98,12 +103,22 @@ class Daemon:
             word_order=plc.word_order,
             heartbeat_period_s=plc.heartbeat_period_s,
             liveness_timeout_s=plc.liveness_timeout_s,
+            map_version=plc.map_version,
         )
+        self.recipes = RecipeBook.load(config.recipes.directory, config.measure)
+        self.glue_output = GlueOutput.from_config(config)
+        #: Called with each finished cycle after the PLC has its answer (OPC UA, station); must not block.
+        self.listeners: list[OutcomeListener] = []
+        self.active_recipe: Recipe | None = self.recipes.get(0)
+        self.opcua = None  # the OPC UA server while running, if [opcua] enabled
         self._reconstructor = (
             None
             if self.calib is None
             else SoleReconstructor(self.calib, config.measure.depth_range_mm, taught=_load_taught(config, self.calib))
         )
+        # At most one more, for a recipe's own depth range: each matcher keeps its cost volume (~0.5 GB at
+        # 1280x1024), so a line switching among several depth ranges re-allocates rather than piling them up.
+        self._recipe_reconstructor: SoleReconstructor | None = None
         self._stop = threading.Event()
         self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
@@ -138,23 +153,51 @@ class Daemon:
             # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
             self._probe_cameras(force=True)
             self._warm_up()
-            self.link.start()
+            opcua = self._start_opcua()  # before the link too: asyncua loads its address space for seconds
             try:
-                self._report_health()
-                self.notifier.notify(READY=1, STATUS=self._status_text())
-                log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self._cameras_ok else "NOT ok")
-                self._started.set()
-                self._publish_state()
-                self._serve()
+                self._serve_link()
             finally:
-                self.notifier.notify(STOPPING=1, STATUS="stopping")
-                self._publish_state("stopping")
-                self.link.stop()
+                if opcua is not None:
+                    opcua.stop()
         finally:
             self.source.close()
             self._finish_artifacts()
             self._journal.close()
             log.info("stopped after %d cycles", self.cycles_done)
+
+    def _serve_link(self) -> None:
+        self.link.start()
+        try:
+            self._report_health()
+            self.notifier.notify(READY=1, STATUS=self._status_text())
+            log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self._cameras_ok else "NOT ok")
+            self._started.set()
+            self._publish_state()
+            self._serve()
+        finally:
+            self.notifier.notify(STOPPING=1, STATUS="stopping")
+            self._publish_state("stopping")
+            self.link.stop()
+
+    def _start_opcua(self):  # noqa: ANN202 - OpcUaServer | None; asyncua is imported only when enabled
+        if not self.config.opcua.enabled:
+            return None
+        from cellctl.service.opcua import OpcUaServer
+
+        def active() -> tuple[int, str]:
+            recipe = self.active_recipe
+            return (0, "") if recipe is None else (recipe.number, recipe.name)
+
+        server = OpcUaServer(
+            self.config.opcua,
+            status=lambda: self.link.status,
+            recipes=[(r.number, r.name) for r in self.recipes],
+            active_recipe=active,
+        )
+        server.start()
+        self.listeners.append(server.publish)
+        self.opcua = server
+        return server
 
     def _serve(self) -> None:
         while not self._stop.is_set():
@@ -190,9 +233,15 @@ class Daemon:
         timings: dict[str, float] = {}
         frame: StereoFrame | None = None
         result: Measured | None = None
+        recipe = self.recipes.get(trigger.recipe)
         try:
+            if recipe is None:
+                raise CycleFailed.of(
+                    FailureKind.RECIPE_UNKNOWN, f"recipe {trigger.recipe} selected by the PLC is not loaded"
+                )
+            self.active_recipe = recipe
             frame = self._grab(timings)
-            result = self._measure(frame, timings)
+            result = self._measure(frame, timings, recipe)
             code, reason = ErrorCode.NONE, None
         except CycleFailed as failure:
             code, reason = failure.code, str(failure)
@@ -201,11 +250,24 @@ class Daemon:
             code, reason = ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}"
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         measurement = None if result is None else result.measurement
-        record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
+        failed = _inspect(recipe, measurement) if code is ErrorCode.NONE else None
+        record = journal_record(
+            trigger.cycle,
+            triggered_at,
+            code,
+            reason,
+            cycle_time_ms,
+            timings,
+            measurement,
+            frame,
+            trigger.recipe,
+            failed,
+        )
         assert self._journal is not None
         self._journal.record(record)  # durable before the PLC hears of it
-        self._publish(trigger.cycle, code, cycle_time_ms, measurement)
+        self._publish(trigger.cycle, code, cycle_time_ms, measurement, recipe, failed)
         self._report_health()
+        self._tell_listeners(record, recipe)
         self.cycles_done += 1
         if code is ErrorCode.NONE:
             log.info(
@@ -282,40 +344,72 @@ class Daemon:
         self._cameras_ok = True
         return frame
 
-    def _measure(self, frame: StereoFrame, timings: dict[str, float]) -> Measured:
-        if self.calib is None or self._reconstructor is None:
+    def _measure(self, frame: StereoFrame, timings: dict[str, float], recipe: Recipe) -> Measured:
+        if self.calib is None:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
-        measure = self.config.measure
-        result = measure_frame(
-            frame, self._reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
-        )
+        reconstructor = self._reconstructor
+        if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
+            # The matcher's disparity range follows from the depth range.
+            reconstructor = self._recipe_reconstructor
+            if reconstructor is None or reconstructor.depth_range_mm != recipe.depth_range_mm:
+                self._recipe_reconstructor = None  # release the old buffers before allocating new ones
+                taught = None if self._reconstructor is None else self._reconstructor.taught
+                reconstructor = SoleReconstructor(self.calib, recipe.depth_range_mm, taught=taught)
+                self._recipe_reconstructor = reconstructor
+        result = measure_frame(frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm))
         timings.update(result.timings)
         if isinstance(result, Refused):
             raise CycleFailed.of(result.failure, result.reason)
         return result
 
-    def _publish(self, cycle: int, code: ErrorCode, cycle_time_ms: float, measurement: SoleMeasurement | None) -> None:
-        if code is not ErrorCode.NONE or measurement is None:
+    def _publish(
+        self,
+        cycle: int,
+        code: ErrorCode,
+        cycle_time_ms: float,
+        measurement: SoleMeasurement | None,
+        recipe: Recipe | None,
+        failed: FeatureBit | None,
+    ) -> None:
+        """Answer the PLC; `failed`: the features out of tolerance (None when nothing was checked)."""
+        if code is not ErrorCode.NONE or measurement is None or recipe is None:
             self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
             return
         assert measurement.glue_path is not None
+        out = self.glue_output.prepare(measurement.glue_path.points, measurement.glue_path.normals)
         self.link.publish_result(
             cycle,
             heel_height_mm=float(measurement.heel_height_mm),
             toe_height_mm=float(measurement.toe_height_mm),
             length_mm=float(measurement.length_mm),
             cycle_time_ms=cycle_time_ms,
-            glue_points=_published_points(measurement.glue_path.points),
+            glue_points=out.points,
+            path=PathInfo(out.normals, out.frame, out.nozzle_offset_mm, recipe.glue_offset_mm),
+            inspection=None if failed is None else Inspection(failed),
         )
+
+    def _tell_listeners(self, record: CycleRecord, recipe: Recipe | None) -> None:
+        if not self.listeners:
+            return
+        outcome = outcome_of(self.config.opcua.cell_name, record, recipe)
+        for listener in self.listeners:
+            try:
+                listener(outcome)
+            except Exception:  # a listener's fault never stops the line
+                log.exception("cycle %d: result listener %r failed", record.cycle, listener)
 
     def _abort(self, trigger: Trigger) -> None:
         reason = "the service is stopping"
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         triggered_at = time.time() - (time.monotonic() - trigger.received_at)
         assert self._journal is not None
-        record = _record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
+        code = ErrorCode.CYCLE_ABORTED
+        record = journal_record(
+            trigger.cycle, triggered_at, code, reason, cycle_time_ms, {}, None, None, trigger.recipe
+        )
         self._journal.record(record)
         self.link.publish_error(trigger.cycle, ErrorCode.CYCLE_ABORTED, cycle_time_ms=cycle_time_ms)
+        self._tell_listeners(record, self.recipes.get(trigger.recipe))
         self.events.publish(CycleDone(record, None, None))
         log.warning("cycle %d: aborted, %s", trigger.cycle, reason)
 
@@ -378,39 +472,8 @@ def _load_taught(config: CellConfig, calib: Calibration) -> TaughtTable | None:
     return taught
 
 
-def _published_points(points: np.ndarray) -> np.ndarray:
-    """The glue path as the PLC gets it: at most MAX_GLUE_POINTS, evenly thinned if longer."""
-    if len(points) <= MAX_GLUE_POINTS:
-        return points
-    keep = np.linspace(0, len(points), MAX_GLUE_POINTS, endpoint=False).astype(int)
-    return points[keep]
-
-
-def _record(
-    cycle: int,
-    triggered_at: float,
-    code: ErrorCode,
-    reason: str | None,
-    cycle_time_ms: float,
-    timings: dict[str, float],
-    measurement: SoleMeasurement | None,
-    frame: StereoFrame | None,
-) -> CycleRecord:
-    ok = code is ErrorCode.NONE and measurement is not None and measurement.glue_path is not None
-    return CycleRecord(
-        cycle=cycle,
-        triggered_at=triggered_at,
-        status="ok" if ok else "error",
-        error_code=int(code),
-        reason=reason,
-        cycle_time_ms=cycle_time_ms,
-        length_mm=float(measurement.length_mm) if ok else None,
-        heel_height_mm=float(measurement.heel_height_mm) if ok else None,
-        toe_height_mm=float(measurement.toe_height_mm) if ok else None,
-        timings={k: round(v, 5) for k, v in timings.items()},
-        # float32 as published: the journal holds exactly the numbers the PLC reads.
-        glue_path=_published_points(measurement.glue_path.points).astype(np.float32).astype(float).tolist()
-        if ok
-        else [],
-        source={} if frame is None else {**frame.info, "skew_ms": round(frame.skew_s * 1000.0, 3)},
-    )
+def _inspect(recipe: Recipe | None, measurement: SoleMeasurement | None) -> FeatureBit | None:
+    """Features of a measured sole outside the recipe's tolerances; None when the recipe checks nothing."""
+    if recipe is None or measurement is None or not recipe.checks_tolerances:
+        return None
+    return recipe.inspect(measurement.length_mm, measurement.heel_height_mm, measurement.toe_height_mm)

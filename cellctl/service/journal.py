@@ -37,9 +37,18 @@ CREATE TABLE IF NOT EXISTS cycles (
     glue_path TEXT NOT NULL,           -- JSON [[x, y, z], ...] table frame, mm
     source TEXT NOT NULL,              -- JSON: where the pair came from (backend, scene, devices)
     ply_path TEXT,
-    overlay_path TEXT
+    overlay_path TEXT,
+    recipe INTEGER NOT NULL DEFAULT 0,  -- recipe the PLC selected (map v2 register 7; 0 = cell default)
+    in_tolerance INTEGER,              -- 1 within every checked tolerance, 0 not, NULL nothing checked
+    failed_features TEXT NOT NULL DEFAULT '[]'  -- JSON ["LENGTH", ...]: features outside their tolerance
 );
 """
+#: Columns added after the first release, with their definition: added to older journals when opened.
+ADDED_COLUMNS = {
+    "recipe": "INTEGER NOT NULL DEFAULT 0",
+    "in_tolerance": "INTEGER",
+    "failed_features": "TEXT NOT NULL DEFAULT '[]'",
+}
 
 COLUMNS = (
     "id",
@@ -57,8 +66,9 @@ COLUMNS = (
     "source",
     "ply_path",
     "overlay_path",
+    *ADDED_COLUMNS,
 )
-_JSON_COLUMNS = ("timings", "glue_path", "source")
+_JSON_COLUMNS = ("timings", "glue_path", "source", "failed_features")
 
 
 @dataclass
@@ -80,6 +90,9 @@ class CycleRecord:
     ply_path: str | None = None
     overlay_path: str | None = None
     id: int | None = None
+    recipe: int = 0
+    in_tolerance: bool | None = None  # None: no tolerance checked
+    failed_features: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -91,6 +104,9 @@ class Journal:
     def __init__(self, connection: sqlite3.Connection, state_dir: Path) -> None:
         self._db = connection
         self.state_dir = state_dir
+        # A reader may open an older journal it must not change: it reads the columns that are there.
+        present = {row[1] for row in connection.execute("PRAGMA table_info(cycles)")}
+        self._select = ", ".join(name for name in COLUMNS if name in present)
 
     @classmethod
     def open(cls, state_dir: str | Path, *, readonly: bool = False) -> Journal:
@@ -109,6 +125,7 @@ class Journal:
             db.execute("PRAGMA journal_mode=WAL")
             db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
             db.executescript(SCHEMA)
+            _add_columns(db)
         db.row_factory = sqlite3.Row
         return cls(db, state)
 
@@ -160,9 +177,7 @@ class Journal:
     def last(self, count: int | None = None) -> list[CycleRecord]:
         """The newest `count` cycles (all when None), oldest first."""
         limit = -1 if count is None else count
-        rows = self._db.execute(
-            f"SELECT {', '.join(COLUMNS)} FROM cycles ORDER BY id DESC LIMIT ?", (limit,)
-        ).fetchall()
+        rows = self._db.execute(f"SELECT {self._select} FROM cycles ORDER BY id DESC LIMIT ?", (limit,)).fetchall()
         return [_record(row) for row in reversed(rows)]
 
     def get(self, row_id: int) -> CycleRecord | None:
@@ -173,13 +188,25 @@ class Journal:
     def find(self, cycle: int) -> CycleRecord | None:
         """The newest journaled cycle with this PLC cycle number."""
         row = self._db.execute(
-            f"SELECT {', '.join(COLUMNS)} FROM cycles WHERE cycle = ? ORDER BY id DESC LIMIT 1", (cycle,)
+            f"SELECT {self._select} FROM cycles WHERE cycle = ? ORDER BY id DESC LIMIT 1", (cycle,)
         ).fetchone()
         return None if row is None else _record(row)
+
+
+def _add_columns(db: sqlite3.Connection) -> None:
+    """Bring a journal written by an older release up to this schema (its rows get the defaults)."""
+    present = {row[1] for row in db.execute("PRAGMA table_info(cycles)")}
+    with db:
+        for name, definition in ADDED_COLUMNS.items():
+            if name not in present:
+                db.execute(f"ALTER TABLE cycles ADD COLUMN {name} {definition}")
 
 
 def _record(row: sqlite3.Row) -> CycleRecord:
     values = dict(row)
     for name in _JSON_COLUMNS:
-        values[name] = json.loads(values[name])
+        if name in values:
+            values[name] = json.loads(values[name])
+    if values.get("in_tolerance") is not None:
+        values["in_tolerance"] = bool(values["in_tolerance"])
     return CycleRecord(**values)

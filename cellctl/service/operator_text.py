@@ -73,6 +73,11 @@ OPERATOR_TEXT: dict[ErrorCode, tuple[str, str]] = {
         "The glue path leaves the sole's surface (height jump, out of the sole's height range, or tilted normal).",
         "Re-trigger; if it repeats for this sole, check lighting for glare and call the line engineer.",
     ),
+    ErrorCode.RECIPE_UNKNOWN: (
+        "The recipe number in register 7 names no recipe loaded on this cell (map version 2).",
+        "Write the number of an installed recipe before triggering (0 = the cell's default settings), "
+        "or install the recipe file and restart the service.",
+    ),
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",
         "Re-trigger once the heartbeat runs again.",

@@ -254,6 +254,7 @@ EXPECTED_CODES = {
     FailureKind.SURFACE_NOT_MEASURED: ErrorCode.TOO_FEW_POINTS,
     FailureKind.NO_TABLE: ErrorCode.NO_TABLE,
     FailureKind.NO_SOLE: ErrorCode.NO_SOLE,
+    FailureKind.RECIPE_UNKNOWN: ErrorCode.RECIPE_UNKNOWN,  # end to end in tests/service/test_robot_cell.py
     FailureKind.SOLE_AT_BORDER: ErrorCode.SOLE_AT_BORDER,
     FailureKind.COLOURS_TOO_SIMILAR: ErrorCode.COLOURS_TOO_SIMILAR,
     FailureKind.ENDS_TOO_CLOSE_TO_CALL: ErrorCode.ENDS_TOO_CLOSE_TO_CALL,

@@ -63,6 +63,9 @@ class Station:
             token=config.station.token,
             plc=daemon.link,
             cell_name=config.source.stem,
+            active_recipe=lambda: (
+                None if daemon.active_recipe is None else (daemon.active_recipe.number, daemon.active_recipe.name)
+            ),
         )
         server = None
         if config.station.enabled:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ class StationContext:
     token: str | None
     plc: Any  # firmware_io PlcLink (connected clients, heartbeat), or None
     cell_name: str
+    active_recipe: Callable[[], tuple[int, str] | None] | None = None  # (number, name) the cell measures with
 
     def cell_view(self) -> dict[str, Any]:
         """The state panel's and last result's facts, as the pages and /api/state show them."""
@@ -44,6 +46,7 @@ class StationContext:
             "cycle": s.cycle,
             "plc_clients": None if plc is None else plc.connected_clients,
             "heartbeat_ok": None if plc is None else not plc.heartbeat_stalled,
+            "recipe": None if self.active_recipe is None else self.active_recipe(),
             "state_version": self.hub.state_version,
             "cycle_version": self.hub.cycle_version,
             "last": self._last_view(),
@@ -71,6 +74,11 @@ class StationContext:
             "error_action": action,
             "reason": r.reason,
             "has_picture": last.frame is not None,
+            "recipe": r.recipe,
+            # Out of tolerance is a measured sole that fails its recipe: the operator sees FAIL.
+            "passed": r.status == "ok" and r.in_tolerance is not False,
+            "in_tolerance": r.in_tolerance,
+            "failed_features": [name.replace("_", " ").lower() for name in r.failed_features],
         }
 
     def journal_rows(self) -> list[CycleRecord]:

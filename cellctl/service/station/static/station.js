@@ -23,6 +23,7 @@
     if (s.plc_clients !== null) setTile("t-plc", s.plc_clients ? "CONNECTED (" + s.plc_clients + ")" : "NO CLIENT", s.plc_clients ? "ok" : "warn");
     if (s.heartbeat_ok !== null) setTile("t-heartbeat", s.heartbeat_ok ? "RUNNING" : "STALLED", s.heartbeat_ok ? "ok" : "bad");
     setTile("t-cycles", String(s.cycles_done), "");
+    if (s.recipe) setTile("t-recipe", s.recipe[0] + " · " + s.recipe[1], "");
   }
 
   const last = document.getElementById("last");

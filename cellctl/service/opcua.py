@@ -1,0 +1,291 @@
+"""The cell for the plant's MES: an OPC UA server (asyncua) with the cell's state, last result and history.
+
+    server = OpcUaServer(config.opcua, status=lambda: link.status, recipes=book, active_recipe=...)
+    server.start()                  # own thread and event loop; the controller stays plain blocking code
+    daemon.listeners.append(server.publish)      # every finished cycle: variables, history, one event
+    server.stop()
+
+The address space follows the structure of the OPC UA Machine Vision companion specification (OPC 40100)
+as far as it fits a measuring cell without its full type system: a system object per cell with a
+VisionStateMachine (CurrentState: Preoperational, Ready, SingleExecution, Error, Halted), RecipeManagement
+(active recipe), ResultManagement with the last result (ResultId, CreationTime, RecipeId, measurements,
+IsPass) and its history, and a ResultReadyEventType event per cycle (emitted by the Server object, SourceNode
+the cell's object).
+docs/opcua.md lists every node. Off unless [opcua] enabled = true; anonymous access only if
+allow_anonymous = true, otherwise username and the password from password_file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import json
+import logging
+import math
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import asdict
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+from asyncua import Node, Server, ua
+from asyncua.crypto.permission_rules import User, UserRole
+
+from cellctl.errors import UserError
+from cellctl.service.config import OpcUaConfig
+from cellctl.service.outcome import CycleOutcome
+from firmware_io.registers import StatusBit
+
+log = logging.getLogger(__name__)
+# asyncua reports every connection and endpoint at INFO; the service log keeps its warnings and errors.
+logging.getLogger("asyncua").setLevel(logging.WARNING)
+
+NAMESPACE = "urn:cellctl:machinevision"
+#: How often CurrentState follows the PLC link's status register.
+STATE_PERIOD_S = 0.2
+
+#: LastResult variables: browse name -> (OPC UA type, CycleOutcome field or a function of it).
+_RESULT_FIELDS: dict[str, tuple[ua.VariantType, Callable[[CycleOutcome], Any]]] = {
+    "ResultId": (ua.VariantType.String, lambda o: o.result_id),
+    "CreationTime": (ua.VariantType.DateTime, lambda o: datetime.fromtimestamp(o.triggered_at, UTC)),
+    "Cycle": (ua.VariantType.UInt16, lambda o: o.cycle),
+    "RecipeId": (ua.VariantType.UInt16, lambda o: o.recipe),
+    "RecipeName": (ua.VariantType.String, lambda o: o.recipe_name),
+    "IsPass": (ua.VariantType.Boolean, lambda o: o.passed),
+    "ResultState": (ua.VariantType.String, lambda o: _result_state(o)),
+    "ErrorCode": (ua.VariantType.UInt16, lambda o: o.error_code),
+    "ErrorName": (ua.VariantType.String, lambda o: o.error_name),
+    "LengthMm": (ua.VariantType.Double, lambda o: o.length_mm),
+    "HeelHeightMm": (ua.VariantType.Double, lambda o: o.heel_height_mm),
+    "ToeHeightMm": (ua.VariantType.Double, lambda o: o.toe_height_mm),
+    "CycleTimeMs": (ua.VariantType.Double, lambda o: o.cycle_time_ms),
+    "GluePointCount": (ua.VariantType.UInt32, lambda o: o.glue_points),
+    "FailedFeatures": (ua.VariantType.String, lambda o: list(o.failed_features)),
+}
+#: Fields of ResultReadyEventType (each event also has the base fields Time, Message, Severity, SourceNode).
+_EVENT_FIELDS = ("ResultId", "Cycle", "RecipeId", "IsPass", "ResultState", "ErrorCode", "LengthMm",
+                 "HeelHeightMm", "ToeHeightMm")  # fmt: skip
+
+
+def _result_state(outcome: CycleOutcome) -> str:
+    """Pass, Fail (out of tolerance), Measured (no tolerances checked) or Error."""
+    if not outcome.measured:
+        return "Error"
+    return {True: "Pass", False: "Fail", None: "Measured"}[outcome.in_tolerance]
+
+
+def system_state(status: StatusBit, stopping: bool) -> str:
+    """CurrentState of the VisionStateMachine for the PLC link's status register."""
+    if stopping:
+        return "Halted"
+    if status & StatusBit.BUSY:
+        return "SingleExecution"
+    if status & StatusBit.READY:
+        return "Ready"
+    healthy = StatusBit.CAMERAS_OK | StatusBit.CALIBRATION_OK
+    return "Error" if status & healthy != healthy else "Preoperational"
+
+
+class _PasswordUsers:
+    """asyncua user manager: one configured user, password compared in constant time; anonymous if allowed."""
+
+    def __init__(self, username: str | None, password: str | None, allow_anonymous: bool) -> None:
+        self._username, self._password, self._anonymous = username, password, allow_anonymous
+
+    def get_user(self, iserver: object, username: str | None = None, password: str | None = None, certificate: object = None) -> User | None:  # fmt: skip
+        if username is None:  # anonymous token (the secure channel's certificate may still be there)
+            return User(role=UserRole.User) if self._anonymous else None
+        if self._username is None or self._password is None or username != self._username:
+            return None
+        if not hmac.compare_digest((password or "").encode(), self._password.encode()):
+            return None
+        return User(role=UserRole.User, name=username)
+
+
+class OpcUaServer:
+    """The OPC UA server of one cell, in its own thread."""
+
+    def __init__(
+        self,
+        config: OpcUaConfig,
+        *,
+        status: Callable[[], StatusBit],
+        recipes: list[tuple[int, str]],
+        active_recipe: Callable[[], tuple[int, str]],
+    ) -> None:
+        self.config = config
+        self._status = status
+        self._recipes = recipes
+        self._active_recipe = active_recipe
+        self._history: deque[CycleOutcome] = deque(maxlen=config.history)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._thread: threading.Thread | None = None
+        self._started = threading.Event()
+        self._start_error: BaseException | None = None
+        self._stopping = False
+        self.endpoint = config.endpoint  #: with the port actually bound once started (port 0 picks one)
+
+    # ---- lifetime (controller thread) ------------------------------------------------------------
+
+    def start(self, timeout_s: float = 30.0) -> None:
+        self._thread = threading.Thread(target=self._run, name="opcua", daemon=True)
+        self._thread.start()
+        if not self._started.wait(timeout_s):
+            self.stop()
+            raise UserError(f"OPC UA server on {self.config.endpoint} did not start within {timeout_s} s")
+        if self._start_error is not None:
+            raise UserError(
+                f"cannot serve OPC UA on {self.config.endpoint}: {self._start_error} (is the port in use by another "
+                "cellctl, and is the address local to this PC? set [opcua] endpoint)"
+            )
+        log.info("OPC UA serving %s", self.endpoint)
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        self._stopping = True
+        loop, stop, thread = self._loop, self._stop, self._thread
+        if loop is not None and stop is not None and not loop.is_closed():
+            try:
+                loop.call_soon_threadsafe(stop.set)
+            except RuntimeError:  # loop closed meanwhile: already stopped
+                pass
+        if thread is not None:
+            thread.join(timeout_s)
+
+    def publish(self, outcome: CycleOutcome) -> None:
+        """Daemon listener: queue the outcome for the server's loop; never blocks the cycle."""
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            return
+        future = asyncio.run_coroutine_threadsafe(self._publish(outcome), loop)
+        future.add_done_callback(_log_failure)
+
+    # ---- server thread ---------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._serve())
+        except BaseException as exc:  # report, never die silently
+            log.exception("OPC UA server failed")
+            self._start_error = self._start_error or exc
+        finally:
+            self._started.set()
+
+    async def _serve(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        server = await self._build()
+        try:
+            await server.start()
+        except Exception as exc:
+            self._start_error = exc
+            return
+        self.endpoint = _bound_endpoint(self.config.endpoint, server.bserver.port if server.bserver else None)
+        self._started.set()
+        try:
+            while not self._stop.is_set():
+                try:
+                    await self._follow_state()
+                except Exception:  # a failed update must not end the server; the next tick tries again
+                    log.exception("OPC UA: updating the state failed")
+                try:
+                    await asyncio.wait_for(self._stop.wait(), STATE_PERIOD_S)
+                except TimeoutError:
+                    pass
+            await self._state.write_value("Halted")
+        finally:
+            await server.stop()
+
+    async def _follow_state(self) -> None:
+        await self._state.write_value(system_state(self._status(), self._stopping))
+        number, name = self._active_recipe()
+        await self._active_id.write_value(ua.Variant(number, ua.VariantType.UInt16))
+        await self._active_name.write_value(name)
+
+    async def _build(self) -> Server:
+        cfg = self.config
+        password = None if cfg.password_file is None else cfg.password_file.read_text(encoding="utf-8").strip()
+        server = Server(user_manager=_PasswordUsers(cfg.username, password, cfg.allow_anonymous))  # type: ignore[arg-type]
+        await server.init()
+        server.set_endpoint(cfg.endpoint)
+        server.set_server_name(f"cellctl {cfg.cell_name}")
+        tokens: list[type] = [ua.UserNameIdentityToken]
+        if cfg.allow_anonymous:
+            tokens.append(ua.AnonymousIdentityToken)
+        server.set_identity_tokens(tokens)
+        idx = await server.register_namespace(NAMESPACE)
+        self._event_type = await server.create_custom_event_type(
+            idx, "ResultReadyEventType", ua.ObjectIds.BaseEventType,
+            [(name, _RESULT_FIELDS[name][0]) for name in _EVENT_FIELDS],
+        )  # fmt: skip
+        system = await server.nodes.objects.add_object(idx, cfg.cell_name)
+        self._system = system
+        machine = await system.add_object(idx, "VisionStateMachine")
+        self._state = await machine.add_variable(idx, "CurrentState", "Preoperational")
+        recipes = await system.add_object(idx, "RecipeManagement")
+        self._active_id = await recipes.add_variable(idx, "ActiveRecipeId", ua.Variant(0, ua.VariantType.UInt16))
+        self._active_name = await recipes.add_variable(idx, "ActiveRecipeName", "")
+        listing = [f"{number}: {name}" for number, name in self._recipes]
+        await recipes.add_variable(idx, "Recipes", ua.Variant(listing, ua.VariantType.String))
+        results = await system.add_object(idx, "ResultManagement")
+        last = await results.add_object(idx, "LastResult")
+        self._last: dict[str, Node] = {}
+        for name, (kind, _) in _RESULT_FIELDS.items():
+            empty: Any = [] if name == "FailedFeatures" else _empty(kind)
+            self._last[name] = await last.add_variable(idx, name, ua.Variant(empty, kind))
+        self._history_node = await results.add_variable(idx, "ResultHistory", ua.Variant([], ua.VariantType.String))
+        self._count = await results.add_variable(idx, "ResultCount", ua.Variant(0, ua.VariantType.UInt32))
+        # Events are emitted by the Server object (where an MES subscribes, and the only source asyncua's
+        # event history can store) with SourceNode = this cell's object, so they say which cell they are from.
+        self._events = await server.get_event_generator(self._event_type, ua.ObjectIds.Server)
+        self._events.event.SourceNode = system.nodeid
+        self._events.event.SourceName = cfg.cell_name
+        # History reads (HistoryReadRaw / HistoryReadEvents) of the last result and its events, in memory.
+        await server.historize_node_data_change(self._last["ResultId"], period=timedelta(days=7), count=cfg.history)
+        await server.historize_node_event(server.nodes.server, period=timedelta(days=7), count=cfg.history)
+        return server
+
+    async def _publish(self, outcome: CycleOutcome) -> None:
+        for name, (kind, value_of) in _RESULT_FIELDS.items():
+            await self._last[name].write_value(ua.Variant(value_of(outcome), kind))
+        self._history.appendleft(outcome)
+        history = [json.dumps(_jsonable(o)) for o in self._history]
+        await self._history_node.write_value(ua.Variant(history, ua.VariantType.String))
+        count = await self._count.read_value()
+        await self._count.write_value(ua.Variant(count + 1, ua.VariantType.UInt32))
+        event = self._events.event
+        for name in _EVENT_FIELDS:
+            setattr(event, name, _RESULT_FIELDS[name][1](outcome))
+        event.Message = ua.LocalizedText(f"cycle {outcome.cycle}: {_result_state(outcome)}")
+        event.Severity = 100 if outcome.passed else 500
+        await self._events.trigger(datetime.now(UTC))
+
+
+def _empty(kind: ua.VariantType) -> Any:
+    return {
+        ua.VariantType.String: "",
+        ua.VariantType.Boolean: False,
+        ua.VariantType.Double: math.nan,
+        ua.VariantType.DateTime: datetime.fromtimestamp(0, UTC),
+    }.get(kind, 0)
+
+
+def _jsonable(outcome: CycleOutcome) -> dict[str, Any]:
+    data = asdict(outcome)
+    data["result_state"] = _result_state(outcome)
+    data["is_pass"] = outcome.passed
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in data.items()}
+
+
+def _bound_endpoint(url: str, port: int | None) -> str:
+    if port is None:
+        return url
+    scheme_host, _, rest = url.removeprefix("opc.tcp://").partition("/")
+    host = scheme_host.rsplit(":", 1)[0]
+    return f"opc.tcp://{host}:{port}/{rest}"
+
+
+def _log_failure(future: Any) -> None:
+    if not future.cancelled() and future.exception() is not None:
+        log.error("OPC UA: publishing a result failed: %s", future.exception())

@@ -1,0 +1,70 @@
+"""Recipe files: the shipped examples load, tolerances decide the feature bits, bad files are refused by name."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cellctl.service.config import ConfigError, MeasureConfig
+from cellctl.service.recipes import RecipeBook, Tolerance, load_recipe
+from firmware_io.registers import FeatureBit
+
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
+MEASURE = MeasureConfig(depth_range_mm=(450.0, 650.0), glue_offset_mm=2.0, glue_spacing_mm=2.0)
+
+
+def test_the_shipped_examples_load_and_recipe_0_is_the_cell_default() -> None:
+    book = RecipeBook.load(DEPLOY / "recipes", MEASURE)
+    assert [r.number for r in book] == [0, 1, 2]
+    default, runner, trail = list(book)
+    assert default.name == "cell default" and not default.checks_tolerances and default.glue_offset_mm == 2.0
+    assert runner.toe_height_mm == Tolerance(8.0, 1.0, 2.0) and runner.glue_spacing_mm == 2.0
+    assert trail.glue_offset_mm == 3.5 and trail.toe_height_mm is None and trail.depth_range_mm == (450.0, 650.0)
+    assert book.get(3) is None
+
+
+@pytest.mark.parametrize(
+    ("length", "heel", "toe", "failed"),
+    [
+        (268.0, 18.0, 8.0, FeatureBit(0)),
+        (270.0, 16.5, 10.0, FeatureBit(0)),  # every bound is inclusive
+        (270.1, 18.0, 8.0, FeatureBit.LENGTH),
+        (268.0, 19.6, 6.9, FeatureBit.HEEL_HEIGHT | FeatureBit.TOE_HEIGHT),
+        (268.0, 18.0, float("nan"), FeatureBit.TOE_HEIGHT),  # no value is never in tolerance
+    ],
+)
+def test_features_outside_their_tolerance_get_their_bit(
+    length: float, heel: float, toe: float, failed: FeatureBit
+) -> None:
+    runner = load_recipe(DEPLOY / "recipes" / "runner-42.toml", MEASURE)
+    assert runner.inspect(length, heel, toe) == failed
+
+
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ('name = "x"\n', "missing the required key 'number'"),
+        ('number = 0\nname = "x"\n', "number: 0 is impossible"),
+        ('number = 1.5\nname = "x"\n', "not a whole number"),
+        ('number = 1\nname = "x"\ncolour = "red"\n', "unknown key(s) colour"),
+        ('number = 1\nname = "x"\n[length_mm]\nnominal = 250\n', "tolerance"),
+        ('number = 1\nname = "x"\n[glue]\noffset_mm = -1\n', "offset_mm: -1 is impossible"),
+        ('number = 1\nname = "x"\n[length_mm]\nnominal = 250\ntolerence = 2\n', "unknown key(s) tolerence"),
+        ('number = 1\nname = "x"\ndepth_range_mm = [600, 500]\n', "need 0 < near < far"),
+        ("number = 1\nname = \n", "not valid TOML"),
+    ],
+)
+def test_a_bad_recipe_file_is_refused_naming_file_and_key(tmp_path: Path, text: str, words: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="bad.toml") as caught:
+        load_recipe(path, MEASURE)
+    assert words in str(caught.value)
+
+
+def test_two_files_with_one_number_are_refused(tmp_path: Path) -> None:
+    (tmp_path / "a.toml").write_text('number = 4\nname = "a"\n')
+    (tmp_path / "b.toml").write_text('number = 4\nname = "b"\n')
+    with pytest.raises(ConfigError, match="recipe number 4 is already used"):
+        RecipeBook.load(tmp_path, MEASURE)
