@@ -30,8 +30,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from numpy.typing import ArrayLike
-from pymodbus.constants import ExcCodes
 
+from firmware_io.pdu import ExceptionCode
 from firmware_io.registers import (
     MAP_SIZE,
     MAP_VERSION,
@@ -58,18 +58,24 @@ class Trigger:
 class PlcHandshake:
     """Register image plus handshake state, shared by the Modbus server thread and the controller."""
 
-    def __init__(self, register_map: RegisterMap) -> None:
+    def __init__(self, register_map: RegisterMap, *, last_cycle: int = 0) -> None:
+        """last_cycle: the cycle answered last before a restart; writing it again starts nothing."""
+        if not 0 <= last_cycle <= 0xFFFF:
+            raise ValueError(f"last cycle {last_cycle} is not a cycle number 0..65535")
         self._map = register_map
         self._changed = threading.Condition()  # its lock guards everything below
         self._image = [0] * MAP_SIZE
         self._image[Register.MAP_VERSION] = MAP_VERSION
         self._flags = StatusBit(0)  # RESULT_VALID, ERROR, CAMERAS_OK, CALIBRATION_OK; the rest is derived
         self._running: int | None = None
-        self._last_accepted = 0
+        self._running_since: float | None = None
+        self._last_accepted = last_cycle
+        self._timed_out: int | None = None  # the cycle the link answered with CYCLE_TIMEOUT itself
         self._pending: Trigger | None = None
         self._closed = False
         self._controller_seen_at = time.monotonic()
         self._clear_result()
+        self._image[Register.TRIGGER] = last_cycle  # as the PLC left it: max(reg 2, reg 3) + 1 stays right
         self._update_status()
 
     # ---- PLC side: called by the Modbus server for each request -------------------------------
@@ -79,11 +85,11 @@ class PlcHandshake:
         with self._changed:
             return self._image[address : address + count]
 
-    def plc_write(self, address: int, values: Sequence[int]) -> ExcCodes | None:
+    def plc_write(self, address: int, values: Sequence[int]) -> ExceptionCode | None:
         """Apply a PLC write to the trigger; returns the Modbus exception to answer with, or None.
 
-        Writes to read-only registers never get here: the server refuses them first (pymodbus'
-        read-only flag, exception 0x02), so anything else is a bug in the server wiring.
+        Writes to read-only registers never get here: firmware_io.pdu refuses them first (exception
+        0x02), so anything else is a bug in the server wiring.
         """
         if address != Register.TRIGGER or len(values) != 1:
             raise ValueError(f"only the trigger register is writable, got {len(values)} values at {address}")
@@ -95,18 +101,43 @@ class PlcHandshake:
             if self._running is not None:
                 refused = self._image[Register.REFUSED_TRIGGERS]
                 self._image[Register.REFUSED_TRIGGERS] = (refused + 1) & 0xFFFF
-                return ExcCodes.DEVICE_BUSY
+                return ExceptionCode.DEVICE_BUSY
             self._accept(cycle)
             return None
 
+    def expire_overdue(self, cycle_timeout_s: float | None) -> int | None:
+        """Answer a cycle older than cycle_timeout_s with CYCLE_TIMEOUT; returns its number, if any.
+
+        The link does this itself because the controller may be stuck inside the cycle: the PLC gets
+        an answer with a reason instead of waiting into its own timeout.
+        """
+        with self._changed:
+            started = self._running_since
+            if self._running is None or started is None or cycle_timeout_s is None:
+                return None
+            age_s = time.monotonic() - started
+            if age_s <= cycle_timeout_s:
+                return None
+            expired = self._timed_out = self._running
+            measurement = self._map.encode_floats([_NAN, _NAN, _NAN, age_s * 1000.0])
+            self._finish(expired, measurement, [], ErrorCode.CYCLE_TIMEOUT)
+            return expired
+
     def beat(self, liveness_timeout_s: float | None) -> bool:
-        """Advance the heartbeat if the controller was seen recently enough; True if it advanced."""
+        """Advance the heartbeat if the controller is alive and working; True if it advanced.
+
+        "Working": a cycle is running (expire_overdue bounds how long that lasts), or the controller
+        made a call (a waiting wait_trigger() counts) within liveness_timeout_s.
+        """
         with self._changed:
             silent_for = time.monotonic() - self._controller_seen_at
-            if liveness_timeout_s is not None and silent_for > liveness_timeout_s:
+            if self._running is None and liveness_timeout_s is not None and silent_for > liveness_timeout_s:
                 return False
-            self._image[Register.HEARTBEAT] = (self._image[Register.HEARTBEAT] + 1) & 0xFFFF
+            self._advance_heartbeat()
             return True
+
+    def _advance_heartbeat(self) -> None:
+        self._image[Register.HEARTBEAT] = (self._image[Register.HEARTBEAT] + 1) & 0xFFFF
 
     # ---- controller side -----------------------------------------------------------------------
 
@@ -152,8 +183,11 @@ class PlcHandshake:
         length_mm: float,
         cycle_time_ms: float,
         glue_points: ArrayLike,
-    ) -> None:
-        """Hand the PLC the measurement of `cycle`; refuses values that are not finite."""
+    ) -> bool:
+        """Hand the PLC the measurement of `cycle`; refuses values that are not finite.
+
+        False (and nothing published) if the cycle was already answered with CYCLE_TIMEOUT.
+        """
         values = {
             "heel_height_mm": heel_height_mm,
             "toe_height_mm": toe_height_mm,
@@ -167,16 +201,19 @@ class PlcHandshake:
         measurement = self._map.encode_floats(list(values.values()), what="measurement")
         points = self._map.encode_points(glue_points)
         with self._changed:
-            self._finish(cycle, measurement, points, ErrorCode.NONE)
+            return self._finish(cycle, measurement, points, ErrorCode.NONE)
 
-    def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> None:
-        """Tell the PLC that `cycle` ended with `code`; measurements read NaN and no glue points."""
+    def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> bool:
+        """Tell the PLC that `cycle` ended with `code`; measurements read NaN and no glue points.
+
+        False (and nothing published) if the cycle was already answered with CYCLE_TIMEOUT.
+        """
         code = ErrorCode(code)
         if code is ErrorCode.NONE:
             raise ValueError("publish_error needs an error code other than ErrorCode.NONE")
         measurement = self._map.encode_floats([_NAN, _NAN, _NAN, cycle_time_ms], what="measurement")
         with self._changed:
-            self._finish(cycle, measurement, [], code)
+            return self._finish(cycle, measurement, [], code)
 
     def close(self) -> None:
         """Wake any wait_trigger() so the controller can stop."""
@@ -189,13 +226,16 @@ class PlcHandshake:
     def _accept(self, cycle: int) -> None:
         self._image[Register.TRIGGER] = cycle
         self._running = self._last_accepted = cycle
+        self._running_since = time.monotonic()
         self._clear_result()
         self._update_status()
         self._pending = Trigger(cycle, time.monotonic())
         self._changed.notify_all()
 
-    def _finish(self, cycle: int, measurement: list[int], points: list[int], code: ErrorCode) -> None:
+    def _finish(self, cycle: int, measurement: list[int], points: list[int], code: ErrorCode) -> bool:
         self._controller_seen_at = time.monotonic()
+        if cycle == self._timed_out and cycle != self._running:
+            return False  # the link answered it with CYCLE_TIMEOUT already; the late result is dropped
         if cycle != self._running:
             raise RuntimeError(
                 f"cannot publish cycle {cycle}: the running cycle is {self._running} "
@@ -211,7 +251,9 @@ class PlcHandshake:
         self._set_flag(StatusBit.RESULT_VALID, code is ErrorCode.NONE)
         self._set_flag(StatusBit.ERROR, code is not ErrorCode.NONE)
         self._running = None
+        self._running_since = None
         self._update_status()
+        return True
 
     def _clear_result(self) -> None:
         image = self._image
