@@ -58,10 +58,7 @@ class Trigger:
 class PlcHandshake:
     """Register image plus handshake state, shared by the Modbus server thread and the controller."""
 
-    def __init__(self, register_map: RegisterMap, *, last_cycle: int = 0) -> None:
-        """last_cycle: the cycle answered last before a restart; writing it again starts nothing."""
-        if not 0 <= last_cycle <= 0xFFFF:
-            raise ValueError(f"last cycle {last_cycle} is not a cycle number 0..65535")
+    def __init__(self, register_map: RegisterMap) -> None:
         self._map = register_map
         self._changed = threading.Condition()  # its lock guards everything below
         self._image = [0] * MAP_SIZE
@@ -69,13 +66,12 @@ class PlcHandshake:
         self._flags = StatusBit(0)  # RESULT_VALID, ERROR, CAMERAS_OK, CALIBRATION_OK; the rest is derived
         self._running: int | None = None
         self._running_since: float | None = None
-        self._last_accepted = last_cycle
+        self._last_accepted = 0
         self._timed_out: int | None = None  # the cycle the link answered with CYCLE_TIMEOUT itself
         self._pending: Trigger | None = None
         self._closed = False
         self._controller_seen_at = time.monotonic()
         self._clear_result()
-        self._image[Register.TRIGGER] = last_cycle  # as the PLC left it: max(reg 2, reg 3) + 1 stays right
         self._update_status()
 
     # ---- PLC side: called by the Modbus server for each request -------------------------------
@@ -165,6 +161,19 @@ class PlcHandshake:
                     if wait <= 0:
                         return None
                 self._changed.wait(wait)
+
+    def restore_last_cycle(self, cycle: int) -> None:
+        """After a restart: the cycle answered last (from the journal); writing it again starts nothing.
+
+        The trigger register shows it, as the PLC left it, so `max(reg 2, reg 3) + 1` stays the next number.
+        """
+        if not 0 <= cycle <= 0xFFFF:
+            raise ValueError(f"last cycle {cycle} is not a cycle number 0..65535")
+        with self._changed:
+            if self._last_accepted != 0 or self._running is not None:
+                raise RuntimeError("restore_last_cycle() is for a fresh link, before the PLC triggered anything")
+            self._last_accepted = cycle
+            self._image[Register.TRIGGER] = cycle
 
     def set_health(self, *, cameras_ok: bool, calibration_ok: bool) -> None:
         """Report camera and calibration state (status bits 4, 5 and hence READY)."""

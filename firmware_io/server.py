@@ -66,7 +66,6 @@ class PlcLink:
         liveness_timeout_s: float | None = 5.0,
         cycle_timeout_s: float | None = None,
         limits: ConnectionLimits = ConnectionLimits(),
-        last_cycle: int = 0,
     ) -> None:
         """Configure the link; nothing is opened until start().
 
@@ -79,8 +78,6 @@ class PlcLink:
             this time is answered with ErrorCode.CYCLE_TIMEOUT by the link itself, and the liveness
             rule applies again from then on. None: no limit.
         limits: TCP connection cap, idle timeout and allowed client addresses.
-        last_cycle: the last cycle answered before a restart (from the journal): writing it again
-            starts nothing, as before the restart.
         """
         if not 0 < heartbeat_period_s < 0.5:
             raise ValueError(f"heartbeat period {heartbeat_period_s} s must be above 0 and below 0.5 s")
@@ -94,7 +91,7 @@ class PlcLink:
         self._liveness_timeout_s = liveness_timeout_s
         self._cycle_timeout_s = cycle_timeout_s
         self._limits = limits
-        self._handshake = PlcHandshake(RegisterMap(word_order), last_cycle=last_cycle)
+        self._handshake = PlcHandshake(RegisterMap(word_order))
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_requested: asyncio.Event | None = None
@@ -157,6 +154,10 @@ class PlcLink:
         """Block until the PLC starts a new cycle; None on timeout or when the link stops."""
         slice_s = self._heartbeat_period_s if self._liveness_timeout_s is None else self._liveness_timeout_s / 2
         return self._handshake.wait_trigger(timeout_s, liveness_slice_s=slice_s)
+
+    def restore_last_cycle(self, cycle: int) -> None:
+        """After a restart, the cycle answered last (from the journal): writing it again starts nothing."""
+        self._handshake.restore_last_cycle(cycle)
 
     def set_status(self, *, cameras_ok: bool, calibration_ok: bool) -> None:
         """Report camera and calibration health (status bits 4 and 5; READY needs both)."""

@@ -1,11 +1,14 @@
 """What a cycle leaves for people: the sole's cloud as PLY and the left image with the glue path drawn.
 
-Written after the PLC has its answer; a failure here is logged and never fails the cycle.
+Written after the PLC has its answer; a failure here is logged and never fails the cycle. The files go to
+a staging folder that the journal renames into place in the same transaction that records them, so no
+folder is left that no row refers to (Journal.prune_orphans cleans up after a crash at the next start).
 """
 
 from __future__ import annotations
 
 import logging
+import shutil
 
 import cv2
 
@@ -36,7 +39,7 @@ def keep_artifacts(
     if keep == 0 or record.id is None:
         return
     try:
-        folder = journal.artifact_dir(record.id)
+        folder = journal.staging_dir(record.id)  # renamed into place by attach_artifacts
         folder.mkdir(parents=True, exist_ok=True)
         ply = folder / f"cycle-{record.cycle}.ply"
         import open3d as o3d
@@ -46,7 +49,8 @@ def keep_artifacts(
         overlay = folder / f"cycle-{record.cycle}-overlay.png"
         if not cv2.imwrite(str(overlay), draw_on_left(frame.left, calib, measurement), PNG_FAST):
             raise OSError(f"cannot write {overlay}")
-        journal.attach_artifacts(record.id, ply, overlay)
+        journal.attach_artifacts(record.id, ply.name, overlay.name)
         journal.prune_artifacts(keep)
     except Exception as exc:
         log.warning("cycle %d: artifacts not kept: %s", record.cycle, exc)
+        shutil.rmtree(journal.staging_dir(record.id), ignore_errors=True)

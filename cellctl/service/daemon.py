@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 import time
 
@@ -92,6 +93,8 @@ class Daemon:
             word_order=plc.word_order,
             heartbeat_period_s=plc.heartbeat_period_s,
             liveness_timeout_s=plc.liveness_timeout_s,
+            cycle_timeout_s=plc.cycle_timeout_s,
+            limits=plc.limits(),
         )
         self._reconstructor = (
             None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
@@ -117,8 +120,13 @@ class Daemon:
 
     def run(self) -> None:
         """Serve until request_stop(); raises if the journal or the Modbus port cannot be opened."""
+        _check_watchdog(self.config)
         self._journal = Journal.open(self.config.journal.state_dir)
         try:
+            # A restart must not make the PLC's cyclic rewrite of its last cycle number a new cycle.
+            self.link.restore_last_cycle(self._journal.last_cycle())
+            if orphans := self._journal.prune_orphans():
+                log.info("removed %d artifact folders no journal row refers to (left by a crash)", orphans)
             # Cameras first: preparing them may take long (the simulator renders its scenes), and the
             # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
             self._probe_cameras(force=True)
@@ -181,7 +189,14 @@ class Daemon:
         record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
         assert self._journal is not None
         self._journal.record(record)  # durable before the PLC hears of it
-        self._publish(trigger.cycle, code, cycle_time_ms, measurement)
+        if not self._publish(trigger.cycle, code, cycle_time_ms, measurement):
+            # The link answered CYCLE_TIMEOUT already (it does not wait for a stuck controller): the
+            # journal says what the PLC was told, and the late result is not used.
+            reason = f"not published within cycle_timeout_s = {self.config.plc.cycle_timeout_s:g} s (took {cycle_time_ms:.0f} ms)"
+            assert record.id is not None
+            self._journal.amend_error(record.id, int(ErrorCode.CYCLE_TIMEOUT), reason)
+            code, result = ErrorCode.CYCLE_TIMEOUT, None
+            record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, None, frame)
         self._report_health()
         self.cycles_done += 1
         if code is ErrorCode.NONE:
@@ -233,12 +248,12 @@ class Daemon:
             raise CycleFailed.of(result.failure, result.reason)
         return result
 
-    def _publish(self, cycle: int, code: ErrorCode, cycle_time_ms: float, measurement: SoleMeasurement | None) -> None:
+    def _publish(self, cycle: int, code: ErrorCode, cycle_time_ms: float, measurement: SoleMeasurement | None) -> bool:
+        """Answer the PLC; False if the link had answered CYCLE_TIMEOUT already."""
         if code is not ErrorCode.NONE or measurement is None:
-            self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
-            return
+            return self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
         assert measurement.glue_path is not None
-        self.link.publish_result(
+        return self.link.publish_result(
             cycle,
             heel_height_mm=float(measurement.heel_height_mm),
             toe_height_mm=float(measurement.toe_height_mm),
@@ -284,6 +299,24 @@ class Daemon:
         cameras = "cameras ok" if self._cameras_ok else "CAMERAS NOT OK"
         calibration = "calibration ok" if self.calib is not None else "NO CALIBRATION"
         return f"waiting for trigger; {self.cycles_done} cycles; {cameras}; {calibration}"
+
+
+def _check_watchdog(config: CellConfig) -> None:
+    """Refuse a cycle timeout the systemd watchdog would cut short (WatchdogSec= in deploy/cellctl.service).
+
+    The watchdog is pinged between cycles only, so a cycle may take cycle_timeout_s and the PLC must see
+    the heartbeat stop (liveness_timeout_s later) before systemd restarts the service.
+    """
+    usec = os.environ.get("WATCHDOG_USEC")
+    if not usec or not usec.isdigit():
+        return
+    watchdog_s = int(usec) / 1e6
+    needed = config.plc.cycle_timeout_s + config.plc.liveness_timeout_s
+    if needed >= watchdog_s:
+        raise ValueError(
+            f"{config.source}: [plc] cycle_timeout_s + liveness_timeout_s = {needed:g} s must be below the "
+            f"systemd watchdog ({watchdog_s:g} s, WatchdogSec= in the unit): lower them or raise WatchdogSec"
+        )
 
 
 def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None]:

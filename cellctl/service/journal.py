@@ -128,19 +128,63 @@ class Journal:
         record.id = int(cursor.lastrowid)
         return record.id
 
+    def last_cycle(self) -> int:
+        """The PLC cycle number journaled last (0 for an empty journal): it was answered before a restart."""
+        row = self._db.execute("SELECT cycle FROM cycles ORDER BY id DESC LIMIT 1").fetchone()
+        return 0 if row is None else int(row["cycle"])
+
+    def amend_error(self, row_id: int, error_code: int, reason: str) -> None:
+        """Turn a journaled cycle into an error after the fact (the link answered it with a timeout)."""
+        with self._db:
+            self._db.execute(
+                "UPDATE cycles SET status = 'error', error_code = ?, reason = ?, length_mm = NULL, "
+                "heel_height_mm = NULL, toe_height_mm = NULL, glue_path = '[]' WHERE id = ?",
+                (error_code, reason, row_id),
+            )
+
     def artifact_dir(self, row_id: int) -> Path:
         return self.state_dir / "cycles" / f"{row_id:08d}"
 
-    def attach_artifacts(self, row_id: int, ply_path: Path | None, overlay_path: Path | None) -> None:
+    def staging_dir(self, row_id: int) -> Path:
+        """Where a cycle's artifacts are written before they count: renamed to artifact_dir() on attach."""
+        return self.state_dir / "cycles" / f".partial-{row_id:08d}"
+
+    def attach_artifacts(self, row_id: int, ply_name: str | None, overlay_name: str | None) -> None:
+        """Publish the files written under staging_dir(row_id): rename the folder and record it, together.
+
+        The rename happens inside the row's transaction, so a crash leaves either a recorded folder or
+        an unrecorded one; prune_orphans() removes the latter (and staging leftovers) at the next start.
+        """
+        staged, final = self.staging_dir(row_id), self.artifact_dir(row_id)
         with self._db:
             self._db.execute(
                 "UPDATE cycles SET ply_path = ?, overlay_path = ? WHERE id = ?",
                 (
-                    None if ply_path is None else str(ply_path),
-                    None if overlay_path is None else str(overlay_path),
+                    None if ply_name is None else str(final / ply_name),
+                    None if overlay_name is None else str(final / overlay_name),
                     row_id,
                 ),
             )
+            staged.replace(final)
+
+    def prune_orphans(self) -> int:
+        """Delete artifact folders no row refers to (a crash between writing and recording); returns how many."""
+        root = self.state_dir / "cycles"
+        if not root.is_dir():
+            return 0
+        referenced = {
+            str(Path(path).parent)
+            for row in self._db.execute("SELECT ply_path, overlay_path FROM cycles").fetchall()
+            for path in (row["ply_path"], row["overlay_path"])
+            if path is not None
+        }
+        orphans = [folder for folder in root.iterdir() if str(folder) not in referenced]
+        for folder in orphans:
+            if folder.is_dir():
+                shutil.rmtree(folder, ignore_errors=True)
+            else:
+                folder.unlink(missing_ok=True)
+        return len(orphans)
 
     def prune_artifacts(self, keep: int) -> int:
         """Delete the artifacts of all but the newest `keep` cycles that have any; returns how many went."""

@@ -214,7 +214,8 @@ def test_heartbeat_keeps_moving_during_a_slow_cycle_and_an_overrun_gets_its_own_
 
 
 def test_last_cycle_from_before_a_restart_starts_nothing_when_written_again() -> None:
-    with PlcLink(TcpEndpoint(LOCALHOST, 0), last_cycle=41) as link:
+    with PlcLink(TcpEndpoint(LOCALHOST, 0)) as link:
+        link.restore_last_cycle(41)
         link.set_status(cameras_ok=True, calibration_ok=True)
         with PlcSimulator(link.endpoint, response_timeout_s=1.0) as plc:
             assert plc.read_header().trigger == 41
