@@ -34,7 +34,8 @@ class ReplayCameras:
     def open(self) -> None:
         self.pairs()
 
-    def grab_pair(self) -> StereoFrame:
+    def grab_pair(self, not_before: float | None = None) -> StereoFrame:
+        """The next stored pair, stamped now (so always after not_before)."""
         pairs = self.pairs()
         left_path, right_path = pairs[self._next % len(pairs)]
         self._next += 1

@@ -135,9 +135,11 @@ class V4l2Cameras:
             self.close()
             raise
 
-    def grab_pair(self) -> StereoFrame:
+    def grab_pair(self, not_before: float | None = None) -> StereoFrame:
         try:
-            left, right = grab_synchronised(self.left.grab, self.right.grab, self.sync_tolerance_s, self.max_regrabs)
+            left, right = grab_synchronised(
+                self.left.grab, self.right.grab, self.sync_tolerance_s, self.max_regrabs, not_before
+            )
             images = left.payload.retrieve(), right.payload.retrieve()
         except (CameraMissing, FrameTimeout):
             self.close()  # reopen both next time: a replugged camera restarts its stream

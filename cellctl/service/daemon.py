@@ -176,7 +176,7 @@ class Daemon:
         frame: StereoFrame | None = None
         result: Measured | None = None
         try:
-            frame = self._grab(timings)
+            frame = self._grab(timings, not_before=trigger.received_at)
             result = self._measure(frame, timings)
             code, reason = ErrorCode.NONE, None
         except CycleFailed as failure:
@@ -223,10 +223,10 @@ class Daemon:
             )
         self.notifier.notify(STATUS=self._status_text())
 
-    def _grab(self, timings: dict[str, float]) -> StereoFrame:
+    def _grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
         start = time.perf_counter()
         try:
-            frame = self.source.grab_pair()
+            frame = self.source.grab_pair(not_before=not_before)  # frames exposed after the trigger only
         except CameraError as exc:
             self._cameras_ok = False
             self._last_probe = time.monotonic()

@@ -352,8 +352,6 @@ def test_a_slow_cycle_keeps_the_heartbeat_and_an_overrun_is_answered_cycle_timeo
                 plc.watch_heartbeat(0.2)
             assert record.error_code == ErrorCode.CYCLE_TIMEOUT and "cycle_timeout_s" in record.reason
             assert plc.read_header().error_code == ErrorCode.CYCLE_TIMEOUT  # the late result was not published
-            service.daemon._reconstructor = stuck.real
-            assert plc.run_cycle(timeout_s=10.0).ok
     finally:
         stuck.release.set()
         service.stop()
