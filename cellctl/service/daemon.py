@@ -31,6 +31,7 @@ import time
 import numpy as np
 
 from cellctl.cameras import CameraError, FrameSource, StereoFrame, open_frame_source
+from cellctl.cameras.identity import identity_problem
 from cellctl.errors import FailureKind
 from cellctl.service.artifacts import keep_artifacts
 from cellctl.service.codes import FAILURE_CODES
@@ -53,6 +54,30 @@ TICK_S = 0.25
 STOP_LINGER_S = 0.5
 #: Cameras that failed are probed this often between cycles so READY comes back without a trigger.
 CAMERA_PROBE_PERIOD_S = 1.0
+#: The same camera failure is logged again (at warning level) at most this often.
+CAMERA_LOG_REPEAT_S = 60.0
+
+
+class RepeatQuietLog:
+    """Logs a warning when it changes, and the same warning again only every `repeat_s` (at debug between).
+
+    A camera unplugged over a weekend is probed every second; one line a minute says it is still missing.
+    """
+
+    def __init__(self, logger: logging.Logger, repeat_s: float) -> None:
+        self._log, self._repeat_s = logger, repeat_s
+        self._last: tuple[str, float] | None = None
+
+    def warning(self, key: str, message: str, *args: object) -> None:
+        now = time.monotonic()
+        if self._last is None or self._last[0] != key or now - self._last[1] >= self._repeat_s:
+            self._last = (key, now)
+            self._log.warning(message, *args)
+        else:
+            self._log.debug(message, *args)
+
+    def reset(self) -> None:
+        self._last = None
 
 
 class CycleFailed(Exception):
@@ -103,6 +128,8 @@ class Daemon:
         self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
         self._cameras_ok = False
+        self._identity_problem: str | None = None
+        self._camera_log = RepeatQuietLog(log, CAMERA_LOG_REPEAT_S)
         self._last_probe = 0.0
         self._journal: Journal | None = None
         self.cycles_done = 0
@@ -239,6 +266,8 @@ class Daemon:
     def _measure(self, frame: StereoFrame, timings: dict[str, float]) -> Measured:
         if self.calib is None or self._reconstructor is None:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
+        if problem := identity_problem(self.calib.cameras, frame.info):
+            raise CycleFailed.of(FailureKind.CALIBRATION_MISMATCH, problem)
         measure = self.config.measure
         result = measure_frame(
             frame, self._reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
@@ -283,17 +312,23 @@ class Daemon:
         self._last_probe = now
         try:
             self.source.open()
-            self.source.grab_pair()
+            frame = self.source.grab_pair()
         except CameraError as exc:
-            log.warning("cameras not ready: %s", exc)
+            self._camera_log.warning(str(exc), "cameras not ready: %s", exc)
             return
         self._cameras_ok = True
+        self._camera_log.reset()
         log.info("cameras ok")
+        # At start and after a reconnect: are these the calibrated cameras (a replug may have swapped them)?
+        self._identity_problem = identity_problem(self.calib.cameras if self.calib else None, frame.info)
+        if self._identity_problem:
+            log.error("calibration does not match the cameras: %s", self._identity_problem)
         if not force:
             self._report_health()
 
     def _report_health(self) -> None:
-        self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=self.calib is not None)
+        calibration_ok = self.calib is not None and self._identity_problem is None
+        self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=calibration_ok)
 
     def _status_text(self) -> str:
         cameras = "cameras ok" if self._cameras_ok else "CAMERAS NOT OK"
