@@ -79,7 +79,8 @@ def _from_storage(storage: cv2.FileStorage, path: Path) -> Calibration:
             )
         derived = {key: _read_matrix(storage, key, path) for key in DERIVED_KEYS}
         stored = Calibration(size, rms=rms, cameras=cameras, **base, **derived)
-        _check_derived(stored, Calibration.from_extrinsics(size, **base))
+        fresh = Calibration.from_extrinsics(size, base["K1"], base["D1"], base["K2"], base["D2"], base["R"], base["T"])
+        _check_derived(stored, fresh)
         return stored
     except ValueError as exc:
         if str(path) in str(exc):
