@@ -39,6 +39,10 @@ log = logging.getLogger(__name__)
 SERIAL_REOPEN_PERIOD_S = 1.0
 
 
+class LinkStartError(RuntimeError):
+    """The TCP port or serial line cannot be opened; the message names it and what to check."""
+
+
 class PlcLink:
     """The controller's side of the PLC handshake, served over Modbus TCP or RTU.
 
@@ -113,7 +117,7 @@ class PlcLink:
             raise RuntimeError(f"Modbus server on {self._endpoint} did not start within {timeout_s} s")
         if self._start_error is not None:
             self._thread.join(timeout_s)
-            raise RuntimeError(_start_failure_text(self._endpoint, self._start_error)) from None
+            raise LinkStartError(_start_failure_text(self._endpoint, self._start_error)) from None
         log.info("Modbus %s serving unit id %d", self._bound, self._unit_id)
 
     def stop(self, timeout_s: float = 5.0) -> None:

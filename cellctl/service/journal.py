@@ -96,19 +96,27 @@ class Journal:
     def open(cls, state_dir: str | Path, *, readonly: bool = False) -> Journal:
         state = Path(state_dir)
         path = state / "journal.sqlite3"
-        if readonly:
-            if not path.is_file():
-                raise FileNotFoundError(f"no journal at {path}: has `cellctl run` run with this state directory?")
-            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
-        else:
+        if path.exists() and not path.is_file():
+            raise ValueError(f"journal {path} is not a file (a directory?): move it away")
+        if readonly and not path.is_file():
+            raise FileNotFoundError(f"no journal at {path}: has `cellctl run` run with this state directory?")
+        if not readonly:
             try:
                 state.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise ValueError(f"cannot create the state directory {state}: {exc.strerror}") from None
-            db = sqlite3.connect(path)
-            db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
-            db.executescript(SCHEMA)
+        try:
+            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True) if readonly else sqlite3.connect(path)
+            if readonly:
+                db.execute("SELECT 1 FROM cycles LIMIT 1")
+            else:
+                db.execute("PRAGMA journal_mode=WAL")
+                db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
+                db.executescript(SCHEMA)
+        except sqlite3.Error as exc:
+            raise ValueError(
+                f"journal {path} cannot be used ({exc}): is it a cellctl journal? move it away to start a new one"
+            ) from None
         db.row_factory = sqlite3.Row
         return cls(db, state)
 

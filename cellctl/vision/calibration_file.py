@@ -126,7 +126,12 @@ def _read_int(storage: cv2.FileStorage, key: str, path: Path) -> int:
 
 
 def _read_matrix(storage: cv2.FileStorage, key: str, path: Path) -> np.ndarray:
-    matrix = storage.getNode(key).mat()
+    try:
+        matrix = storage.getNode(key).mat()
+    except cv2.error:  # rows x cols disagree with the number of data values
+        raise ValueError(
+            f"calibration file {path}: {key} has rows/cols that do not match its data: correct or re-calibrate"
+        ) from None
     if matrix is None or matrix.size == 0:
         raise ValueError(f"calibration file {path}: {key} is not a matrix (expected an !!opencv-matrix)")
     return np.asarray(matrix)
