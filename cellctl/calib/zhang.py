@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from cellctl.images import read_image
 from cellctl.vision.calibration import Calibration
 
 IMAGE_EXTENSIONS: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -222,9 +223,10 @@ def _detect_view(pair: PairFiles, board: Checkerboard) -> BoardView:
     for side, path in (("left", pair.left), ("right", pair.right)):
         if path is None:
             return BoardView(pair.name, None, None, problem=f"{side}_{pair.name} image missing")
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            return BoardView(pair.name, None, None, problem=f"cannot read {path.name}")
+        try:
+            image = read_image(path, cv2.IMREAD_GRAYSCALE)
+        except (OSError, ValueError) as exc:
+            return BoardView(pair.name, None, None, problem=f"cannot read {path.name}: {exc}")
         images[side] = image
     left, right = images["left"], images["right"]
     size = (left.shape[1], left.shape[0])

@@ -5,10 +5,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import cv2
-
 from cellctl.calib.zhang import find_pairs
 from cellctl.cameras.base import CameraMissing, StereoFrame
+from cellctl.images import read_image
 
 
 class ReplayCameras:
@@ -39,9 +38,10 @@ class ReplayCameras:
         pairs = self.pairs()
         left_path, right_path = pairs[self._next % len(pairs)]
         self._next += 1
-        left, right = cv2.imread(str(left_path), cv2.IMREAD_COLOR), cv2.imread(str(right_path), cv2.IMREAD_COLOR)
-        if left is None or right is None:
-            raise CameraMissing(f"replay pair {left_path.name}/{right_path.name} cannot be read as images")
+        try:
+            left, right = read_image(left_path, what="replay image"), read_image(right_path, what="replay image")
+        except (OSError, ValueError) as exc:
+            raise CameraMissing(f"replay pair {left_path.name}/{right_path.name}: {exc}") from None
         now = time.monotonic()
         return StereoFrame(
             left, right, now, now, {"backend": "replay", "left": str(left_path), "right": str(right_path)}

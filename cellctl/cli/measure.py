@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from cellctl.errors import UserError
+from cellctl.images import read_image
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -82,12 +83,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(path: Path, name: str) -> np.ndarray:
-    if not path.is_file():
-        raise UserError(f"{name} image {path} does not exist")
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise UserError(f"{name} image {path} cannot be read as an image (PNG, BMP, JPEG, TIFF...)")
-    return image
+    try:
+        return read_image(path, what=f"{name} image")
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 def _write_ply(path: Path, reconstruction) -> None:  # noqa: ANN001 - Reconstruction, imported lazily

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from cellctl.errors import UserError
+from cellctl.images import read_image
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.rectification import side_by_side, vertical_disparity
 
@@ -55,9 +56,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(path: Path) -> np.ndarray:
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise UserError(f"cannot read image {path}: check the path and that it is a PNG/JPEG/BMP/TIFF file")
+    try:
+        image = read_image(path, cv2.IMREAD_UNCHANGED)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     if image.ndim == 3 and image.shape[2] == 4:
         image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
     return image
