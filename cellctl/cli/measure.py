@@ -51,13 +51,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from cellctl.vision.calibration import Calibration
-    from cellctl.vision.measurement import GLUE_OFFSET_MM, GLUE_SPACING_MM, measure_sole
+    from cellctl.vision.measurement import GLUE_OFFSET_MM, GLUE_SPACING_MM, check_glue_settings, measure_sole
     from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
 
     offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset
     spacing = GLUE_SPACING_MM if args.glue_spacing is None else args.glue_spacing
-    if offset < 0 or spacing <= 0:
-        raise UserError(f"--glue-offset must be >= 0 and --glue-spacing > 0 mm, got {offset:g} and {spacing:g}")
+    try:
+        check_glue_settings(offset, spacing)
+    except ValueError as exc:
+        raise UserError(f"--glue-offset/--glue-spacing: {exc}") from None
     calib = Calibration.load(args.calib)
     left, right = _read(args.left, "LEFT"), _read(args.right, "RIGHT")
     for name, image in (("LEFT", left), ("RIGHT", right)):

@@ -32,6 +32,7 @@ HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture t
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
 GLUE_OFFSET_MM = 2.0
 GLUE_SPACING_MM = 2.0
+MIN_GLUE_SPACING_MM = 0.1  # finer than any dispenser; 1e-6 mm once grew the path to 18 GB
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
 GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
@@ -97,14 +98,22 @@ def _round(value: float | None) -> float | None:
     return None if value is None else round(float(value), 3)
 
 
+def check_glue_settings(glue_offset_mm: float, glue_spacing_mm: float) -> None:
+    """ValueError unless the glue path's offset and spacing are possible (a tiny spacing would exhaust memory)."""
+    if not (0 <= glue_offset_mm <= 50 and MIN_GLUE_SPACING_MM <= glue_spacing_mm <= 50):
+        raise ValueError(
+            f"glue offset must be in 0..50 mm and spacing in {MIN_GLUE_SPACING_MM:g}..50 mm, got "
+            f"{glue_offset_mm:g} and {glue_spacing_mm:g}"
+        )
+
+
 def measure_sole(
     reconstruction: Reconstruction,
     glue_offset_mm: float = GLUE_OFFSET_MM,
     glue_spacing_mm: float = GLUE_SPACING_MM,
 ) -> SoleMeasurement:
     """Length, heel and toe height and glue path of a reconstructed sole."""
-    if glue_offset_mm < 0 or glue_spacing_mm <= 0:
-        raise ValueError(f"glue offset must be >= 0 and spacing > 0 mm, got {glue_offset_mm:g} and {glue_spacing_mm:g}")
+    check_glue_settings(glue_offset_mm, glue_spacing_mm)
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
     base = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)

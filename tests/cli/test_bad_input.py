@@ -55,6 +55,9 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     width, height = calib.image_size
     for name, level in (("black", 0), ("grey", 128)):
         cv2.imwrite(str(d / f"{name}.png"), np.full((height, width, 3), level, np.uint8))
+    bomb = bytearray((d / "grey.png").read_bytes())
+    bomb[16:24] = (20000).to_bytes(4, "big") * 2  # the IHDR says 20000 x 20000: 3.7 GB if decoded
+    (d / "bomb.png").write_bytes(bytes(bomb))
     text = (d / "calib.yaml").read_text()
     (d / "calib-rows.yaml").write_text(text.replace("rows: 3\n   cols: 3", "rows: 4\n   cols: 3", 1))
     calib_k0 = (
@@ -138,6 +141,22 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         ["measure", "--calib", str(d / "calib.yaml"), str(d / "black.png"), str(d / "black.png")],
         "too few measured points",
         exit_code=1,
+    ),
+    "measure: image bomb": lambda d, _: Case(
+        ["measure", "--calib", str(d / "calib.yaml"), str(d / "bomb.png"), str(d / "grey.png")],
+        "larger than any camera image",
+    ),
+    "measure: glue spacing 1e-6": lambda d, _: Case(
+        [
+            "measure",
+            "--calib",
+            str(d / "calib.yaml"),
+            "--glue-spacing",
+            "1e-6",
+            str(d / "grey.png"),
+            str(d / "grey.png"),
+        ],
+        "spacing in 0.1..50 mm",
     ),
     "rectify: matrix rows/cols do not match": lambda d, _: Case(
         ["rectify", str(d / "calib-rows.yaml"), str(d / "grey.png"), str(d / "grey.png"), "-o", str(d / "r.png")],
