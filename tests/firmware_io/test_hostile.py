@@ -323,3 +323,26 @@ def test_rtu_answers_only_its_unit_id_and_only_documented_function_codes(tmp_pat
             assert ask(3, struct.pack(">BHH", 3, Register.MAP_VERSION, 1)) == rtu.frame(3, b"\x03\x02\x00\x01")
     finally:
         cable.close()
+
+
+# ---- log hygiene ----------------------------------------------------------------------------------------
+
+
+def test_wrong_unit_ids_and_foreign_function_codes_leave_no_log_lines(
+    link: PlcLink, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level("DEBUG")
+    with connect(link) as conn:
+        for _ in range(50):
+            conn.sendall(mbap(struct.pack(">BHH", 3, 0, 1), unit=7) + mbap(bytes([8, 0, 0, 0, 0])))
+            assert read_reply(conn)[7:] == bytes([0x83, ExcCodes.GATEWAY_NO_RESPONSE])
+            assert read_reply(conn)[7:] == bytes([0x88, ExcCodes.ILLEGAL_FUNCTION])
+    assert [r for r in caplog.records if r.levelno >= 30] == []  # the PLC's mistakes are answers, not log lines
+
+
+def test_a_flood_of_malformed_frames_logs_one_line(link: PlcLink, caplog: pytest.LogCaptureFixture) -> None:
+    for _ in range(30):
+        with connect(link) as conn:
+            conn.sendall(b"\xff" * 7)
+            assert closed_by_server(conn)
+    assert len([r for r in caplog.records if r.levelno >= 30]) == 1
