@@ -11,13 +11,27 @@ deliver bytes in chunks whose timing says little, so a frame is recognised in tw
 
 Requests for another unit id, broadcasts (unit 0) and frames with a bad CRC get no answer at all: the
 bus may carry other slaves, and the spec forbids answering a broadcast. The CRC is pymodbus'.
+
+SerialLine reads the port from the event loop (pyserial, non-blocking) and answers each frame as soon as
+it is whole; serve_serial_line reopens a port that went away.
 """
 
 from __future__ import annotations
 
+import asyncio
+import logging
+from collections.abc import Callable
+
+import serial
 from pymodbus.framer.rtu import FramerRTU
 
+from firmware_io.endpoints import SerialEndpoint
 from firmware_io.pdu import READ_HOLDING, READ_WRITE, WRITE_MULTIPLE, WRITE_SINGLE
+
+log = logging.getLogger(__name__)
+
+#: How often a lost serial port is retried.
+SERIAL_REOPEN_PERIOD_S = 1.0
 
 #: Shortest frame: unit id, function code, CRC.
 MIN_FRAME = 4
@@ -90,3 +104,98 @@ class RtuDeframer:
     @property
     def pending(self) -> bool:
         return bool(self._buffer)
+
+
+class SerialLine:
+    """One open serial port, read by the event loop; replies are written as soon as a frame is whole."""
+
+    def __init__(self, endpoint: SerialEndpoint, answer: Callable[[int, bytes], bytes | None]) -> None:
+        self._answer = answer
+        self._port = serial.Serial(
+            endpoint.port,
+            baudrate=endpoint.baudrate,
+            bytesize=endpoint.bytesize,
+            parity=endpoint.parity,
+            stopbits=endpoint.stopbits,
+            timeout=0,
+            write_timeout=1.0,
+            exclusive=True,
+        )
+        self._silence_s = silence_s(endpoint.baudrate, endpoint.bytesize, endpoint.parity, endpoint.stopbits)
+        self._deframer = RtuDeframer()
+        self._loop = asyncio.get_running_loop()
+        self._lost = asyncio.Event()
+        self._silence: asyncio.TimerHandle | None = None
+        self._loop.add_reader(self._port.fileno(), self._on_readable)
+
+    async def lost_or(self, stop: asyncio.Event) -> None:
+        """Wait until the line fails or stop is set."""
+        waits = {asyncio.create_task(self._lost.wait()), asyncio.create_task(stop.wait())}
+        _, pending = await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+        for task in pending:
+            task.cancel()
+
+    def close(self) -> None:
+        if self._silence is not None:
+            self._silence.cancel()
+        try:
+            self._loop.remove_reader(self._port.fileno())
+        except (OSError, ValueError):
+            pass
+        self._port.close()
+
+    def _on_readable(self) -> None:
+        try:
+            data = self._port.read(max(1, self._port.in_waiting))
+            for unit, pdu in self._deframer.feed(data):
+                self._reply(unit, pdu)
+        except (serial.SerialException, OSError) as exc:
+            log.debug("serial line failed: %s", exc)
+            self._loop.remove_reader(self._port.fileno())
+            self._lost.set()
+            return
+        if self._silence is not None:
+            self._silence.cancel()
+        if self._deframer.pending:
+            self._silence = self._loop.call_later(self._silence_s, self._on_silence)
+
+    def _on_silence(self) -> None:
+        received = self._deframer.silence()
+        if received is not None:
+            try:
+                self._reply(*received)
+            except (serial.SerialException, OSError):
+                self._lost.set()
+
+    def _reply(self, unit: int, pdu: bytes) -> None:
+        reply = self._answer(unit, pdu)
+        if reply is not None:
+            self._port.write(frame(unit, reply))
+
+
+async def serve_serial_line(
+    line: SerialLine, endpoint: SerialEndpoint, answer: Callable[[int, bytes], bytes | None], stop: asyncio.Event
+) -> None:
+    """Serve `line` until stop is set; a lost line (USB adapter unplugged) is reopened every second.
+
+    Reopening the same device name brings the link back when the adapter is replugged (same
+    /dev/serial/by-id name), without a service restart.
+    """
+    while True:
+        await line.lost_or(stop)
+        line.close()
+        if stop.is_set():
+            return
+        log.warning("Modbus RTU line %s lost; reopening every %.0f s", endpoint, SERIAL_REOPEN_PERIOD_S)
+        while True:
+            try:
+                await asyncio.wait_for(stop.wait(), SERIAL_REOPEN_PERIOD_S)
+                return
+            except TimeoutError:
+                pass
+            try:
+                line = SerialLine(endpoint, answer)
+                break
+            except (serial.SerialException, OSError):
+                continue
+        log.info("Modbus RTU line %s open again", endpoint)

@@ -21,7 +21,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from collections.abc import Callable
 
 import serial
 from numpy.typing import ArrayLike
@@ -30,13 +29,10 @@ from firmware_io.endpoints import Endpoint, SerialEndpoint, TcpEndpoint, check_u
 from firmware_io.handshake import PlcHandshake, Trigger
 from firmware_io.pdu import ExceptionCode, exception_reply, execute
 from firmware_io.registers import ErrorCode, RegisterMap, StatusBit, WordOrder
-from firmware_io.rtu import RtuDeframer, frame, silence_s
+from firmware_io.rtu import SerialLine, serve_serial_line
 from firmware_io.tcp import ConnectionLimits, TcpFrontEnd
 
 log = logging.getLogger(__name__)
-
-#: How often a lost serial port is retried.
-SERIAL_REOPEN_PERIOD_S = 1.0
 
 
 class LinkStartError(RuntimeError):
@@ -45,6 +41,9 @@ class LinkStartError(RuntimeError):
 
 class PlcLink:
     """The controller's side of the PLC handshake, served over Modbus TCP or RTU.
+
+    The field side's one facade (lifetime, the controller API, the server thread); the work is in
+    handshake, pdu, tcp and rtu, and most of its length is the public methods' documentation.
 
     Typical controller loop::
 
@@ -249,31 +248,12 @@ class PlcLink:
     async def _serve_rtu(self, endpoint: SerialEndpoint) -> None:
         assert self._stop_requested is not None
         try:
-            line = _SerialLine(endpoint, self._answer)
+            line = SerialLine(endpoint, self._answer)
         except (serial.SerialException, OSError, ValueError) as exc:
             self._start_error = exc
             return
         self._started.set()
-        while True:
-            await line.lost_or(self._stop_requested)
-            line.close()
-            if self._stop_requested.is_set():
-                return
-            # The adapter went away (USB unplugged): retry the same device name until it is back, so
-            # replugging it (same /dev/serial/by-id name) brings the link back without a restart.
-            log.warning("Modbus RTU line %s lost; reopening every %.0f s", endpoint, SERIAL_REOPEN_PERIOD_S)
-            while True:
-                try:
-                    await asyncio.wait_for(self._stop_requested.wait(), SERIAL_REOPEN_PERIOD_S)
-                    return
-                except TimeoutError:
-                    pass
-                try:
-                    line = _SerialLine(endpoint, self._answer)
-                    break
-                except (serial.SerialException, OSError):
-                    continue
-            log.info("Modbus RTU line %s open again", endpoint)
+        await serve_serial_line(line, endpoint, self._answer, self._stop_requested)
 
     async def _heartbeat(self) -> None:
         while True:
@@ -286,73 +266,6 @@ class PlcLink:
                     self._cycle_timeout_s,
                 )
             await asyncio.sleep(self._heartbeat_period_s)
-
-
-class _SerialLine:
-    """One open serial port, read by the event loop; replies are written as soon as a frame is whole."""
-
-    def __init__(self, endpoint: SerialEndpoint, answer: Callable[[int, bytes], bytes | None]) -> None:
-        self._answer = answer
-        self._port = serial.Serial(
-            endpoint.port,
-            baudrate=endpoint.baudrate,
-            bytesize=endpoint.bytesize,
-            parity=endpoint.parity,
-            stopbits=endpoint.stopbits,
-            timeout=0,
-            write_timeout=1.0,
-            exclusive=True,
-        )
-        self._silence_s = silence_s(endpoint.baudrate, endpoint.bytesize, endpoint.parity, endpoint.stopbits)
-        self._deframer = RtuDeframer()
-        self._loop = asyncio.get_running_loop()
-        self._lost = asyncio.Event()
-        self._silence: asyncio.TimerHandle | None = None
-        self._loop.add_reader(self._port.fileno(), self._on_readable)
-
-    async def lost_or(self, stop: asyncio.Event) -> None:
-        """Wait until the line fails or stop is set."""
-        waits = {asyncio.create_task(self._lost.wait()), asyncio.create_task(stop.wait())}
-        _, pending = await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
-        for task in pending:
-            task.cancel()
-
-    def close(self) -> None:
-        if self._silence is not None:
-            self._silence.cancel()
-        try:
-            self._loop.remove_reader(self._port.fileno())
-        except (OSError, ValueError):
-            pass
-        self._port.close()
-
-    def _on_readable(self) -> None:
-        try:
-            data = self._port.read(max(1, self._port.in_waiting))
-            for unit, pdu in self._deframer.feed(data):
-                self._reply(unit, pdu)
-        except (serial.SerialException, OSError) as exc:
-            log.debug("serial line failed: %s", exc)
-            self._loop.remove_reader(self._port.fileno())
-            self._lost.set()
-            return
-        if self._silence is not None:
-            self._silence.cancel()
-        if self._deframer.pending:
-            self._silence = self._loop.call_later(self._silence_s, self._on_silence)
-
-    def _on_silence(self) -> None:
-        received = self._deframer.silence()
-        if received is not None:
-            try:
-                self._reply(*received)
-            except (serial.SerialException, OSError):
-                self._lost.set()
-
-    def _reply(self, unit: int, pdu: bytes) -> None:
-        reply = self._answer(unit, pdu)
-        if reply is not None:
-            self._port.write(frame(unit, reply))
 
 
 def _start_failure_text(endpoint: Endpoint, error: BaseException) -> str:
