@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import threading
 import time
 
@@ -38,7 +37,8 @@ from cellctl.service.codes import FAILURE_CODES
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
 from cellctl.service.journal import CycleRecord, Journal
-from cellctl.service.sdnotify import SystemdNotifier
+from cellctl.service.quiet_log import RepeatQuietLog
+from cellctl.service.sdnotify import SystemdNotifier, check_watchdog
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.reconstruction import SoleReconstructor
@@ -56,28 +56,6 @@ STOP_LINGER_S = 0.5
 CAMERA_PROBE_PERIOD_S = 1.0
 #: The same camera failure is logged again (at warning level) at most this often.
 CAMERA_LOG_REPEAT_S = 60.0
-
-
-class RepeatQuietLog:
-    """Logs a warning when it changes, and the same warning again only every `repeat_s` (at debug between).
-
-    A camera unplugged over a weekend is probed every second; one line a minute says it is still missing.
-    """
-
-    def __init__(self, logger: logging.Logger, repeat_s: float) -> None:
-        self._log, self._repeat_s = logger, repeat_s
-        self._last: tuple[str, float] | None = None
-
-    def warning(self, key: str, message: str, *args: object) -> None:
-        now = time.monotonic()
-        if self._last is None or self._last[0] != key or now - self._last[1] >= self._repeat_s:
-            self._last = (key, now)
-            self._log.warning(message, *args)
-        else:
-            self._log.debug(message, *args)
-
-    def reset(self) -> None:
-        self._last = None
 
 
 class CycleFailed(Exception):
@@ -147,7 +125,13 @@ class Daemon:
 
     def run(self) -> None:
         """Serve until request_stop(); raises if the journal or the Modbus port cannot be opened."""
-        _check_watchdog(self.config)
+        # A stuck cycle is answered CYCLE_TIMEOUT, the heartbeat stops liveness_timeout_s later: both must
+        # come before systemd's watchdog (pinged between cycles only) restarts the service.
+        plc = self.config.plc
+        check_watchdog(
+            plc.cycle_timeout_s + plc.liveness_timeout_s,
+            f"{self.config.source}: [plc] cycle_timeout_s + liveness_timeout_s",
+        )
         self._journal = Journal.open(self.config.journal.state_dir)
         try:
             # A restart must not make the PLC's cyclic rewrite of its last cycle number a new cycle.
@@ -334,24 +318,6 @@ class Daemon:
         cameras = "cameras ok" if self._cameras_ok else "CAMERAS NOT OK"
         calibration = "calibration ok" if self.calib is not None else "NO CALIBRATION"
         return f"waiting for trigger; {self.cycles_done} cycles; {cameras}; {calibration}"
-
-
-def _check_watchdog(config: CellConfig) -> None:
-    """Refuse a cycle timeout the systemd watchdog would cut short (WatchdogSec= in deploy/cellctl.service).
-
-    The watchdog is pinged between cycles only, so a cycle may take cycle_timeout_s and the PLC must see
-    the heartbeat stop (liveness_timeout_s later) before systemd restarts the service.
-    """
-    usec = os.environ.get("WATCHDOG_USEC")
-    if not usec or not usec.isdigit():
-        return
-    watchdog_s = int(usec) / 1e6
-    needed = config.plc.cycle_timeout_s + config.plc.liveness_timeout_s
-    if needed >= watchdog_s:
-        raise ValueError(
-            f"{config.source}: [plc] cycle_timeout_s + liveness_timeout_s = {needed:g} s must be below the "
-            f"systemd watchdog ({watchdog_s:g} s, WatchdogSec= in the unit): lower them or raise WatchdogSec"
-        )
 
 
 def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None]:

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from cellctl.service.config import PlcConfig
-from cellctl.service.daemon import RepeatQuietLog
+from cellctl.service.quiet_log import RepeatQuietLog
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
@@ -52,3 +52,21 @@ def test_a_missing_camera_is_logged_once_a_minute_not_every_second(caplog: pytes
     quiet.warning("right gone", "cameras not ready: %s", "right camera unplugged")  # a new problem is told
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert warnings == ["cameras not ready: left camera unplugged", "cameras not ready: right camera unplugged"]
+
+
+def test_run_refuses_a_cycle_timeout_the_systemd_watchdog_would_cut_short(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from cellctl.cli import main
+
+    calib = tmp_path / "calib.yaml"
+    calib.write_text((DEPLOY / "sim-calib.yaml").read_text())
+    path = tmp_path / "cell.toml"
+    path.write_text(
+        f'[cameras]\nbackend = "replay"\nreplay_dir = "."\n[calibration]\npath = "{calib}"\n'
+        '[plc]\ncycle_timeout_s = 12\n[journal]\nstate_dir = "s"\n'
+    )
+    monkeypatch.setenv("WATCHDOG_USEC", "15000000")  # what systemd passes for WatchdogSec=15
+    assert main(["run", "--config", str(path)]) == 2
+    assert "liveness_timeout_s = 17 s must be below the systemd watchdog (15 s" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()  # refused before anything started
