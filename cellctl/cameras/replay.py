@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from cellctl.calib.zhang import find_pairs
+from cellctl.calib.pairs import find_pairs
 from cellctl.cameras.base import CameraMissing, StereoFrame
 from cellctl.images import read_image
 

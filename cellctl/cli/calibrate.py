@@ -8,7 +8,9 @@ from pathlib import Path
 
 import cv2
 
-from cellctl.calib.zhang import MIN_PAIRS, Checkerboard, calibrate_views, detect_views, find_pairs
+from cellctl.calib.board import Checkerboard
+from cellctl.calib.pairs import find_pairs
+from cellctl.calib.zhang import MIN_PAIRS, calibrate_views, detect_views
 from cellctl.errors import UserError
 
 

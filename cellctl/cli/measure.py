@@ -51,7 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from cellctl.vision.calibration import Calibration
-    from cellctl.vision.measurement import GLUE_OFFSET_MM, GLUE_SPACING_MM, check_glue_settings, measure_sole
+    from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
+    from cellctl.vision.measurement import check_glue_settings, measure_sole
     from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
 
     offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset

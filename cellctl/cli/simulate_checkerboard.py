@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cellctl.calib.zhang import Checkerboard
+from cellctl.calib.board import Checkerboard
 from cellctl.errors import UserError
 from cellctl.sim.checkerboard import BAD_KINDS, CheckerboardSimulator, write_pairs
 from cellctl.sim.rig import default_rig

@@ -17,7 +17,8 @@ import numpy as np
 
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
-from cellctl.vision.measurement import GLUE_OFFSET_MM, measure_sole
+from cellctl.vision.defaults import GLUE_OFFSET_MM
+from cellctl.vision.measurement import measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
 
 

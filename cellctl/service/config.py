@@ -18,6 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from cellctl.cameras.config import CameraConfig, SimulatedCameraConfig
+from cellctl.vision.defaults import (
+    DEPTH_RANGE_MM,
+    GLUE_OFFSET_MM,
+    GLUE_OFFSET_RANGE_MM,
+    GLUE_SPACING_MM,
+    GLUE_SPACING_RANGE_MM,
+)
 from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
 from firmware_io.registers import WordOrder
 from firmware_io.tcp import ConnectionLimits
@@ -126,9 +133,9 @@ class CalibrationConfig:
 
 @dataclass(frozen=True)
 class MeasureConfig:
-    depth_range_mm: tuple[float, float] = (450.0, 650.0)
-    glue_offset_mm: float = 2.0
-    glue_spacing_mm: float = 2.0
+    depth_range_mm: tuple[float, float] = DEPTH_RANGE_MM
+    glue_offset_mm: float = GLUE_OFFSET_MM
+    glue_spacing_mm: float = GLUE_SPACING_MM
 
 
 @dataclass(frozen=True)
@@ -280,16 +287,19 @@ def _calibration(t: _Table) -> CalibrationConfig:
 
 
 def _measure(t: _Table) -> MeasureConfig:
-    depth = t.get("depth_range_mm", list, [450.0, 650.0])
+    depth = t.get("depth_range_mm", list, list(DEPTH_RANGE_MM))
     if len(depth) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in depth):
         raise t.fail("depth_range_mm", f"expected [near, far] in mm, got {depth!r}")
     if not 0 < depth[0] < depth[1]:
         raise t.fail("depth_range_mm", f"{depth!r} is impossible: need 0 < near < far")
     config = MeasureConfig(
         depth_range_mm=(float(depth[0]), float(depth[1])),
-        glue_offset_mm=t.number("glue_offset_mm", 2.0, low=0, high=50),
-        # At least 0.1 mm: a dispenser cannot place glue finer, and 1e-6 mm grew the path to 18 GB.
-        glue_spacing_mm=t.number("glue_spacing_mm", 2.0, low=0.1, high=50),
+        glue_offset_mm=t.number(
+            "glue_offset_mm", GLUE_OFFSET_MM, low=GLUE_OFFSET_RANGE_MM[0], high=GLUE_OFFSET_RANGE_MM[1]
+        ),
+        glue_spacing_mm=t.number(
+            "glue_spacing_mm", GLUE_SPACING_MM, low=GLUE_SPACING_RANGE_MM[0], high=GLUE_SPACING_RANGE_MM[1]
+        ),
     )
     t.finish()
     return config

@@ -29,7 +29,7 @@ class SystemdNotifier:
 
     def notify(self, **fields: str | int) -> None:
         """Send e.g. notify(READY=1, STATUS="waiting for trigger"); failures are logged, never raised."""
-        if self._socket is None:
+        if self._socket is None or self._address is None:
             return
         message = "\n".join(f"{key}={value}" for key, value in fields.items()).encode()
         try:

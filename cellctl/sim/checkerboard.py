@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cellctl.calib.zhang import Checkerboard
+from cellctl.calib.board import Checkerboard
 from cellctl.vision.calibration import Calibration
 
 BAD_KINDS: tuple[str, ...] = ("outside", "blur")

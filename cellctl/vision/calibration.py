@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import threading
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -149,30 +150,45 @@ class Calibration:
             cv2.remap(right, right_map[0], right_map[1], cv2.INTER_LINEAR),
         )
 
+    def camera(self, side: str) -> CameraModel:
+        """One camera of the pair ("left" or "right"): the one place that picks K, D, R, P by side."""
+        if side == "left":
+            return CameraModel(self.K1, self.D1, self.R1, self.P1)
+        if side == "right":
+            return CameraModel(self.K2, self.D2, self.R2, self.P2)
+        raise ValueError(f"camera side must be 'left' or 'right', got {side!r}")
+
     def rectify_points_left(self, points: np.ndarray) -> np.ndarray:
         """Map left-image pixel positions (N x 2) to rectified left-image pixel positions."""
-        return _rectify_points(points, self.K1, self.D1, self.R1, self.P1)
+        return self.camera("left").rectify_points(points)
 
     def rectify_points_right(self, points: np.ndarray) -> np.ndarray:
         """Map right-image pixel positions (N x 2) to rectified right-image pixel positions."""
-        return _rectify_points(points, self.K2, self.D2, self.R2, self.P2)
+        return self.camera("right").rectify_points(points)
 
     def _rectify_map(self, side: str) -> tuple[np.ndarray, np.ndarray]:
         # The maps cost ~100 ms to build and never change: build once per side, on first use.
         with self._maps_lock:
             if side not in self._maps:
-                K, D, R, P = (
-                    (self.K1, self.D1, self.R1, self.P1) if side == "left" else (self.K2, self.D2, self.R2, self.P2)
-                )
+                K, D, R, P = self.camera(side)
                 self._maps[side] = cv2.initUndistortRectifyMap(K, D, R, P, self.image_size, cv2.CV_16SC2)
             return self._maps[side]
 
 
-def _rectify_points(points: np.ndarray, K: np.ndarray, D: np.ndarray, R: np.ndarray, P: np.ndarray) -> np.ndarray:
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)
-    # More iterations than the default 5: the default leaves ~0.1 px error near the corners of the image.
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9)
-    return cv2.undistortPoints(pts, K, D, R=R, P=P, criteria=criteria).reshape(-1, 2)
+class CameraModel(NamedTuple):
+    """One calibrated camera: intrinsics K, distortion D, and its rectification R (rotation) and P (projection)."""
+
+    K: np.ndarray
+    D: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+
+    def rectify_points(self, points: np.ndarray) -> np.ndarray:
+        """Map raw pixel positions (N x 2) of this camera to rectified pixel positions."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)
+        # More iterations than the default 5: the default leaves ~0.1 px error near the corners of the image.
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9)
+        return cv2.undistortPoints(pts, self.K, self.D, R=self.R, P=self.P, criteria=criteria).reshape(-1, 2)
 
 
 def _matrix(value: np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:
@@ -217,7 +233,7 @@ def _distortion(value: np.ndarray, name: str) -> np.ndarray:
 def _rotation(value: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(value, dtype=np.float64)
     if arr.size == 3:  # a Rodrigues vector, as some tools store it
-        arr = cv2.Rodrigues(arr.reshape(3, 1))[0]
+        arr = np.asarray(cv2.Rodrigues(arr.reshape(3, 1))[0], dtype=np.float64)
     arr = _matrix(arr, (3, 3), name)
     if not np.allclose(arr @ arr.T, np.eye(3), atol=1e-6) or np.linalg.det(arr) <= 0:
         raise ValueError(f"{name} is not a rotation matrix")

@@ -20,19 +20,21 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision.defaults import (
+    GLUE_OFFSET_MM,
+    GLUE_OFFSET_RANGE_MM,
+    GLUE_SPACING_MM,
+    GLUE_SPACING_RANGE_MM,
+    PLAUSIBLE_HEIGHT_MM,
+    PLAUSIBLE_LENGTH_MM,
+)
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
-# Results outside these ranges are no sole on this cell: refused, never published.
-PLAUSIBLE_LENGTH_MM = (100.0, 400.0)
-PLAUSIBLE_HEIGHT_MM = (0.5, 150.0)
 HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
-GLUE_OFFSET_MM = 2.0
-GLUE_SPACING_MM = 2.0
-MIN_GLUE_SPACING_MM = 0.1  # finer than any dispenser; 1e-6 mm once grew the path to 18 GB
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
 GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
@@ -100,10 +102,11 @@ def _round(value: float | None) -> float | None:
 
 def check_glue_settings(glue_offset_mm: float, glue_spacing_mm: float) -> None:
     """ValueError unless the glue path's offset and spacing are possible (a tiny spacing would exhaust memory)."""
-    if not (0 <= glue_offset_mm <= 50 and MIN_GLUE_SPACING_MM <= glue_spacing_mm <= 50):
+    (offset_low, offset_high), (spacing_low, spacing_high) = GLUE_OFFSET_RANGE_MM, GLUE_SPACING_RANGE_MM
+    if not (offset_low <= glue_offset_mm <= offset_high and spacing_low <= glue_spacing_mm <= spacing_high):
         raise ValueError(
-            f"glue offset must be in 0..50 mm and spacing in {MIN_GLUE_SPACING_MM:g}..50 mm, got "
-            f"{glue_offset_mm:g} and {glue_spacing_mm:g}"
+            f"glue offset must be in {offset_low:g}..{offset_high:g} mm and spacing in {spacing_low:g}..{spacing_high:g}"
+            f" mm, got {glue_offset_mm:g} and {glue_spacing_mm:g}"
         )
 
 

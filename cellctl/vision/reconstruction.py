@@ -17,12 +17,13 @@ import numpy as np
 from cellctl.errors import FailureKind, MeasurementInputError
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud, cloud_from_disparity, disparity_range
+from cellctl.vision.defaults import DEPTH_RANGE_MM
 from cellctl.vision.segmentation import MIN_HEIGHT_MM, Reconstruction, Segmentation
 from cellctl.vision.table import TablePlane
 
 __all__ = ["DEFAULT_DEPTH_RANGE_MM", "Reconstruction", "SoleReconstructor", "StereoCloud", "disparity_range"]
 
-DEFAULT_DEPTH_RANGE_MM: tuple[float, float] = (450.0, 650.0)  # covers a table 550 mm below the rig and soles on it
+DEFAULT_DEPTH_RANGE_MM = DEPTH_RANGE_MM
 # Only really measured pixels (no fill); the widest census window, because the sole's texture is weak:
 # on simulated soles it halves the matcher's height noise for the same time.
 SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7)}

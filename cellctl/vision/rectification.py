@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cellctl.images import bgr, grey
+
 MIN_MATCHES = 20  # fewer inliers than this say more about the scene than about the rectification
 MAX_MISMATCH_FRACTION = 0.25  # beyond this the scene is too repetitive for the figures to be trusted
 
@@ -66,17 +68,17 @@ def vertical_disparity(left: np.ndarray, right: np.ndarray) -> VerticalDisparity
     scenes such as a checkerboard: a plane leaves the fundamental matrix undetermined, and RANSAC then
     accepts matches one square off.
     """
-    sift = cv2.SIFT_create(nfeatures=4000)
-    kp_left, desc_left = sift.detectAndCompute(_grey(left), None)
-    kp_right, desc_right = sift.detectAndCompute(_grey(right), None)
+    sift = cv2.SIFT_create(nfeatures=4000)  # type: ignore[attr-defined]  # in OpenCV's main module since 4.4, not in its stubs
+    kp_left, desc_left = sift.detectAndCompute(grey(left), None)
+    kp_right, desc_right = sift.detectAndCompute(grey(right), None)
     if desc_left is None or desc_right is None or len(kp_left) < MIN_MATCHES or len(kp_right) < MIN_MATCHES:
         raise ValueError(_too_few(min(len(kp_left), len(kp_right)), "features"))
     pairs = cv2.BFMatcher(cv2.NORM_L2).knnMatch(desc_left, desc_right, k=2)
     good = [m[0] for m in pairs if len(m) == 2 and m[0].distance < 0.75 * m[1].distance]
     if len(good) < MIN_MATCHES:
         raise ValueError(_too_few(len(good), "matches"))
-    pts_left = np.float64([kp_left[m.queryIdx].pt for m in good])
-    pts_right = np.float64([kp_right[m.trainIdx].pt for m in good])
+    pts_left = np.array([kp_left[m.queryIdx].pt for m in good], dtype=np.float64)
+    pts_right = np.array([kp_right[m.trainIdx].pt for m in good], dtype=np.float64)
     _, inliers = cv2.findFundamentalMat(pts_left, pts_right, cv2.FM_RANSAC, 1.0, 0.999)
     if inliers is None or int(inliers.sum()) < MIN_MATCHES:
         raise ValueError(_too_few(0 if inliers is None else int(inliers.sum()), "consistent matches"))
@@ -94,7 +96,7 @@ def vertical_disparity(left: np.ndarray, right: np.ndarray) -> VerticalDisparity
 
 def side_by_side(left: np.ndarray, right: np.ndarray, lines: int = 16) -> np.ndarray:
     """Left and right next to each other with `lines` equally spaced horizontal lines (BGR)."""
-    pair = np.hstack([_bgr(left), _bgr(right)])
+    pair = np.hstack([bgr(left), bgr(right)])
     spacing = pair.shape[0] / (lines + 1)
     for i in range(1, lines + 1):
         y = int(round(i * spacing))
@@ -107,11 +109,3 @@ def _too_few(count: int, what: str) -> str:
         f"only {count} {what} between the two images (at least {MIN_MATCHES} needed): "
         "check the images show the same textured scene, well lit and in focus"
     )
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
-
-
-def _bgr(image: np.ndarray) -> np.ndarray:
-    return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image

@@ -16,7 +16,9 @@ import cv2
 import numpy as np
 import pytest
 
-from cellctl.calib.zhang import Checkerboard, calibrate_views, detect_views, find_corners, find_pairs
+from cellctl.calib.board import Checkerboard, find_corners
+from cellctl.calib.pairs import find_pairs
+from cellctl.calib.zhang import calibrate_views, detect_views
 from cellctl.cli import main
 from cellctl.sim.checkerboard import BoardPose, BoardTexture, CheckerboardSimulator
 from cellctl.sim.rig import default_rig
