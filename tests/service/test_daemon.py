@@ -109,7 +109,7 @@ def test_ten_cycles_match_the_journal_and_the_simulated_truth(tmp_path: Path) ->
     service = Service(write_config(tmp_path, [1, 2], tmp_path / "state", DEPLOY / "sim-calib.yaml"))
     try:
         with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as plc:
-            readings = [plc.run_cycle(timeout_s=15.0) for _ in range(10)]
+            readings = [plc.run_cycle(timeout_s=60.0) for _ in range(10)]  # 3 s per cycle idle, 10+ s at load 20
             plc.watch_heartbeat(0.6)  # still beating after the cycles (the watchdog raises if not)
     finally:
         service.stop()
