@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 
 from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint
@@ -51,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--interval {args.interval} must not be negative")
     if args.timeout <= 0:
         raise ValueError(f"--timeout {args.timeout} must be positive")
+    # pymodbus logs a failed connect itself; the one line below says it, with the remedy.
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     simulator = PlcSimulator(
         endpoint,
         unit_id=args.unit,
