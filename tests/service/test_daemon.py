@@ -283,6 +283,8 @@ class FailingReconstructor:
 
     def __init__(self, kind: FailureKind, real: SoleReconstructor) -> None:
         self.kind, self.real = kind, real
+        # What measure_frame's swapped-camera check reads (a real pair here: it must not call it swapped).
+        self.calib, self.min_disparity = real.calib, real.min_disparity
         self.reason = f"simulated failure: {kind.value}"
 
     def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
