@@ -5,9 +5,10 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-# Compiler and headers for the C core; libgomp for its threads; libusb for Open3D; mbpoll (libmodbus) and
-# socat for the Modbus conformance test (a master nobody here wrote, over TCP and an RTU pty pair).
-APT_PACKAGES := python3-venv python3-dev gcc libc6-dev libgomp1 libusb-1.0-0 mbpoll socat
+# Compiler and headers for the C core; libgomp for its threads; libusb for Open3D; chromium and its
+# driver for the operator station's browser tests; mbpoll (libmodbus) and socat for the Modbus
+# conformance test (a master nobody here wrote, over TCP and an RTU pty pair).
+APT_PACKAGES := python3-venv python3-dev gcc libc6-dev libgomp1 libusb-1.0-0 chromium chromium-driver mbpoll socat
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 SANITIZE := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 

@@ -174,7 +174,11 @@ class SerialLine:
 
 
 async def serve_serial_line(
-    line: SerialLine, endpoint: SerialEndpoint, answer: Callable[[int, bytes], bytes | None], stop: asyncio.Event
+    line: SerialLine,
+    endpoint: SerialEndpoint,
+    answer: Callable[[int, bytes], bytes | None],
+    stop: asyncio.Event,
+    on_state: Callable[[bool], None],
 ) -> None:
     """Serve `line` until stop is set; a lost line (USB adapter unplugged) is reopened every second.
 
@@ -184,6 +188,7 @@ async def serve_serial_line(
     while True:
         await line.lost_or(stop)
         line.close()
+        on_state(False)
         if stop.is_set():
             return
         log.warning("Modbus RTU line %s lost; reopening every %.0f s", endpoint, SERIAL_REOPEN_PERIOD_S)
@@ -198,4 +203,5 @@ async def serve_serial_line(
                 break
             except (serial.SerialException, OSError):
                 continue
+        on_state(True)
         log.info("Modbus RTU line %s open again", endpoint)

@@ -25,7 +25,7 @@ import threading
 import serial
 from numpy.typing import ArrayLike
 
-from firmware_io.endpoints import Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
+from firmware_io.endpoints import Endpoint, LinkStartError, SerialEndpoint, TcpEndpoint, check_unit_id
 from firmware_io.handshake import PlcHandshake, Trigger
 from firmware_io.pdu import ExceptionCode, exception_reply, execute
 from firmware_io.registers import ErrorCode, RegisterMap, StatusBit, WordOrder
@@ -33,10 +33,6 @@ from firmware_io.rtu import SerialLine, serve_serial_line
 from firmware_io.tcp import ConnectionLimits, TcpFrontEnd
 
 log = logging.getLogger(__name__)
-
-
-class LinkStartError(RuntimeError):
-    """The TCP port or serial line cannot be opened; the message names it and what to check."""
 
 
 class PlcLink:
@@ -101,7 +97,11 @@ class PlcLink:
         self._started = threading.Event()
         self._start_error: BaseException | None = None
         self._bound: Endpoint = endpoint
-        self.tcp: TcpFrontEnd | None = None
+        self._tcp: TcpFrontEnd | None = None
+        self._serial_open = False
+        # For the operator station and /metrics (read from other threads; ints are replaced atomically).
+        self.heartbeat_stalls = 0  # times the heartbeat stopped because the controller went silent
+        self.heartbeat_stalled = False
 
     # ---- lifetime ------------------------------------------------------------------------------
 
@@ -140,6 +140,13 @@ class PlcLink:
 
     def __exit__(self, *exc_info: object) -> None:
         self.stop()
+
+    @property
+    def connected_clients(self) -> int:
+        """TCP connections open now (RTU: 1 while the serial line is open)."""
+        if isinstance(self._endpoint, SerialEndpoint):
+            return int(self._serial_open)
+        return 0 if self._tcp is None else self._tcp.connection_count
 
     @property
     def endpoint(self) -> Endpoint:
@@ -229,9 +236,9 @@ class PlcLink:
 
     async def _serve_tcp(self, endpoint: TcpEndpoint) -> None:
         assert self._stop_requested is not None
-        self.tcp = TcpFrontEnd(self._limits, self._answer)
+        self._tcp = TcpFrontEnd(self._limits, self._answer)
         try:
-            server = await self.tcp.start(endpoint.host, endpoint.port)
+            server = await self._tcp.start(endpoint.host, endpoint.port)
         except OSError as exc:
             self._start_error = exc
             return
@@ -242,7 +249,7 @@ class PlcLink:
             await self._stop_requested.wait()
         finally:
             server.close()
-            await self.tcp.close_all()
+            await self._tcp.close_all()
             await server.wait_closed()
 
     async def _serve_rtu(self, endpoint: SerialEndpoint) -> None:
@@ -253,12 +260,22 @@ class PlcLink:
             self._start_error = exc
             return
         self._started.set()
-        await serve_serial_line(line, endpoint, self._answer, self._stop_requested)
+        self._serial_open = True
+        try:
+            await serve_serial_line(line, endpoint, self._answer, self._stop_requested, self._on_serial_state)
+        finally:
+            self._serial_open = False
+
+    def _on_serial_state(self, line_open: bool) -> None:
+        self._serial_open = line_open
 
     async def _heartbeat(self) -> None:
         while True:
             expired = self._handshake.expire_overdue(self._cycle_timeout_s)
-            self._handshake.beat(self._liveness_timeout_s)
+            beating = self._handshake.beat(self._liveness_timeout_s)
+            if not beating and not self.heartbeat_stalled:
+                self.heartbeat_stalls += 1
+            self.heartbeat_stalled = not beating
             if expired is not None:
                 log.error(
                     "cycle %d: not published within cycle_timeout_s = %g s; answered CYCLE_TIMEOUT",

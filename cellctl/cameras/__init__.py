@@ -6,9 +6,13 @@ frame = source.grab_pair()          # CameraMissing / FrameTimeout / OutOfSync o
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from cellctl.cameras.base import CameraError, CameraMissing, FrameSource, FrameTimeout, OutOfSync, StereoFrame
 from cellctl.cameras.config import CameraConfig
-from cellctl.vision.calibration import Calibration
+
+if TYPE_CHECKING:  # importing it loads OpenCV, which reading a config does not need
+    from cellctl.vision.calibration import Calibration
 
 __all__ = [
     "CameraError",

@@ -13,7 +13,7 @@ import os
 import sys
 
 from cellctl.errors import UserError
-from firmware_io.server import LinkStartError
+from firmware_io.endpoints import LinkStartError
 
 # Modules under cellctl.cli, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -28,15 +28,35 @@ COMMAND_MODULES: tuple[str, ...] = (
     "bench_sole",
     "results",
     "run",
+    "capture",
+    "check",
 )
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cellctl", description="Sole-gluing stereo cell controller")
+    parser.add_argument("--version", action=_VersionAction, nargs=0, help="print the version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(f"cellctl.cli.{name}").register(sub)
     return parser
+
+
+class _VersionAction(argparse.Action):
+    """--version, looked up only when asked (reading the installed metadata costs ~0.1 s at every start)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        print(f"cellctl {_version()}")
+        parser.exit()
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("cellctl")
+    except PackageNotFoundError:  # running from a source tree that was never installed
+        return "unknown (not installed)"
 
 
 def main(argv: list[str] | None = None) -> int:

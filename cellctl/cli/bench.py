@@ -6,8 +6,6 @@ import argparse
 import json
 import sys
 
-from cellctl.eval import matcher_bench as benchmark
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("bench", help="time the matcher against OpenCV StereoSGBM", description=__doc__)
@@ -19,6 +17,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # Imported here, not at the top: `cellctl --help` and the light commands must not load them.
+    from cellctl.eval import matcher_bench as benchmark
+
     if args.threads < 1:
         raise ValueError("--threads must be at least 1")
     if args.runs is not None and args.runs < 1:

@@ -12,11 +12,6 @@ import argparse
 import time
 from pathlib import Path
 
-import cv2
-import numpy as np
-
-from cellctl.cli.demo_cell import run_cell_demo
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -28,12 +23,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--cycles", type=int, default=6, help="PLC cycles to run (default 6)")
     p.add_argument("--config", type=Path, help="service config (default deploy/cell-sim.toml)")
     p.add_argument("--port", type=int, default=5020, help="Modbus TCP port for the demo (default 5020)")
+    p.add_argument("--station-port", type=int, help="operator station web port (default: [station] port of the config)")
     p.add_argument("--teddy", action="store_true", help="instead: the matcher on Middlebury Teddy")
     p.add_argument(
         "--data", help="with --teddy: Middlebury 2001-2003 folder (default ../shared/data/middlebury/2001-2003)"
     )
     p.add_argument(
-        "--out", default="demo-out", help="output folder: journal, PLY and overlays, Teddy PNG (default demo-out)"
+        "-o", "--out", default="demo-out", help="output folder: journal, PLY and overlays, Teddy PNG (default demo-out)"
     )
     p.set_defaults(func=run)
 
@@ -41,10 +37,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.teddy:
         return run_teddy(args)
-    return run_cell_demo(args.config, args.port, args.cycles, Path(args.out))
+    from cellctl.cli.demo_cell import run_cell_demo  # pymodbus: loaded only when the demo runs
+
+    return run_cell_demo(args.config, args.port, args.cycles, Path(args.out), args.station_port)
 
 
 def run_teddy(args: argparse.Namespace) -> int:
+    import cv2
+    import numpy as np
+
     from cellctl.eval.middlebury import bad_pixel_percent, load_scene
     from cellctl.eval.pictures import disparity_colour
     from cellctl.stereo import StereoMatcher

@@ -22,10 +22,11 @@ DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "deploy" / "cell-sim.toml
 START_TIMEOUT_S = 120.0  # the simulated cameras render all scenes (a few s each) before READY
 
 
-def run_cell_demo(config: Path | None, port: int, cycles: int, out: Path) -> int:
+def run_cell_demo(config: Path | None, port: int, cycles: int, out: Path, station_port: int | None = None) -> int:
     if cycles < 1:
         raise ValueError(f"--cycles {cycles} must be at least 1")
     config = DEFAULT_CONFIG if config is None else config
+    station = _station_url(config, station_port)
     state = (out / "cell-state").resolve()
     shutil.rmtree(state, ignore_errors=True)  # a fresh journal, so the table below is this run's
     command = [
@@ -39,8 +40,11 @@ def run_cell_demo(config: Path | None, port: int, cycles: int, out: Path) -> int
         str(state),
         "--port",
         str(port),
+        *([] if station_port is None else ["--station-port", str(station_port)]),
     ]
     print(f"starting the service: {' '.join(command[2:])}", flush=True)
+    if station:
+        print(f"operator station (live while the demo runs): {station}", flush=True)
     # As deploy/cellctl.service runs it: numpy's BLAS single-threaded (why: in the unit file).
     environment = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     service = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=environment)
@@ -57,7 +61,23 @@ def run_cell_demo(config: Path | None, port: int, cycles: int, out: Path) -> int
         print(log, file=sys.stderr)
         return 1
     _report(readings, state)
+    if station:
+        print(
+            f"operator station: {station}  (it stopped with the demo; to browse these cycles run\n"
+            f"  cellctl run --config {config} --state-dir {state}\n  and open {station})"
+        )
     return 0 if all(r.ok for r in readings) else 1
+
+
+def _station_url(config: Path, station_port: int | None) -> str | None:
+    """Where the service's operator station will listen, from the config (None if disabled)."""
+    from cellctl.service.config import CellConfig
+
+    station = CellConfig.load(config).station
+    if not station.enabled:
+        return None
+    host = "127.0.0.1" if station.bind in ("0.0.0.0", "") else station.bind
+    return f"http://{host}:{station.port if station_port is None else station_port}/"
 
 
 def _drive(service: subprocess.Popen[str], port: int, cycles: int) -> list[CycleReading] | None:

@@ -8,12 +8,12 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-
-import cv2
-import numpy as np
+from typing import TYPE_CHECKING
 
 from cellctl.errors import UserError
-from cellctl.images import read_image
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,6 +50,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import cv2
+
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
     from cellctl.vision.measurement import check_glue_settings, measure_sole
@@ -86,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(path: Path, name: str) -> np.ndarray:
+    from cellctl.images import read_image  # OpenCV: not at the top, so --help stays light
+
     try:
         return read_image(path, what=f"{name} image")
     except ValueError as exc:

@@ -8,8 +8,6 @@ import logging
 import sys
 
 from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint
-from firmware_io.plc_sim import PlcSimError, PlcSimulator, describe
-from firmware_io.registers import WordOrder
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -30,8 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--unit", type=int, default=1, help="Modbus unit id (default 1)")
     parser.add_argument(
         "--word-order",
-        choices=[w.value for w in WordOrder],
-        default=WordOrder.HIGH_FIRST.value,
+        default="high_first",
+        metavar="{high_first,low_first}",  # checked in run(): firmware_io.registers loads numpy and pymodbus
         help="float32 word order, must match the controller (default high_first)",
     )
     parser.add_argument("--cycles", type=int, default=10, help="number of cycles to run (default 10)")
@@ -45,6 +43,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from firmware_io.plc_sim import PlcSimError, PlcSimulator, describe  # pymodbus: only when it runs
+    from firmware_io.registers import WordOrder
+
+    if args.word_order not in {w.value for w in WordOrder}:
+        raise ValueError(f"--word-order {args.word_order!r} is not one of {', '.join(w.value for w in WordOrder)}")
+
     endpoint = _endpoint(args)
     if args.cycles < 1:
         raise ValueError(f"--cycles {args.cycles} must be at least 1")

@@ -6,11 +6,10 @@ import argparse
 import csv
 import json
 import sys
-from datetime import UTC, datetime
 from pathlib import Path
 
-from cellctl.service.config import CellConfig
 from cellctl.service.journal import CycleRecord, Journal
+from cellctl.service.timefmt import iso_time, local_time
 
 CSV_FIELDS = (
     "id",
@@ -33,7 +32,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "results",
         help="list or export journaled cycles",
-        description="Reads the cycle journal of a running or stopped service (read only).",
+        description="Reads the cycle journal of a running or stopped service (read only). Text shows local "
+        "times with their zone; CSV and JSON give triggered_at in ISO 8601 with the UTC offset.",
     )
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--config", type=Path, help="the service's config file (its [journal] state_dir)")
@@ -48,14 +48,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.last is not None and args.last < 1:
         raise ValueError(f"--last {args.last} must be at least 1")
-    state_dir = args.state_dir if args.state_dir is not None else CellConfig.load(args.config).journal.state_dir
+    if args.state_dir is not None:
+        state_dir = args.state_dir
+    else:
+        from cellctl.service.config import CellConfig  # checks the whole config: numpy, pymodbus
+
+        state_dir = CellConfig.load(args.config).journal.state_dir
     journal = Journal.open(state_dir, readonly=True)
     try:
         records = journal.last(args.last)
     finally:
         journal.close()
     if args.json:
-        json.dump([r.to_dict() for r in records], sys.stdout, indent=1)
+        json.dump([{**r.to_dict(), "triggered_at": iso_time(r.triggered_at)} for r in records], sys.stdout, indent=1)
         print()
     elif args.csv:
         _write_csv(records)
@@ -66,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def describe(record: CycleRecord) -> str:
-    when = datetime.fromtimestamp(record.triggered_at, UTC).strftime("%Y-%m-%d %H:%M:%S")
+    when = local_time(record.triggered_at)
     head = f"{when} cycle {record.cycle}: "
     if record.status == "ok":
         return (
@@ -83,4 +88,5 @@ def _write_csv(records: list[CycleRecord]) -> None:
     for record in records:
         row = {name: getattr(record, name, None) for name in CSV_FIELDS}
         row["glue_points"] = len(record.glue_path)
+        row["triggered_at"] = iso_time(record.triggered_at)
         writer.writerow(row)

@@ -10,8 +10,6 @@ import sys
 import threading
 from pathlib import Path
 
-from cellctl.service.config import CellConfig
-
 # syslog priorities for systemd's "<N>" line prefix (SyslogLevelPrefix=, on by default for services).
 _PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3, logging.CRITICAL: 2}
 
@@ -28,6 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--config", type=Path, required=True, help="cell config, e.g. /etc/cellctl/cell.toml")
     parser.add_argument("--state-dir", type=Path, help="override [journal] state_dir (journal, PLY, overlays)")
     parser.add_argument("--port", type=int, help="override [plc] port (TCP)")
+    parser.add_argument("--station-port", type=int, metavar="PORT", help="override [station] port (web pages)")
     parser.add_argument("--verbose", action="store_true", help="also log debug messages")
     parser.set_defaults(func=run)
 
@@ -61,7 +60,9 @@ def setup_logging(verbose: bool) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    from cellctl.service.config import CellConfig
     from cellctl.service.daemon import Daemon
+    from cellctl.service.station import Station
 
     setup_logging(args.verbose)
     config = CellConfig.load(args.config)
@@ -70,7 +71,12 @@ def run(args: argparse.Namespace) -> int:
     if args.port is not None:
         config = replace(config, plc=replace(config.plc, port=args.port))
         config.plc.endpoint()  # checks the port range
+    if args.station_port is not None:
+        config = replace(config, station=replace(config.station, port=args.station_port))
     daemon = Daemon(config)
+    station = Station.attach(daemon)  # pages, /metrics and image log share the daemon's state
+    if station.url is not None:
+        print(f"operator station: {station.url}", file=sys.stderr, flush=True)
 
     def stop(signum: int, _frame: object) -> None:
         logging.getLogger("cellctl.run").info("%s: stopping after the running cycle", signal.Signals(signum).name)
@@ -79,5 +85,8 @@ def run(args: argparse.Namespace) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, stop)
         signal.signal(signal.SIGINT, stop)
-    daemon.run()
+    try:
+        daemon.run()
+    finally:
+        station.stop()
     return 0

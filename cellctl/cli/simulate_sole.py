@@ -7,8 +7,6 @@ import time
 from pathlib import Path
 
 from cellctl.errors import UserError
-from cellctl.sim.render import SOLE_MATERIALS
-from cellctl.vision.calibration import Calibration
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -19,9 +17,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     and calib.yaml (the rig that took the pair) to the output directory. The same seed always gives the
     same sole, pose and noise.
     """
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="directory to write the scene to")
+    parser.add_argument("-o", "--out", required=True, type=Path, metavar="DIR", help="directory to write the scene to")
     parser.add_argument("--seed", type=int, default=0, help="sole shape, pose and noise (default 0)")
-    parser.add_argument("--color", default="white", choices=sorted(SOLE_MATERIALS), help="sole colour (default white)")
+    # Checked in run(): the colours live with the renderer, which imports Open3D (slow for `--help`).
+    parser.add_argument("--color", default="white", help="sole colour: white (default) or black")
     parser.add_argument(
         "--calib", type=Path, metavar="calib.yaml", help="rig to render through (default: the built-in simulated rig)"
     )
@@ -29,9 +28,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cellctl.sim.render import SOLE_MATERIALS
     from cellctl.sim.rig import default_rig
     from cellctl.sim.scene import SoleScene
+    from cellctl.vision.calibration import Calibration
 
+    if args.color not in SOLE_MATERIALS:
+        raise UserError(f"--color {args.color!r} is not one of {', '.join(sorted(SOLE_MATERIALS))}")
     calib = Calibration.load(args.calib) if args.calib else default_rig()
     start = time.perf_counter()
     try:

@@ -12,6 +12,7 @@ calibration can be moved together.
 
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -177,6 +178,26 @@ class JournalConfig:
 
 
 @dataclass(frozen=True)
+class StationConfig:
+    """The operator station (web pages and /metrics), served by the service itself."""
+
+    enabled: bool = True
+    bind: str = "127.0.0.1"  # only this machine; "0.0.0.0" shows it to the plant network
+    port: int = 8080
+    token: str | None = None  # actions (capture) need it; without one they are refused
+    board: str | None = None  # checkerboard inner corners COLSxROWS for capture feedback, e.g. "9x6"
+
+
+@dataclass(frozen=True)
+class ImageLogConfig:
+    """Raw pair and overlay of every failed cycle and every Nth good one, under state_dir/images."""
+
+    every_nth_good: int = 0  # 0: failed cycles only
+    keep_cycles: int = 200
+    max_mb: float = 500.0
+
+
+@dataclass(frozen=True)
 class CellConfig:
     source: Path
     cameras: CameraConfig
@@ -184,6 +205,8 @@ class CellConfig:
     measure: MeasureConfig
     plc: PlcConfig
     journal: JournalConfig
+    station: StationConfig = StationConfig()
+    image_log: ImageLogConfig = ImageLogConfig()
 
     @classmethod
     def load(cls, path: str | Path) -> CellConfig:
@@ -202,7 +225,10 @@ class CellConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: Path) -> CellConfig:
         root = _Table(data, "top level", source)
-        sections = {name: root.table(name) for name in ("cameras", "calibration", "measure", "plc", "journal")}
+        sections = {
+            name: root.table(name)
+            for name in ("cameras", "calibration", "measure", "plc", "journal", "station", "image_log")
+        }
         for name in ("cameras", "calibration", "journal"):
             if name not in data:
                 raise ConfigError(f"{source}: the [{name}] section is missing")
@@ -216,6 +242,8 @@ class CellConfig:
             measure=_measure(sections["measure"]),
             plc=_plc(sections["plc"]),
             journal=_journal(sections["journal"]),
+            station=_station(sections["station"]),
+            image_log=_image_log(sections["image_log"]),
         )
         return config
 
@@ -349,4 +377,32 @@ def _journal(t: _Table) -> JournalConfig:
     t.finish()
     if state_dir.exists() and not state_dir.is_dir():
         raise t.fail("state_dir", f"{state_dir} exists and is not a directory")
+    return config
+
+
+def _station(t: _Table) -> StationConfig:
+    token = t.get("token", str, None)
+    if token is not None and len(token) < 8:
+        raise t.fail("token", "too short: use at least 8 characters (e.g. `openssl rand -hex 16`)")
+    board = t.get("board", str, None)
+    if board is not None and not re.fullmatch(r"\d+x\d+", board):
+        raise t.fail("board", f'{board!r} is not COLSxROWS inner corners, e.g. "9x6"')
+    config = StationConfig(
+        enabled=t.get("enabled", bool, True),
+        bind=t.get("bind", str, "127.0.0.1"),
+        port=int(t.number("port", 8080, low=0, high=65535)),
+        token=token,
+        board=board,
+    )
+    t.finish()
+    return config
+
+
+def _image_log(t: _Table) -> ImageLogConfig:
+    config = ImageLogConfig(
+        every_nth_good=int(t.number("every_nth_good", 0, low=0)),
+        keep_cycles=int(t.number("keep_cycles", 200, low=0)),
+        max_mb=t.number("max_mb", 500.0, low=0),
+    )
+    t.finish()
     return config

@@ -36,6 +36,7 @@ from cellctl.service.artifacts import keep_artifacts
 from cellctl.service.codes import FAILURE_CODES
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
+from cellctl.service.events import CellEvents, CellState, CycleDone
 from cellctl.service.journal import CycleRecord, Journal
 from cellctl.service.quiet_log import RepeatQuietLog
 from cellctl.service.sdnotify import SystemdNotifier, check_watchdog
@@ -111,6 +112,11 @@ class Daemon:
         self._last_probe = 0.0
         self._journal: Journal | None = None
         self.cycles_done = 0
+        # Observers (operator station, metrics, image log) subscribe here; the daemon only publishes.
+        self.events = CellEvents()
+        # Held for every grab: the station's live view grabs between cycles and never during one.
+        self.camera_lock = threading.Lock()
+        self._busy_cycle: int | None = None
 
     # ---- lifetime ------------------------------------------------------------------------------
 
@@ -147,9 +153,11 @@ class Daemon:
                 self.notifier.notify(READY=1, STATUS=self._status_text())
                 log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self._cameras_ok else "NOT ok")
                 self._started.set()
+                self._publish_state()
                 self._serve()
             finally:
                 self.notifier.notify(STOPPING=1, STATUS="stopping")
+                self._publish_state("stopping")
                 self.link.stop()
         finally:
             self.source.close()
@@ -182,6 +190,8 @@ class Daemon:
 
     def _cycle(self, trigger: Trigger) -> None:
         self.notifier.notify(STATUS=f"measuring cycle {trigger.cycle}")
+        self._busy_cycle = trigger.cycle
+        self._publish_state()
         triggered_at = time.time() - (time.monotonic() - trigger.received_at)
         timings: dict[str, float] = {}
         frame: StereoFrame | None = None
@@ -232,12 +242,16 @@ class Daemon:
                 result.measurement,
                 self.config.journal.keep_artifacts,
             )
+        self._busy_cycle = None
+        self.events.publish(CycleDone(record, frame, result))
+        self._publish_state()
         self.notifier.notify(STATUS=self._status_text())
 
     def _grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
         start = time.perf_counter()
         try:
-            frame = self.source.grab_pair(not_before=not_before)  # frames exposed after the trigger only
+            with self.camera_lock:
+                frame = self.source.grab_pair(not_before=not_before)  # frames exposed after the trigger only
         except CameraError as exc:
             self._cameras_ok = False
             self._last_probe = time.monotonic()
@@ -280,10 +294,10 @@ class Daemon:
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
         triggered_at = time.time() - (time.monotonic() - trigger.received_at)
         assert self._journal is not None
-        self._journal.record(
-            _record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
-        )
+        record = _record(trigger.cycle, triggered_at, ErrorCode.CYCLE_ABORTED, reason, cycle_time_ms, {}, None, None)
+        self._journal.record(record)
         self.link.publish_error(trigger.cycle, ErrorCode.CYCLE_ABORTED, cycle_time_ms=cycle_time_ms)
+        self.events.publish(CycleDone(record, None, None))
         log.warning("cycle %d: aborted, %s", trigger.cycle, reason)
 
     # ---- health --------------------------------------------------------------------------------
@@ -295,8 +309,9 @@ class Daemon:
             return
         self._last_probe = now
         try:
-            self.source.open()
-            frame = self.source.grab_pair()
+            with self.camera_lock:
+                self.source.open()
+                frame = self.source.grab_pair()
         except CameraError as exc:
             self._camera_log.warning(str(exc), "cameras not ready: %s", exc)
             return
@@ -309,10 +324,19 @@ class Daemon:
             log.error("calibration does not match the cameras: %s", self._identity_problem)
         if not force:
             self._report_health()
+            self._publish_state()
 
     def _report_health(self) -> None:
         calibration_ok = self.calib is not None and self._identity_problem is None
         self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=calibration_ok)
+
+    def _publish_state(self, phase: str | None = None) -> None:
+        if phase is None:
+            healthy = self._cameras_ok and self.calib is not None
+            phase = "busy" if self._busy_cycle is not None else "ready" if healthy else "error"
+        self.events.publish(
+            CellState(phase, self._cameras_ok, self.calib is not None, self.cycles_done, self._busy_cycle)
+        )
 
     def _status_text(self) -> str:
         cameras = "cameras ok" if self._cameras_ok else "CAMERAS NOT OK"

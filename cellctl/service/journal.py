@@ -217,6 +217,11 @@ class Journal:
         ).fetchall()
         return [_record(row) for row in reversed(rows)]
 
+    def get(self, row_id: int) -> CycleRecord | None:
+        """The journaled cycle with this row id."""
+        row = self._db.execute(f"SELECT {', '.join(COLUMNS)} FROM cycles WHERE id = ?", (row_id,)).fetchone()
+        return None if row is None else _record(row)
+
     def find(self, cycle: int) -> CycleRecord | None:
         """The newest journaled cycle with this PLC cycle number."""
         row = self._db.execute(

@@ -32,12 +32,42 @@ def draw_overlay(
     """Left image with edge, glue path and heel/toe points, next to a top view of the cloud (BGR)."""
     image = draw_on_left(left, calib, measurement)
     _caption(image, measurement)
+    _legend(image)
     top = top_view(reconstruction, measurement)
     if top is None:
         return image
     scale = image.shape[0] / top.shape[0]
     top = cv2.resize(top, (max(1, int(round(top.shape[1] * scale))), image.shape[0]), interpolation=cv2.INTER_AREA)
-    return np.hstack([image, top])
+    z = reconstruction.sole_points[:, 2]
+    return np.hstack([image, top, height_scale(float(z.min()), float(z.max()), image.shape[0])])
+
+
+def draw_refused(left: np.ndarray, text: str) -> np.ndarray:
+    """The raw left image of a cycle that gave no measurement, captioned with why (BGR)."""
+    image = cv2.cvtColor(left, cv2.COLOR_GRAY2BGR) if left.ndim == 2 else left.copy()
+    size = _text_size(image)
+    _put(image, "NOT MEASURED", (10, int(40 * size)), (0, 0, 255), size * 1.2)
+    words, line, y = text.split(), "", int(80 * size)
+    per_line = max(20, int(image.shape[1] / (19 * size)))
+    for word in words:
+        if len(line) + len(word) + 1 > per_line:
+            _put(image, line, (10, y), (255, 255, 255), size)
+            line, y = "", y + int(34 * size)
+        line = f"{line} {word}".strip()
+    _put(image, line, (10, y), (255, 255, 255), size)
+    return image
+
+
+def height_scale(low_mm: float, high_mm: float, height: int, width: int = 110) -> np.ndarray:
+    """A vertical colour bar of the top view's height colours (viridis), labelled in mm above the table."""
+    bar = np.full((height, width, 3), 30, np.uint8)
+    top, bottom = 50, height - 50
+    ramp = np.linspace(255, 0, max(bottom - top, 2)).astype(np.uint8).reshape(-1, 1)
+    bar[top:bottom, 10:40] = cv2.applyColorMap(ramp, cv2.COLORMAP_VIRIDIS)[:, :1, :].repeat(30, axis=1)
+    for row, value in ((top, high_mm), ((top + bottom) // 2, (low_mm + high_mm) / 2), (bottom - 1, low_mm)):
+        cv2.putText(bar, f"{value:.0f}", (45, row + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+    cv2.putText(bar, "height mm", (5, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    return bar
 
 
 def draw_on_left(left: np.ndarray, calib: Calibration, measurement: SoleMeasurement) -> np.ndarray:
@@ -99,12 +129,40 @@ def _edge_heights(measurement: SoleMeasurement) -> np.ndarray:
 def _caption(image: np.ndarray, measurement: SoleMeasurement) -> None:
     if measurement.valid:
         text = (
-            f"length {measurement.length_mm:.1f} mm  heel (blue) {measurement.heel_height_mm:.1f} mm  "
-            f"toe (red) {measurement.toe_height_mm:.1f} mm  edge green, glue path orange"
+            f"length {measurement.length_mm:.1f} mm  heel {measurement.heel_height_mm:.1f} mm  "
+            f"toe {measurement.toe_height_mm:.1f} mm"
         )
         colour = (255, 255, 255)
     else:
         text = f"NOT MEASURED: {measurement.reason}"
         colour = (0, 0, 255)
-    cv2.putText(image, text[:110], (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 0), 4, cv2.LINE_AA)
-    cv2.putText(image, text[:110], (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8, colour, 2, cv2.LINE_AA)
+    _put(image, text, (10, int(34 * _text_size(image))), colour, _text_size(image))
+
+
+def _legend(image: np.ndarray) -> None:
+    """Colour swatches of what is drawn, bottom left."""
+    size = _text_size(image)
+    y = image.shape[0] - int(20 * size)
+    x, box = 10, int(22 * size)
+    for name, colour in (("edge", EDGE_BGR), ("glue path", GLUE_BGR), ("heel", HEEL_BGR), ("toe", TOE_BGR)):
+        cv2.rectangle(image, (x, y - box), (x + box, y), (0, 0, 0), -1)
+        cv2.rectangle(image, (x + 3, y - box + 3), (x + box - 3, y - 3), colour, -1)
+        _put(image, name, (x + box + 6, y - 2), (255, 255, 255), size * 0.8)
+        x += box + 20 + int(15 * size * len(name))
+
+
+def _text_size(image: np.ndarray) -> float:
+    """Font scale for an image: captions keep the same share of the width at any resolution."""
+    return max(0.5, image.shape[1] / 1100.0)
+
+
+def _put(
+    image: np.ndarray, text: str, origin: tuple[int, int], colour: tuple[int, int, int], size: float = 0.8
+) -> None:
+    """Text with a dark outline, legible on any image."""
+    thick = max(1, int(round(size * 2.2)))
+    # The outline is the same text shifted around, not a thicker stroke: OpenCV spaces thicker text wider.
+    x, y = origin
+    for dx, dy in ((-1, -1), (1, -1), (-1, 1), (1, 1), (0, 2), (2, 0), (0, -2), (-2, 0)):
+        cv2.putText(image, text[:110], (x + dx, y + dy), cv2.FONT_HERSHEY_SIMPLEX, size, (0, 0, 0), thick, cv2.LINE_AA)
+    cv2.putText(image, text[:110], origin, cv2.FONT_HERSHEY_SIMPLEX, size, colour, thick, cv2.LINE_AA)

@@ -133,7 +133,7 @@ def test_rectify_command_writes_the_pair_and_reports_vertical_disparity(
     left, right = tmp_path / "l.png", tmp_path / "r.png"
     cv2.imwrite(str(left), speckle[0])
     cv2.imwrite(str(right), speckle[1])
-    assert main(["rectify", str(session["calib"]), str(left), str(right), "-o", str(tmp_path / "out")]) == 0
+    assert main(["rectify", "--calib", str(session["calib"]), str(left), str(right), "-o", str(tmp_path / "out")]) == 0
     rms = float(re.search(r"RMS ([\d.]+) px", capsys.readouterr().out).group(1))
     assert rms < 0.3
     for name in ("rectified_left.png", "rectified_right.png", "side_by_side.png", "side_by_side_raw.png"):
@@ -144,7 +144,7 @@ def test_rectify_command_writes_the_pair_and_reports_vertical_disparity(
 def test_rectify_command_refuses_an_image_of_another_size(session: dict, tmp_path: Path, capsys) -> None:
     small = tmp_path / "small.png"
     cv2.imwrite(str(small), np.zeros((480, 640), np.uint8))
-    assert main(["rectify", str(session["calib"]), str(small), str(small), "-o", str(tmp_path)]) == 2
+    assert main(["rectify", "--calib", str(session["calib"]), str(small), str(small), "-o", str(tmp_path)]) == 2
     assert "640x480 px but the calibration is for 1280x1024 px" in capsys.readouterr().err
 
 

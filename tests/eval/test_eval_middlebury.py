@@ -145,9 +145,9 @@ def test_command_names_a_missing_data_folder(tmp_path: Path) -> None:
 
 
 def test_command_rejects_an_unknown_method(capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit):
+    # Checked when the command runs (the method table loads the matcher, too slow for `cellctl --help`).
+    with pytest.raises(ValueError, match="unknown method.*fast-sgm.*choose from"):
         _cellctl(["eval", "middlebury", "--methods", "fast-sgm"])
-    assert "invalid choice: 'fast-sgm'" in capsys.readouterr().err
     with pytest.raises(ValueError, match="--repeat must be at least 1"):
         _cellctl(["eval", "middlebury", "--repeat", "0"])
 

@@ -163,7 +163,7 @@ def test_idle_connections_cannot_lock_the_plc_out() -> None:
         try:
             with PlcSimulator(link.endpoint, response_timeout_s=1.0) as plc:  # the PLC reconnecting
                 assert plc.read_header().map_version == 1
-                assert link.tcp is not None and link.tcp.connection_count <= 4
+                assert link.connected_clients <= 4
         finally:
             for hog in hogs:
                 hog.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from datetime import datetime
 from pathlib import Path
 
 import pytest
@@ -113,9 +114,11 @@ def test_results_command_text_json_csv(tmp_path: Path, capsys: pytest.CaptureFix
     assert main(["results", "--state-dir", str(tmp_path), "--json", "--last", "2"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert [d["cycle"] for d in data] == [2, 3] and data[1]["glue_path"][1] == [4.0, 5.0, 6.0]
+    assert datetime.fromisoformat(data[1]["triggered_at"]).timestamp() == pytest.approx(1_700_000_003.0)
     assert main(["results", "--state-dir", str(tmp_path), "--csv"]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert [r["status"] for r in rows] == ["ok", "error", "ok"] and rows[0]["glue_points"] == "2"
+    assert datetime.fromisoformat(rows[0]["triggered_at"]).utcoffset() is not None
 
 
 def test_results_without_a_journal_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

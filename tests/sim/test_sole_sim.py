@@ -181,6 +181,6 @@ def test_simulate_sole_command_writes_the_scene(tmp_path: Path, capsys: pytest.C
     assert "length" in capsys.readouterr().out
 
 
-def test_simulate_sole_rejects_an_unknown_colour(tmp_path: Path) -> None:
-    with pytest.raises(SystemExit):
-        main(["simulate", "sole", "--out", str(tmp_path), "--color", "red"])
+def test_simulate_sole_rejects_an_unknown_colour(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "sole", "--out", str(tmp_path), "--color", "red"]) == 2
+    assert "--color 'red' is not one of black, white" in capsys.readouterr().err
