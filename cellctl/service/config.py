@@ -390,7 +390,7 @@ def _station(t: _Table) -> StationConfig:
     config = StationConfig(
         enabled=t.get("enabled", bool, True),
         bind=t.get("bind", str, "127.0.0.1"),
-        port=int(t.number("port", 8080, low=0, high=65535)),
+        port=t.integer("port", 8080, low=0, high=65535),
         token=token,
         board=board,
     )

@@ -89,7 +89,7 @@ def config(d: Path, name: str, plc: str, state: str = "state") -> str:
     path = d / f"{name}.toml"
     path.write_text(
         f'[cameras]\nbackend = "replay"\nreplay_dir = "replay"\n[calibration]\npath = "calib.yaml"\n'
-        f'[plc]\n{plc}\n[journal]\nstate_dir = "{state}"\n'
+        f'[plc]\n{plc}\n[journal]\nstate_dir = "{state}"\n[station]\nenabled = false\n'
     )
     return str(path)
 
@@ -170,7 +170,15 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
     ),
     "results: missing config": lambda d, _: Case(["results", "--config", str(d / "absent.toml")], "does not exist"),
     "rectify: matrix rows/cols do not match": lambda d, _: Case(
-        ["rectify", str(d / "calib-rows.yaml"), str(d / "grey.png"), str(d / "grey.png"), "-o", str(d / "r.png")],
+        [
+            "rectify",
+            "--calib",
+            str(d / "calib-rows.yaml"),
+            str(d / "grey.png"),
+            str(d / "grey.png"),
+            "-o",
+            str(d / "r"),
+        ],
         "rows/cols that do not match",
     ),
     "calibrate: FIFO named like an image": lambda d, _: Case(
