@@ -162,6 +162,11 @@ class PlcHandshake:
                         return None
                 self._changed.wait(wait)
 
+    def timed_out(self, cycle: int) -> bool:
+        """True if the link answered `cycle` with CYCLE_TIMEOUT itself (its result will not be published)."""
+        with self._changed:
+            return cycle == self._timed_out and cycle != self._running
+
     def restore_last_cycle(self, cycle: int) -> None:
         """After a restart: the cycle answered last (from the journal); writing it again starts nothing.
 

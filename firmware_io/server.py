@@ -165,6 +165,10 @@ class PlcLink:
         slice_s = self._heartbeat_period_s if self._liveness_timeout_s is None else self._liveness_timeout_s / 2
         return self._handshake.wait_trigger(timeout_s, liveness_slice_s=slice_s)
 
+    def timed_out(self, cycle: int) -> bool:
+        """True if the link already answered `cycle` with CYCLE_TIMEOUT (see cycle_timeout_s)."""
+        return self._handshake.timed_out(cycle)
+
     def restore_last_cycle(self, cycle: int) -> None:
         """After a restart, the cycle answered last (from the journal): writing it again starts nothing."""
         self._handshake.restore_last_cycle(cycle)

@@ -206,17 +206,18 @@ class Daemon:
             log.exception("cycle %d: unexpected failure", trigger.cycle)
             code, reason = ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}"
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
+        late = f"not published within cycle_timeout_s = {self.config.plc.cycle_timeout_s:g} s (took {cycle_time_ms:.0f} ms)"
+        if self.link.timed_out(trigger.cycle):  # the link answered CYCLE_TIMEOUT: the late result is not used
+            code, reason, result = ErrorCode.CYCLE_TIMEOUT, late, None
         measurement = None if result is None else result.measurement
         record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, measurement, frame)
         assert self._journal is not None
         self._journal.record(record)  # durable before the PLC hears of it
-        if not self._publish(trigger.cycle, code, cycle_time_ms, measurement):
-            # The link answered CYCLE_TIMEOUT already (it does not wait for a stuck controller): the
-            # journal says what the PLC was told, and the late result is not used.
-            reason = f"not published within cycle_timeout_s = {self.config.plc.cycle_timeout_s:g} s (took {cycle_time_ms:.0f} ms)"
+        if not self._publish(trigger.cycle, code, cycle_time_ms, measurement) and code is not ErrorCode.CYCLE_TIMEOUT:
+            # It timed out between the check above and publishing: the journal says what the PLC was told.
             assert record.id is not None
-            self._journal.amend_error(record.id, int(ErrorCode.CYCLE_TIMEOUT), reason)
-            code, result = ErrorCode.CYCLE_TIMEOUT, None
+            self._journal.amend_error(record.id, int(ErrorCode.CYCLE_TIMEOUT), late)
+            code, reason, result = ErrorCode.CYCLE_TIMEOUT, late, None
             record = _record(trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, None, frame)
         self._report_health()
         self.cycles_done += 1
