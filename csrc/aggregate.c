@@ -11,7 +11,7 @@
  * whatever the thread count, so the result does not depend on it. */
 #include <string.h>
 
-#include "internal.h"
+#include "aggregate.h"
 
 #if CC_HAVE_X86
 #include <immintrin.h>

@@ -14,7 +14,6 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define CC_DISP_SHIFT 4
 #define CC_DISP_SCALE 16
 #define CC_INVALID (-32768)
 
@@ -36,9 +35,12 @@ typedef struct cc_params {
     int num_disparities;    /* any count >= 1 */
     int census_width;       /* odd, 1..9 */
     int census_height;      /* odd, 1..7 */
+    int census_smooth;      /* 0: census of the pixels; 1: of their 3x3 sums (robust in flat regions) */
     int cost_mode;          /* enum cc_cost_mode */
     float lambda_census;    /* rho scale of the Hamming distance (bits), > 0 */
-    float lambda_bt;        /* rho scale of the BT cost (grey levels), > 0 */
+    float lambda_bt;        /* rho scale of the BT cost (levels of the BT image), > 0 */
+    int bt_prefilter;       /* BT image: 0 = raw intensities; 1..63 = horizontal Sobel clipped to
+                               [-cap, cap] (OpenCV's preFilterCap), robust to gain and exposure */
     int cost_scale;         /* each rho term is quantised to 0..cost_scale (1..127) */
     int p1;                 /* penalty for a disparity step of 1 */
     int p2;                 /* penalty for larger steps, p1 < p2 <= CC_MAX_P2 */
@@ -50,6 +52,8 @@ typedef struct cc_params {
     int lr_max_diff;        /* left-right tolerance in 1/16 px; < 0 disables the check */
     int fill_mode;          /* enum cc_fill_mode */
     int median;             /* 0 (off), 3 or 5 */
+    int fill_interpolate;   /* fill: a run between two valid pixels at most this many px apart in
+                               disparity is interpolated linearly (one surface), else background; 0 off */
     int fill_radius;        /* CC_FILL_WEIGHTED: window radius of the weighted median over filled pixels */
     int border_fit;         /* fill: border-occluded end strips of a row follow a line fitted to the
                                next border_fit px of measurements (0: the nearest value), 0 or 2..64 */
@@ -63,11 +67,10 @@ typedef struct cc_params {
 #define CC_MAX_P2 2000
 #define CC_MAX_DISPARITIES 2048
 #define CC_MAX_DIM 16384
-#define CC_BT_CAP 63        /* BT costs are truncated here before the rho table */
 #define CC_MAX_WM_RADIUS 15 /* largest weighted-median window: 31 x 31 */
 #define CC_MAX_BORDER_FIT 64
 
-/* Fills *p with the defaults (tuned on Middlebury v2, see docs/benchmarks.md). */
+/* Fills *p with the defaults (tuned on Middlebury 2001/2003 + 2005/2006, see docs/benchmarks.md). */
 void cc_params_default(cc_params *p);
 /* CC_OK or CC_ERR_PARAM; on error a static message is stored in *message. */
 int cc_params_check(const cc_params *p, const char **message);

@@ -1,7 +1,7 @@
 /* Fused matching cost of one left pixel against all disparities:
  * C = rho(Hamming(census), lambda_c) + rho(BT, lambda_b), both looked up in
  * quantised tables.  Right pixels outside the image get the largest cost. */
-#include "internal.h"
+#include "cost.h"
 
 #if CC_HAVE_X86
 #include <immintrin.h>

@@ -1,38 +1,14 @@
 /* The matcher object, its buffers, and the public entry points. */
-#define _GNU_SOURCE
-#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 
-#include "internal.h"
-
-#define CC_ALIGN 64
-#define CC_HUGE (2u << 20)
-
-void *cc_alloc(size_t bytes)
-{
-    void *p = NULL;
-    if (bytes == 0)
-        bytes = CC_ALIGN;
-    size_t align = bytes >= CC_HUGE ? CC_HUGE : CC_ALIGN;
-    if (posix_memalign(&p, align, bytes) != 0)
-        return NULL;
-#ifdef MADV_HUGEPAGE
-    /* The volume is touched once per pass: fewer TLB misses and page faults. */
-    if (align == CC_HUGE)
-        madvise(p, bytes, MADV_HUGEPAGE);
-#endif
-    return p;
-}
-
-void cc_free(void *ptr) { free(ptr); }
-
-int cc_thread_count(const cc_params *p)
-{
-    int n = p->threads > 0 ? p->threads : omp_get_max_threads();
-    return n > 0 ? n : 1;
-}
+#include "cost.h"
+#include "frame.h"
+#include "memory.h"
+#include "passes.h"
+#include "postprocess.h"
+#include "select.h"
+#include "workspace.h"
 
 struct cc_matcher {
     cc_setup setup;
@@ -43,83 +19,6 @@ struct cc_matcher {
     size_t bytes;
 };
 
-
-size_t cc_thread_scratch_bytes(const cc_setup *s, int width)
-{
-    size_t dp = (size_t)s->Dp, w = (size_t)width;
-    size_t n = cc_round_up(w * dp + 64, CC_ALIGN);                /* cost row */
-    n += cc_round_up(w * dp * 2, CC_ALIGN);                       /* sum row */
-    n += 2 * cc_round_up((dp + 2 * CC_GUARD) * 2, CC_ALIGN);      /* horizontal paths */
-    n += cc_round_up(cc_select_tmp_bytes(s, width), CC_ALIGN);    /* selection */
-    /* The frame preparation runs before the passes and borrows the same slices. */
-    size_t frame = cc_round_up(cc_frame_scratch_bytes(width), CC_ALIGN);
-    return n > frame ? n : frame;
-}
-
-cc_thread_scratch cc_thread_scratch_at(const cc_setup *s, const cc_workspace *ws, int thread)
-{
-    size_t dp = (size_t)s->Dp, w = (size_t)ws->width;
-    uint8_t *p = ws->scratch + ws->scratch_stride * (size_t)thread;
-    cc_thread_scratch t;
-    t.cost_row = p;
-    p += cc_round_up(w * dp + 64, CC_ALIGN);
-    t.sum_row = (uint16_t *)p;
-    p += cc_round_up(w * dp * 2, CC_ALIGN);
-    for (int i = 0; i < 2; i++) {
-        t.hpath[i] = (uint16_t *)p;
-        p += cc_round_up((dp + 2 * CC_GUARD) * 2, CC_ALIGN);
-    }
-    t.select_tmp = (uint16_t *)p;
-    return t;
-}
-
-static void workspace_free(cc_workspace *ws)
-{
-    cc_free(ws->volume);
-    cc_free(ws->vpath);
-    cc_free(ws->vmin);
-    cc_free(ws->scratch);
-    memset(ws, 0, sizeof *ws);
-}
-
-/* Guard lanes read by the vector kernels around every stored path vector. */
-static void set_guards(uint16_t *base, size_t count, size_t stride)
-{
-    for (size_t i = 0; i < count; i++)
-        for (size_t g = 0; g < stride; g++)
-            base[i * stride + g] = CC_PATH_INF;
-}
-
-static int workspace_alloc(cc_workspace *ws, const cc_setup *s, int width, int height, size_t *bytes)
-{
-    memset(ws, 0, sizeof *ws);
-    ws->width = width;
-    ws->height = height;
-    ws->threads = cc_thread_count(&s->p);
-    int npaths = s->p.paths == 8 ? 3 : 1;
-    ws->vstride = (size_t)s->Dp + 2 * CC_GUARD;
-    size_t vol = (size_t)width * height * s->Dp * sizeof(uint16_t);
-    size_t vpath = (size_t)npaths * 2 * width * ws->vstride * sizeof(uint16_t);
-    size_t vmin = (size_t)npaths * 2 * width * sizeof(uint16_t);
-    ws->scratch_stride = cc_thread_scratch_bytes(s, width);
-    size_t scratch = ws->scratch_stride * (size_t)ws->threads;
-    ws->volume = cc_alloc(vol);
-    ws->vpath = cc_alloc(vpath);
-    ws->vmin = cc_alloc(vmin);
-    ws->scratch = cc_alloc(scratch);
-    if (!ws->volume || !ws->vpath || !ws->vmin || !ws->scratch) {
-        workspace_free(ws);
-        return CC_ERR_NOMEM;
-    }
-    set_guards(ws->vpath, (size_t)npaths * 2 * width, ws->vstride);
-    for (int t = 0; t < ws->threads; t++) {
-        cc_thread_scratch ts = cc_thread_scratch_at(s, ws, t);
-        set_guards(ts.hpath[0], 1, ws->vstride);
-        set_guards(ts.hpath[1], 1, ws->vstride);
-    }
-    *bytes = vol + vpath + vmin + scratch;
-    return CC_OK;
-}
 
 int cc_matcher_create(const cc_params *p, cc_matcher **out)
 {
@@ -141,7 +40,7 @@ int cc_matcher_create(const cc_params *p, cc_matcher **out)
 static void matcher_release(cc_matcher *m)
 {
     cc_frame_free(&m->frame);
-    workspace_free(&m->ws);
+    cc_workspace_free(&m->ws);
     cc_free(m->maps);
     m->maps = NULL;
     cc_free(m->post);
@@ -169,7 +68,7 @@ static int matcher_reserve(cc_matcher *m, int width, int height)
     size_t ws_bytes = 0;
     int rc = cc_frame_alloc(&m->frame, &m->setup, width, height);
     if (rc == CC_OK)
-        rc = workspace_alloc(&m->ws, &m->setup, width, height, &ws_bytes);
+        rc = cc_workspace_alloc(&m->ws, &m->setup, width, height, &ws_bytes);
     size_t maps = (size_t)width * height * 4 * sizeof(int16_t);
     size_t post = cc_postprocess_scratch_bytes(&m->setup.p, width, height, m->ws.threads);
     if (rc == CC_OK && (!(m->maps = cc_alloc(maps)) || !(m->post = cc_alloc(post))))
@@ -253,7 +152,7 @@ int cc_census(const uint8_t *img, int width, int height, int stride,
     if (census_width < 1 || census_width > 9 || census_width % 2 == 0 || census_height < 1 ||
         census_height > 7 || census_height % 2 == 0)
         return CC_ERR_PARAM;
-    uint8_t *scratch = cc_alloc((size_t)width * 9 + 8);
+    uint8_t *scratch = cc_alloc(cc_census_scratch_bytes(width));
     if (!scratch)
         return CC_ERR_NOMEM;
     for (int y = 0; y < height; y++)

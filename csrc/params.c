@@ -2,7 +2,8 @@
 #include <math.h>
 #include <string.h>
 
-#include "internal.h"
+#include "aggregate.h"
+#include "params.h"
 
 void cc_params_default(cc_params *p)
 {
@@ -13,9 +14,11 @@ void cc_params_default(cc_params *p)
     p->num_disparities = 64;
     p->census_width = 5;
     p->census_height = 5;
+    p->census_smooth = 0;
     p->cost_mode = CC_COST_CENSUS_BT;
     p->lambda_census = 45.0f;
-    p->lambda_bt = 30.0f;
+    p->lambda_bt = 20.0f;
+    p->bt_prefilter = 31;
     p->cost_scale = 63;
     p->p1 = 32;
     p->p2 = 100;
@@ -26,10 +29,11 @@ void cc_params_default(cc_params *p)
     p->lr_max_diff = CC_DISP_SCALE;
     p->fill_mode = CC_FILL_WEIGHTED;
     p->median = 3;
-    p->fill_radius = 9;
+    p->fill_interpolate = 2;
+    p->fill_radius = 15;
     p->border_fit = 24;
     p->weighted_median = 3;
-    p->wm_sigma_colour = 20.0f;
+    p->wm_sigma_colour = 12.0f;
     p->wm_sigma_space = 20.0f;
     p->threads = 0;
     p->simd = CC_SIMD_AUTO;
@@ -56,6 +60,8 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("census_width must be odd and between 1 and 9");
     if (p->census_height < 1 || p->census_height > 7 || p->census_height % 2 == 0)
         REJECT("census_height must be odd and between 1 and 7");
+    if (p->census_smooth < 0 || p->census_smooth > 2)
+        REJECT("census_smooth must be 0 (pixels) or 1 (3x3 sums)");
     if (p->cost_mode < CC_COST_CENSUS_BT || p->cost_mode > CC_COST_BT)
         REJECT("cost_mode must be census_bt, census or bt");
     if (p->cost_mode != CC_COST_BT && p->census_width * p->census_height < 2)
@@ -64,6 +70,8 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("lambda_census must be a finite number > 0");
     if (!(p->lambda_bt > 0.0f) || !isfinite(p->lambda_bt))
         REJECT("lambda_bt must be a finite number > 0");
+    if (p->bt_prefilter < 0 || p->bt_prefilter > 63)
+        REJECT("bt_prefilter must be between 0 (raw intensities) and 63 (Sobel cap)");
     if (p->cost_scale < 1 || p->cost_scale > 127)
         REJECT("cost_scale must be between 1 and 127");
     if (p->p1 < 0)
@@ -86,6 +94,8 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("fill_mode must be none, background or weighted");
     if (p->median != 0 && p->median != 3 && p->median != 5)
         REJECT("median must be 0, 3 or 5");
+    if (p->fill_interpolate < 0 || p->fill_interpolate > 64)
+        REJECT("fill_interpolate must be between 0 (off) and 64 (px)");
     if (p->fill_radius < 1 || p->fill_radius > CC_MAX_WM_RADIUS)
         REJECT("fill_radius must be between 1 and 15 (px)");
     if (p->border_fit != 0 && (p->border_fit < 2 || p->border_fit > CC_MAX_BORDER_FIT))

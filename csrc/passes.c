@@ -2,9 +2,12 @@
 #include <omp.h>
 #include <string.h>
 
-#include "internal.h"
+#include "aggregate.h"
+#include "cost.h"
+#include "passes.h"
+#include "select.h"
 
-static inline int intensity(const cc_frame *f, int x, int y) { return f->lint[(size_t)y * f->width + x]; }
+static inline int intensity(const cc_frame *f, int x, int y) { return f->lgrey[(size_t)y * f->width + x]; }
 
 /* Paths from the previous row: straight, and for 8 paths also from x-1 and x+1. */
 static const int path_dx[3] = {0, -1, 1};

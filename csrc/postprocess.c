@@ -2,7 +2,8 @@
 #include <omp.h>
 #include <string.h>
 
-#include "internal.h"
+#include "params.h"
+#include "postprocess.h"
 
 static void lr_check_row(const cc_params *p, const int16_t *left, const int16_t *right, int width,
                          int16_t *out)
@@ -46,24 +47,40 @@ static void border_occlusion_row(int16_t *row, int width)
     }
 }
 
+/* floor(a / b) for b > 0. */
+static inline int64_t floor_div64(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
 /* Invalid pixels are mostly occlusions, which belong to the farther surface:
- * take the smaller of the nearest valid disparities to the left and right. */
-static void fill_row(const int16_t *in, int width, int16_t *out)
+ * take the smaller of the nearest valid disparities to the left and right.
+ * When those two differ by at most fill_interpolate px they are taken to lie
+ * on one surface (a hole in an untextured, possibly slanted region rather
+ * than an occlusion), and the run between them follows the straight line
+ * from one to the other, rounded half up. */
+static void fill_row(const cc_params *p, const int16_t *in, int width, int16_t *out)
 {
-    int last = CC_INVALID;
+    const int span = p->fill_interpolate * CC_DISP_SCALE;
+    int xl = -1;
     for (int x = 0; x < width; x++) {
-        if (in[x] != CC_INVALID)
-            last = in[x];
-        out[x] = in[x] != CC_INVALID ? in[x] : (int16_t)last;
-    }
-    last = CC_INVALID;
-    for (int x = width - 1; x >= 0; x--) {
         if (in[x] != CC_INVALID) {
-            last = in[x];
+            out[x] = in[x];
+            xl = x;
             continue;
         }
-        if (last != CC_INVALID && (out[x] == CC_INVALID || last < out[x]))
-            out[x] = (int16_t)last;
+        int xr = x;
+        while (xr < width && in[xr] == CC_INVALID)
+            xr++;
+        for (int i = x; i < xr; i++) {
+            if (xl < 0 || xr == width) {
+                out[i] = xl < 0 ? (xr == width ? (int16_t)CC_INVALID : in[xr]) : in[xl];
+                continue;
+            }
+            int l = in[xl], r = in[xr];
+            if (span > 0 && (l > r ? l - r : r - l) <= span)
+                out[i] = (int16_t)(l + floor_div64(2 * (int64_t)(r - l) * (i - xl) + (xr - xl), 2 * (int64_t)(xr - xl)));
+            else
+                out[i] = (int16_t)(l < r ? l : r);
+        }
+        x = xr - 1;
     }
 }
 
@@ -81,9 +98,6 @@ static void fill_row(const int16_t *in, int width, int16_t *out)
 #define BORDER_SAME (2 * CC_DISP_SCALE)
 #define BORDER_FRAC 256
 #define BORDER_MAX_SLOPE (CC_DISP_SCALE * BORDER_FRAC / 4) /* 1/4 px per px */
-
-/* floor(a / b) for b > 0. */
-static inline int64_t floor_div64(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 /* Fills out[x] for the strip pixels x0 <= x < x1 of row y, whose edge is the
  * kept pixel `edge`; side = +1 for the left border, -1 for the right.  Returns
@@ -243,6 +257,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                          int16_t *filled, int16_t *disp, void *scratch, int threads)
 {
     const int weighted_fill = p->fill_mode == CC_FILL_WEIGHTED, wmedian = p->weighted_median > 0;
+
     const size_t n = (size_t)width * height, map_bytes = cc_round_up(n * sizeof(int16_t), 64);
     const size_t hist_stride = cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64);
     int16_t *tmp = scratch;
@@ -272,7 +287,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             if (p->lr_max_diff >= 0)
                 border_occlusion_row(checked + o, width);
             if (p->fill_mode != CC_FILL_NONE)
-                fill_row(checked + o, width, fill_out + o);
+                fill_row(p, checked + o, width, fill_out + o);
             else
                 memcpy(fill_out + o, checked + o, sizeof(int16_t) * width);
             if (weighted_fill)

@@ -2,7 +2,7 @@
  * sub-pixel refinement and the uniqueness check (as OpenCV's StereoSGBM), and
  * the right view from the same volume, right pixel xr taking the best of
  * S(xr + d, d). */
-#include "internal.h"
+#include "select.h"
 
 #if CC_HAVE_X86
 #include <immintrin.h>

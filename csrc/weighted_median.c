@@ -12,7 +12,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "internal.h"
+#include "weighted_median.h"
 
 #if CC_HAVE_X86
 #include <immintrin.h>

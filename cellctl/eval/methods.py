@@ -98,6 +98,35 @@ def opencv_sgbm(mode: int) -> DisparityMethod:
     return compute
 
 
+def background_fill(disparity: np.ndarray) -> np.ndarray:
+    """Each invalid (NaN) pixel gets the smaller of the nearest valid disparities left and right in its row.
+
+    The simple fill of the comparison: invalid pixels are mostly occlusions, which belong to the
+    farther surface.  A row without any valid pixel stays invalid.
+    """
+    d = np.asarray(disparity, np.float32)
+    valid = np.isfinite(d)
+    width = d.shape[1]
+    columns = np.arange(width)
+    left_at = np.maximum.accumulate(np.where(valid, columns, -1), axis=1)
+    right_at = np.minimum.accumulate(np.where(valid, columns, width)[:, ::-1], axis=1)[:, ::-1]
+    left = np.take_along_axis(d, np.clip(left_at, 0, width - 1), axis=1)
+    right = np.take_along_axis(d, np.clip(right_at, 0, width - 1), axis=1)
+    left[left_at < 0] = np.nan
+    right[right_at >= width] = np.nan
+    with np.errstate(invalid="ignore"):
+        return np.where(valid, d, np.fmin(left, right)).astype(np.float32)
+
+
+def filled(method: DisparityMethod) -> DisparityMethod:
+    """The method followed by `background_fill` (the fill is part of its timed call)."""
+
+    def compute(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
+        return background_fill(method(left, right, min_disparity, num_disparities))
+
+    return compute
+
+
 def stereo_matcher(**options: Any) -> DisparityMethod:
     """Our matcher (`cellctl.stereo.matcher.StereoMatcher`, which converts BGR to grey) with the given options."""
 
@@ -171,6 +200,11 @@ METHODS: dict[str, Method] = {
         ),
         Method(
             "opencv-hh4", "OpenCV StereoSGBM MODE_HH4 with its post-processing", opencv_sgbm(cv2.StereoSGBM_MODE_HH4)
+        ),
+        Method(
+            "opencv-hh4-fill",
+            "OpenCV StereoSGBM MODE_HH4 with its post-processing and a background fill of invalid pixels",
+            filled(opencv_sgbm(cv2.StereoSGBM_MODE_HH4)),
         ),
         Method(
             "opencv-3way",

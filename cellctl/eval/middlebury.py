@@ -31,6 +31,7 @@ class SceneInfo:
     scale: int  # ground-truth value = disparity * scale
     min_disparity: int
     num_disparities: int  # evaluated range is min .. min + num - 1
+    layout: str = "2001-2003"  # the data set's folder layout (see cellctl.eval.layouts)
 
 
 SCENES: dict[str, SceneInfo] = {
@@ -61,7 +62,7 @@ class Scene:
     left: np.ndarray  # H x W x 3 uint8, BGR
     right: np.ndarray  # H x W x 3 uint8, BGR
     ground_truth: np.ndarray  # H x W float32 disparity of the left image, NaN = unknown
-    regions: dict[str, np.ndarray]  # region name -> H x W bool, True = evaluated
+    regions: dict[str, np.ndarray]  # region name -> H x W bool, True = evaluated; "all" is always one
 
     @property
     def name(self) -> str:
@@ -77,8 +78,9 @@ class Score:
 
     @property
     def mean_percent(self) -> float:
-        """Mean over the regions: the per-scene "mismatch rate" of the paper's Table 3."""
-        return float(np.mean([self.bad_percent[r] for r in REGIONS]))
+        """Mean over the scene's regions: the per-scene "mismatch rate" of the paper's Table 3
+        (2001/2003), the bad % of the one region where a data set has no masks (2005/2006)."""
+        return float(np.mean(list(self.bad_percent.values())))
 
 
 @dataclass(frozen=True)
@@ -190,8 +192,8 @@ def _evaluated(disparity: np.ndarray, ground_truth: np.ndarray, region: np.ndarr
 
 
 def score(disparity: np.ndarray, scene: Scene, threshold: float = BAD_PIXEL_THRESHOLD) -> Score:
-    """Bad-pixel rates of a disparity map (float, NaN = invalid) in the scene's three regions."""
-    bad = {r: bad_pixel_percent(disparity, scene.ground_truth, scene.regions[r], threshold) for r in REGIONS}
+    """Bad-pixel rates of a disparity map (float, NaN = invalid) in each of the scene's regions."""
+    bad = {r: bad_pixel_percent(disparity, scene.ground_truth, m, threshold) for r, m in scene.regions.items()}
     return Score(bad, invalid_percent(disparity, scene.ground_truth, scene.regions["all"]))
 
 
@@ -239,5 +241,5 @@ def evaluate(
 
 
 def average_percent(results: Iterable[SceneResult]) -> float:
-    """Mean of all region rates of the results: over four scenes, the mean of the 12 numbers."""
-    return float(np.mean([r.score.bad_percent[region] for r in results for region in REGIONS]))
+    """Mean of all region rates of the results: over the four 2001/2003 scenes, the mean of the 12 numbers."""
+    return float(np.mean([rate for r in results for rate in r.score.bad_percent.values()]))

@@ -12,7 +12,7 @@ import numpy as np
 
 from cellctl.eval import paper_table3
 from cellctl.eval.methods import METHODS
-from cellctl.eval.middlebury import BAD_PIXEL_THRESHOLD, REGIONS, SCENES, SceneResult, average_percent
+from cellctl.eval.middlebury import BAD_PIXEL_THRESHOLD, REGIONS, SCENES, SceneInfo, SceneResult, average_percent
 
 AVERAGE = "average"
 TIME_REFERENCE = "opencv-hh4"  # run times are also given relative to this method
@@ -34,12 +34,12 @@ class Row:
 
 def build_rows(results: list[SceneResult]) -> list[Row]:
     """Rows per scene (Middlebury's scene order) and then averages; the paper's rows after ours."""
-    scenes = [name for name in SCENES if any(r.scene == name for r in results)]
+    scenes = list(dict.fromkeys(r.scene for r in results))
     methods = list(dict.fromkeys(r.method for r in results))
     rows: list[Row] = []
     for scene in scenes:
         rows += [_scene_row(r) for r in results if r.scene == scene]
-        for column in paper_table3.COLUMNS:
+        for column in paper_table3.COLUMNS if scene in SCENES else ():
             cell = paper_table3.TABLE3[column][scene]
             rows.append(Row("paper", column, scene, cell.mismatch_percent, cell.seconds))
     averages = [_average_row(m, [r for r in results if r.method == m]) for m in methods]
@@ -47,7 +47,7 @@ def build_rows(results: list[SceneResult]) -> list[Row]:
     for row in averages:
         ratio = row.seconds / reference if reference else None
         rows.append(replace(row, time_vs_reference=ratio))
-    if len(scenes) == len(SCENES):  # the paper's averages are over all four scenes
+    if set(scenes) == set(SCENES):  # the paper's averages are over exactly its four scenes
         for column in paper_table3.COLUMNS:
             # As printed where printed; Reference [18] has none, so the mean of its scenes.
             mean = paper_table3.PRINTED_AVERAGE[column] or paper_table3.average(column)
@@ -69,7 +69,11 @@ def _scene_row(result: SceneResult) -> Row:
 
 
 def _average_row(method: str, results: list[SceneResult]) -> Row:
-    bad = {region: float(np.mean([r.score.bad_percent[region] for r in results])) for region in REGIONS}
+    bad = {
+        region: float(np.mean([r.score.bad_percent[region] for r in results]))
+        for region in REGIONS
+        if all(region in r.score.bad_percent for r in results)
+    }
     return Row(
         "ours",
         method,
@@ -125,7 +129,8 @@ def markdown(rows: list[Row], repeat: int = 1) -> str:
         if row.scene == AVERAGE
     ]
     notes = (
-        f"Bad pixels: |d - gt| > {BAD_PIXEL_THRESHOLD:g} px or no disparity, over mask pixels = 255. "
+        f"Bad pixels: |d - gt| > {BAD_PIXEL_THRESHOLD:g} px or no disparity, over mask pixels = 255 "
+        "(2005/2006: known ground truth outside the left band of ndisp px, shown as all). "
         "Per scene, mean % is the mean of nonocc, all and disc (the paper's per-scene mismatch rate); "
         "average % is the mean of all region rates (12 numbers over four scenes). "
         f"Our times are wall-clock seconds per scene, the fastest of {repeat} run(s). "
@@ -137,7 +142,7 @@ def markdown(rows: list[Row], repeat: int = 1) -> str:
 
 
 def _region_cells(row: Row) -> list[str]:
-    return [_number(None if row.bad_percent is None else row.bad_percent[r], 2) for r in REGIONS]
+    return [_number(None if row.bad_percent is None else row.bad_percent.get(r), 2) for r in REGIONS]
 
 
 def _markdown_table(header: list[str], body: list[list[str]], text_columns: int) -> str:
@@ -159,7 +164,7 @@ CSV_FIELDS = (
 
 
 def _record(row: Row) -> dict[str, Any]:
-    regions = {f"{r}_percent": None if row.bad_percent is None else row.bad_percent[r] for r in REGIONS}
+    regions = {f"{r}_percent": None if row.bad_percent is None else row.bad_percent.get(r) for r in REGIONS}
     return {
         "source": row.source,
         "method": row.method,
@@ -182,7 +187,9 @@ def csv_text(rows: list[Row]) -> str:
     return buffer.getvalue()
 
 
-def json_document(rows: list[Row], data_dir: Path, repeat: int = 1) -> dict[str, Any]:
+def json_document(
+    rows: list[Row], data_dir: Path, repeat: int = 1, infos: dict[str, SceneInfo] | None = None
+) -> dict[str, Any]:
     """The run as a JSON-ready dict: settings, methods, scenes and every row."""
     methods = list(dict.fromkeys(row.method for row in rows if row.source == "ours"))
     return {
@@ -192,8 +199,13 @@ def json_document(rows: list[Row], data_dir: Path, repeat: int = 1) -> dict[str,
         "time_reference": TIME_REFERENCE,
         "timing": f"wall-clock seconds per scene, fastest of {repeat} run(s)",
         "scenes": {
-            name: {"min_disparity": info.min_disparity, "num_disparities": info.num_disparities, "scale": info.scale}
-            for name, info in SCENES.items()
+            name: {
+                "set": info.layout,
+                "min_disparity": info.min_disparity,
+                "num_disparities": info.num_disparities,
+                "scale": info.scale,
+            }
+            for name, info in (infos if infos is not None else SCENES).items()
             if any(row.scene == name for row in rows)
         },
         "methods": {

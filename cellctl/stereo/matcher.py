@@ -43,8 +43,10 @@ _ERRORS = {
 _SAME_IN_C = (
     "min_disparity",
     "num_disparities",
+    "census_smooth",
     "lambda_census",
     "lambda_bt",
+    "bt_prefilter",
     "cost_scale",
     "p1",
     "p2",
@@ -52,6 +54,7 @@ _SAME_IN_C = (
     "paths",
     "uniqueness",
     "median",
+    "fill_interpolate",
     "fill_radius",
     "border_fit",
     "weighted_median",
@@ -68,9 +71,11 @@ class MatcherParams:
     min_disparity: int
     num_disparities: int
     census_window: tuple[int, int]  # (width, height), odd, up to 9x7
+    census_smooth: int  # 0: census of the pixels, 1: of their 3x3 sums (robust in flat regions)
     cost: str  # "census_bt" (the paper), "census" or "bt"
     lambda_census: float  # rho scale of the Hamming distance, bits
-    lambda_bt: float  # rho scale of the BT cost, grey levels
+    lambda_bt: float  # rho scale of the BT cost, levels of the BT image
+    bt_prefilter: int  # BT image: 0 raw grey, 1..63 horizontal Sobel clipped to +-cap (OpenCV's preFilterCap)
     cost_scale: int  # each rho term is quantised to 0..cost_scale
     p1: int  # penalty of a 1 px disparity step
     p2: int  # penalty of larger steps (p2 > p1)
@@ -81,6 +86,7 @@ class MatcherParams:
     lr_max_diff: float  # left-right tolerance in px; negative disables the check
     fill: str  # "weighted" (background, then colour-weighted median), "background" or "none"
     median: int  # 0, 3 or 5
+    fill_interpolate: int  # fill: runs between valid pixels this close (px) follow a line, 0 = off
     fill_radius: int  # window radius (px) of the weighted fill, 1..15
     border_fit: int  # fill: border-occluded strips follow a line fitted to this many px, 0 = off
     weighted_median: int  # window radius (px) of the final colour-weighted median, 0 = off
@@ -160,6 +166,7 @@ def make_params(**overrides: Any) -> MatcherParams:
     ints = (
         "min_disparity",
         "num_disparities",
+        "bt_prefilter",
         "cost_scale",
         "p1",
         "p2",
@@ -167,6 +174,7 @@ def make_params(**overrides: Any) -> MatcherParams:
         "paths",
         "uniqueness",
         "median",
+        "fill_interpolate",
         "fill_radius",
         "border_fit",
         "weighted_median",

@@ -156,3 +156,24 @@ def test_command_rejects_a_file_as_output_folder(tmp_path: Path) -> None:
     (tmp_path / "taken").write_text("")
     with pytest.raises(ValueError, match="is a file"):
         _cellctl(["eval", "middlebury", "--methods", "sad-bm", "--out", str(tmp_path / "taken")])
+
+
+def test_command_on_a_2014_folder_compares_with_hh4_fill_and_checks_radiometry(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tests.eval.test_layouts import _folder_2014
+
+    _folder_2014(tmp_path / "data")
+    status = _cellctl(
+        ["eval", "middlebury", "--data", str(tmp_path / "data"), "--repeat", "1", "--radiometric", "--json"]
+    )
+    assert status == 0
+    captured = capsys.readouterr()
+    document = json.loads(captured.out)
+    [scene] = document["comparison"]["scenes"]
+    assert scene["scene"] == "Synth" and scene["set"] == "2014"
+    [summary] = document["comparison"]["sets"]
+    assert summary["scenes"] == 1 and summary["time_ratio"] > 0
+    assert set(document["radiometric"]) == {"plain", "gain", "gamma", "offset", "all"}
+    # 3 methods (ours, HH4 + fill, HH4) on one scene, plain and four variants
+    assert "15/15 done" in captured.err

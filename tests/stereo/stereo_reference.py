@@ -13,10 +13,19 @@ INVALID = -32768
 LUT = 64
 
 
-def census(img: np.ndarray, cw: int, ch: int) -> np.ndarray:
-    """Bit i set when the centre >= the i-th neighbour (raster order), borders replicated."""
+def box3_sum(img: np.ndarray) -> np.ndarray:
+    """Sum of each pixel's 3x3 neighbourhood, borders replicated."""
+    h, w = img.shape
+    pad = np.pad(img.astype(np.int64), 1, mode="edge")
+    return sum(pad[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+
+
+def census(img: np.ndarray, cw: int, ch: int, smooth: int = 0) -> np.ndarray:
+    """Bit i set when the centre >= the i-th neighbour (raster order), borders replicated;
+    with smooth = 1 the compared values are the pixels' 3x3 sums."""
     h, w = img.shape
     rx, ry = cw // 2, ch // 2
+    img = box3_sum(img) if smooth else img
     pad = np.pad(img, ((ry, ry), (rx, rx)), mode="edge")
     out = np.zeros((h, w), np.uint64)
     bit = 0
@@ -39,6 +48,17 @@ def bt_bounds(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.minimum(np.minimum(i, a), b), np.maximum(np.maximum(i, a), b)
 
 
+def bt_image(img: np.ndarray, cap: int) -> np.ndarray:
+    """The image BT compares: the grey image (cap 0) or its horizontal Sobel clipped to [-cap, cap], + cap."""
+    if cap == 0:
+        return img
+    h, w = img.shape
+    pad = np.pad(img.astype(np.int64), 1, mode="edge")
+    dx = pad[:, 2:] - pad[:, :-2]  # I(x+1) - I(x-1), rows -1..h
+    sobel = dx[:-2] + 2 * dx[1:-1] + dx[2:]
+    return (np.clip(sobel, -cap, cap) + cap).astype(np.uint8)
+
+
 def rho_table(lam: float, scale: int) -> np.ndarray:
     c = np.arange(LUT, dtype=np.float64)
     return np.floor(scale * (1.0 - np.exp(-c / np.float64(np.float32(lam)))) + 0.5).astype(np.int64)
@@ -51,8 +71,10 @@ def cost_volume(left, right, p) -> np.ndarray:
     tc = rho_table(p["lambda_census"], p["cost_scale"]) if p["cost"] != "bt" else np.zeros(LUT, np.int64)
     tb = rho_table(p["lambda_bt"], p["cost_scale"]) if p["cost"] != "census" else np.zeros(LUT, np.int64)
     cmax = tc[-1] + tb[-1]
-    cl = census(left, cw, ch) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
-    cr = census(right, cw, ch) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
+    smooth = p["census_smooth"]
+    cl = census(left, cw, ch, smooth) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
+    cr = census(right, cw, ch, smooth) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
+    left, right = bt_image(left, p["bt_prefilter"]), bt_image(right, p["bt_prefilter"])
     il, ir = left.astype(np.int64), right.astype(np.int64)
     lmin, lmax = bt_bounds(left)
     rmin, rmax = bt_bounds(right)
@@ -288,6 +310,10 @@ def postprocess(raw_left, raw_right, p, guide=None):
                     [checked[y, after[0]]] if len(after) else []
                 )
                 filled[y, x] = min(cands) if cands else INVALID
+                span = p["fill_interpolate"] * 16
+                if len(cands) == 2 and span > 0 and abs(int(cands[0]) - int(cands[1])) <= span:
+                    xl, xr, dl, dr = int(before[-1]), int(after[0]), int(cands[0]), int(cands[1])
+                    filled[y, x] = dl + (2 * (dr - dl) * (x - xl) + (xr - xl)) // (2 * (xr - xl))
     background = filled.copy()  # the weighted fill votes with the background fill, strips included
     strip = np.zeros((h, w), bool)
     if p["fill"] in ("background", "weighted") and p["border_fit"]:

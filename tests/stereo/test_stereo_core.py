@@ -40,6 +40,9 @@ COST_CASES = [
     dict(num_disparities=6, cost="bt", lambda_bt=4.0),
     dict(num_disparities=16, census_window=(9, 7), lambda_census=9.0, cost_scale=100),
     dict(num_disparities=33, min_disparity=-10, census_window=(3, 3)),
+    dict(num_disparities=12, bt_prefilter=0, census_smooth=0),  # the raw-intensity BT of the paper
+    dict(num_disparities=12, bt_prefilter=5, lambda_bt=3.0),  # the clip bites
+    dict(num_disparities=10, min_disparity=-3, census_smooth=1, census_window=(7, 5), bt_prefilter=63),
 ]
 
 
@@ -57,6 +60,7 @@ AGG_CASES = [
     dict(num_disparities=20, paths=4, p2_gamma=20, p1=7, p2=90),
     dict(num_disparities=17, paths=8, p2_gamma=5, cost="census", p1=3, p2=31),
     dict(num_disparities=5, paths=4, cost="bt"),
+    dict(num_disparities=11, paths=4, census_smooth=1, bt_prefilter=9, p2_gamma=30),
 ]
 
 
@@ -245,3 +249,33 @@ def test_full_pipeline_matches_reference_chain(case, colour):
     ):
         np.testing.assert_array_equal(got, stereo.to_float(r.astype(np.int16)))
     assert np.array_equal(result.valid, want[0] != ref.INVALID)
+
+
+def test_fill_interpolates_holes_on_one_surface_and_takes_the_background_across_a_step():
+    row = np.full(12, stereo.INVALID, np.int16)
+    row[[1, 5]] = [10 * 16, 11 * 16]  # 1 px apart: one surface, the hole follows the line
+    row[[7, 11]] = [11 * 16, 20 * 16]  # 9 px apart: an occlusion, the farther (smaller) value
+    raw = np.tile(row, (3, 1))
+    guide = np.zeros((3, 12), np.uint8)
+    opts = dict(num_disparities=24, lr_max_diff=-1, fill="background", median=0, weighted_median=0, border_fit=0)
+    _, filled, _ = stereo.postprocess(raw, raw, guide, fill_interpolate=2, **opts)
+    assert filled[1, 2:5].tolist() == [164, 168, 172]  # 160 + 16 * k / 4, rounded half up
+    assert filled[1, 8:11].tolist() == [176, 176, 176]
+    assert filled[1, 0] == 160  # before the first valid pixel: its value
+    _, off, _ = stereo.postprocess(raw, raw, guide, fill_interpolate=0, **opts)
+    assert off[1, 2:5].tolist() == [160, 160, 160]
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (dict(bt_prefilter=-1), "bt_prefilter"),
+        (dict(bt_prefilter=64), "bt_prefilter"),
+        (dict(census_smooth=3), "census_smooth"),
+        (dict(fill_interpolate=-1), "fill_interpolate"),
+        (dict(fill_interpolate=65), "fill_interpolate"),
+    ],
+)
+def test_robust_cost_and_fill_parameters_are_validated(bad, message):
+    with pytest.raises(ValueError, match=message):
+        make_params(**bad)

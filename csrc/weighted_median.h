@@ -1,0 +1,38 @@
+/* weighted_median.c: the colour-weighted median of a disparity map at one pixel. */
+#ifndef CELLCTL_WEIGHTED_MEDIAN_H
+#define CELLCTL_WEIGHTED_MEDIAN_H
+
+#include "common.h"
+
+#define CC_WM_COLOURS (3 * 255 + 1)                                  /* summed channel differences */
+#define CC_WM_SPACES (2 * CC_MAX_WM_RADIUS * CC_MAX_WM_RADIUS + 1)   /* squared distances */
+typedef struct cc_wm_tables {
+    uint16_t colour[CC_WM_COLOURS];
+    uint16_t space[CC_WM_SPACES];
+    uint16_t gather_pad[2];   /* the vector kernel reads 32 bits at each 16-bit entry */
+} cc_wm_tables;
+typedef struct cc_wm_image {  /* the guide: 1 or 3 interleaved 8-bit channels */
+    const uint8_t *data;
+    int width, height, channels;
+    size_t stride;
+    const uint32_t *packed;   /* optional: channels packed per pixel (B | G << 8 | R << 16), 8 px slack */
+    int use_avx2;             /* the vector kernel may read `packed` */
+} cc_wm_image;
+/* Pack row y of the guide into out[0..width) (grey counts as three equal channels). */
+void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out);
+typedef struct cc_wm_hist {   /* per thread, one entry per disparity level, kept zero between pixels */
+    int64_t *value;
+    uint32_t *weight;
+} cc_wm_hist;
+void cc_wm_tables_init(cc_wm_tables *t, float sigma_colour, float sigma_space);
+size_t cc_wm_hist_bytes(int levels);
+cc_wm_hist cc_wm_hist_at(void *base, int levels);
+void cc_wm_hist_clear(cc_wm_hist *h, int levels);
+#define CC_WM_NO_LEVEL 0xFFFF
+/* Histogram level of a disparity: rounded to whole px, clamped to the range; CC_WM_NO_LEVEL if invalid. */
+int cc_wm_level(int v, int dmin, int levels);
+/* Weighted median at (x, y) of `map`, whose levels (cc_wm_level) are in `level`. */
+int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
+                    const uint16_t *level, int x, int y, int radius, cc_wm_hist *h);
+
+#endif

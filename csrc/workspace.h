@@ -1,0 +1,30 @@
+/* workspace.c: the buffers of one matcher for one image size. */
+#ifndef CELLCTL_WORKSPACE_H
+#define CELLCTL_WORKSPACE_H
+
+#include "params.h"
+
+typedef struct cc_workspace {
+    int width, height, threads;
+    uint16_t *volume;        /* aggregated cost S, [height][width][Dp] */
+    uint16_t *vpath;         /* vertical/diagonal paths: [paths][2 rows][width][vstride] */
+    uint16_t *vmin;          /* their minima: [paths][2 rows][width] */
+    size_t vstride;          /* Dp + 2 guards */
+    uint8_t *scratch;        /* per thread: see cc_thread_scratch */
+    size_t scratch_stride;
+} cc_workspace;
+
+/* Per-thread scratch of pass 3 and the selection. */
+typedef struct cc_thread_scratch {
+    uint8_t *cost_row;       /* [width][Dp] + slack */
+    uint16_t *sum_row;       /* [width][Dp] */
+    uint16_t *hpath[2];      /* two pixels' path vectors with guards */
+    uint16_t *select_tmp;    /* [width] */
+} cc_thread_scratch;
+
+/* Allocates every buffer (guards set); *bytes receives their size.  CC_OK or CC_ERR_NOMEM. */
+int cc_workspace_alloc(cc_workspace *ws, const cc_setup *s, int width, int height, size_t *bytes);
+void cc_workspace_free(cc_workspace *ws);
+cc_thread_scratch cc_thread_scratch_at(const cc_setup *s, const cc_workspace *ws, int thread);
+
+#endif
