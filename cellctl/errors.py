@@ -24,6 +24,9 @@ class FailureKind(enum.Enum):
     ENDS_TOO_CLOSE_TO_CALL = "ends_too_close_to_call"  #: toe and heel halves of the footprint too alike
     SURFACE_NOT_MEASURED = "surface_not_measured"  #: no top surface at the heel/toe point or on the glue path
     MEASUREMENT_INVALID = "measurement_invalid"  #: numbers outside plausible limits
+    TABLE_MOVED = "table_moved"  #: the table no longer lies where it was taught (table or cameras moved)
+    OUTLINE_INCONSISTENT = "outline_inconsistent"  #: the outline disagrees with the depth step or between the cameras
+    GLUE_PATH_INCONSISTENT = "glue_path_inconsistent"  #: glue path heights or normals disagree with the sole's surface
     CALIBRATION_MISMATCH = "calibration_mismatch"  #: the images do not match the calibration
     CALIBRATION_MISSING = "calibration_missing"  #: no usable calibration is loaded
     CAMERA_MISSING = "camera_missing"  #: a camera is not connected or cannot be opened

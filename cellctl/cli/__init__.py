@@ -25,6 +25,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "rectify",
     "simulate",
     "measure",
+    "teach",
     "bench_sole",
     "results",
     "run",

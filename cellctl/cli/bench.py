@@ -13,6 +13,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--data", help="Middlebury 2001-2003 folder (default ../shared/data/middlebury/2001-2003)")
     p.add_argument("--runs", type=int, default=None, help="timed runs per method (default 9 Teddy, 5 synthetic)")
     p.add_argument("--json", action="store_true", help="print JSON instead of markdown")
+    p.add_argument(
+        "--cycle",
+        action="store_true",
+        help="instead: the cell's measurement cycle on simulated soles against OpenCV HH4 on the same pair",
+    )
+    p.add_argument("--cycles", type=int, default=20, help="with --cycle: cycles to time (default 20)")
+    p.add_argument(
+        "--whole-pair",
+        action="store_true",
+        help="with --cycle: no taught table, the whole pair matched (the cycle before the search region)",
+    )
     p.set_defaults(func=run)
 
 
@@ -24,6 +35,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--threads must be at least 1")
     if args.runs is not None and args.runs < 1:
         raise ValueError("--runs must be at least 1")
+    if args.cycle:
+        return run_cycle(args.cycles, args.whole_pair)
     teddy = benchmark.teddy_case(args.data, runs=args.runs or 9)
     synthetic = benchmark.synthetic_case(runs=args.runs or 5)
     results, summaries = benchmark.run_benchmark(
@@ -33,4 +46,20 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(benchmark.as_json(results, args.threads, summaries), indent=2))
     else:
         print(benchmark.to_markdown(results, args.threads, summaries))
+    return 0
+
+
+def run_cycle(cycles: int, whole_pair: bool) -> int:
+    """`cellctl bench --cycle`: cellctl.eval.cycle_bench on the simulated rig of deploy/sim-calib.yaml."""
+    from cellctl.cli.demo_cell import DEFAULT_CONFIG
+    from cellctl.eval.cycle_bench import bench_cycles
+    from cellctl.vision.calibration import Calibration
+
+    if cycles < 1:
+        raise ValueError(f"--cycles {cycles} must be at least 1")
+    calib = Calibration.load(DEFAULT_CONFIG.parent / "sim-calib.yaml")
+    bench = bench_cycles(
+        calib, cycles, progress=lambda s: print(f"  {s}", file=sys.stderr, flush=True), whole_pair=whole_pair
+    )
+    print(bench.to_markdown())
     return 0

@@ -1,4 +1,4 @@
-"""`cellctl bench-sole`: measurement accuracy and time on simulated white and black soles."""
+"""`cellctl bench-sole`: measurement accuracy and time on simulated soles, plain or over the variation matrix."""
 
 from __future__ import annotations
 
@@ -20,8 +20,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("--soles", type=int, default=20, help="number of soles (default 20)")
+    parser.add_argument(
+        "--matrix",
+        action="store_true",
+        help="spread the soles over the variation matrix (toe/heel shapes, walls, edges, colours, tables, "
+        "shadows, camera gain and gamma, gloss, noise, heights, rig) and print the per-variation table",
+    )
+    parser.add_argument(
+        "--variations",
+        metavar="NAME,...",
+        help="with --matrix: only these matrix entries (default all; `--variations list` prints them)",
+    )
     parser.add_argument("--first-seed", type=int, default=0, help="seed of the first sole (default 0)")
     parser.add_argument("--calib", metavar="calib.yaml", help="rig to simulate (default: the built-in simulated rig)")
+    parser.add_argument(
+        "--taught", action="store_true", help="teach each scene's empty table first (as `cellctl teach` at set-up)"
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of markdown")
     parser.set_defaults(func=run)
 
@@ -33,13 +47,50 @@ def run(args: argparse.Namespace) -> int:
 
     if args.soles < 1:
         raise UserError(f"--soles must be at least 1, got {args.soles}")
+    if args.variations and not args.matrix:
+        raise UserError("--variations needs --matrix")
+    if args.matrix:
+        return _run_matrix(args)
     calib = Calibration.load(args.calib) if args.calib else default_rig()
     # Alternate colours over consecutive seeds, so both colours see every kind of shape and pose.
     soles = [(args.first_seed + i, "white" if i % 2 == 0 else "black") for i in range(args.soles)]
-    rows = bench_sole.bench_soles(calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr))
+    rows = bench_sole.bench_soles(
+        calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught
+    )
     if args.json:
         print(json.dumps(bench_sole.as_json(rows), indent=2))
     else:
         command = f"cellctl bench-sole --soles {args.soles} --first-seed {args.first_seed}"
+        command += " --taught" if args.taught else ""
         print(bench_sole.to_markdown(rows, command + (f" --calib {args.calib}" if args.calib else "")))
     return 0
+
+
+def _run_matrix(args: argparse.Namespace) -> int:
+    from cellctl.eval import sole_matrix
+    from cellctl.sim.look import VARIATIONS
+    from cellctl.sim.matrix import matrix_soles
+    from cellctl.vision.calibration import Calibration
+
+    if args.variations == "list":
+        for name, variation in VARIATIONS.items():
+            print(f"{name:18} {variation.description}")
+        return 0
+    entries = tuple(args.variations.split(",")) if args.variations else None
+    try:
+        soles = matrix_soles(args.soles, args.first_seed, entries)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    calib = Calibration.load(args.calib) if args.calib else None
+    results = sole_matrix.bench_matrix(
+        soles, calib, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught
+    )
+    if args.json:
+        print(json.dumps(sole_matrix.as_json(results), indent=2))
+    else:
+        command = f"cellctl bench-sole --matrix --soles {args.soles} --first-seed {args.first_seed}"
+        command += f" --variations {args.variations}" if args.variations else ""
+        command += f" --calib {args.calib}" if args.calib else ""
+        command += " --taught" if args.taught else ""
+        print(sole_matrix.matrix_markdown(results, command))
+    return 0 if sole_matrix.acceptance(results).passed else 1

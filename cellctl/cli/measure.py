@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
     from cellctl.vision.measurement import check_glue_settings, measure_sole
     from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
+    from cellctl.vision.teach import TeachError, load_taught
 
     offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset
     spacing = GLUE_SPACING_MM if args.glue_spacing is None else args.glue_spacing
@@ -71,7 +72,11 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise UserError(f"{name} {getattr(args, name.lower())}: {exc}") from None
     depth_range = tuple(args.depth_range) if args.depth_range else DEFAULT_DEPTH_RANGE_MM
-    reconstruction = SoleReconstructor(calib, depth_range).reconstruct(left, right)
+    try:  # a table taught beside the calibration (`cellctl teach`) is used when there is one
+        taught = load_taught(args.calib, calib)
+    except TeachError as exc:
+        raise UserError(str(exc)) from None
+    reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right)
     result = measure_sole(reconstruction, offset, spacing)
     if args.ply:
         _write_ply(args.ply, reconstruction)

@@ -18,8 +18,11 @@ import numpy as np
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM
-from cellctl.vision.measurement import measure_sole
+from cellctl.vision.measurement import SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.teach import TeachError, average_exposures
+
+CRASHED = "measurement raised"  # reason and failure of a sole whose measurement raised an exception
 
 
 @dataclass
@@ -36,49 +39,111 @@ class SoleBenchRow:
     glue_height_error_max_mm: float | None
     glue_normal_error_max_deg: float | None
     seconds: float
+    variations: str = "plain"  # matrix variations of the scene, "+"-joined (cellctl.sim.look)
+    failure: str | None = None  # FailureKind value of a refusal
+    half_area_difference_true: float | None = None  # the truth's (toe half - heel half) / area
 
 
 def bench_soles(
-    calib: Calibration, soles: list[tuple[int, str]], progress: Callable[[str], None] | None = None
+    calib: Calibration,
+    soles: list[tuple[int, str]],
+    progress: Callable[[str], None] | None = None,
+    taught: bool = False,
 ) -> list[SoleBenchRow]:
-    """Measure each (seed, colour) sole once and compare with its truth."""
+    """Measure each (seed, colour) plain sole once and compare with its truth.
+
+    taught: teach each scene's empty table first (not timed), as a cell does once at set-up
+    (cellctl.vision.teach); else measure without a taught table.
+    """
     reconstructor = SoleReconstructor(calib)
     rows = []
     for seed, color in soles:
         scene = SoleScene.random(seed, color, calib)
-        pair = scene.render()
-        start = time.perf_counter()
-        reconstruction = reconstructor.reconstruct(pair.left, pair.right)
-        result = measure_sole(reconstruction)
-        seconds = time.perf_counter() - start
-        truth = scene.sole.truth()
-        row = SoleBenchRow(
-            seed, color, truth.length_mm, result.valid, result.reason, None, None, None, None, None, None, seconds
-        )
-        if result.valid:
-            row.length_error_mm = result.length_mm - truth.length_mm
-            row.heel_error_mm = result.heel_height_mm - truth.heel_height_mm
-            row.toe_error_mm = result.toe_height_mm - truth.toe_height_mm
-            transform = scene.table_from_measured(result.camera_to_table)
-            points = result.glue_path.points @ transform[:3, :3].T + transform[:3, 3]
-            normals = result.glue_path.normals @ transform[:3, :3].T
-            outline = scene.sole.outline_table(4000).astype(np.float32).reshape(-1, 1, 2)
-            inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in points[:, :2]])
-            row.glue_inset_error_max_mm = float(np.abs(inset - GLUE_OFFSET_MM).max())
-            row.glue_height_error_max_mm = float(np.abs(points[:, 2] - scene.sole.top_height_at(points[:, :2])).max())
-            cosines = np.clip(np.sum(normals * scene.sole.top_normal_at(points[:, :2]), axis=1), -1.0, 1.0)
-            row.glue_normal_error_max_deg = float(np.degrees(np.arccos(cosines)).max())
-        rows.append(row)
+        rows.append(measure_scene(taught_reconstructor(calib, scene) if taught else reconstructor, scene))
         if progress:
-            progress(_row_text(row))
+            progress(_row_text(rows[-1]))
     return rows
+
+
+TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellctl teach` takes several pairs
+
+
+def taught_reconstructor(calib: Calibration, scene: SoleScene) -> SoleReconstructor:
+    """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise).
+
+    If the table cannot be taught (e.g. too noisy to match), the reconstructor is an untaught one, as the
+    service runs without a taught table.
+    """
+    shots = [scene.render_empty(shot) for shot in range(1, TEACH_SHOTS + 1)]
+    left, right = average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+    try:
+        return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
+    except TeachError:
+        return SoleReconstructor(calib)
+
+
+def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain") -> SoleBenchRow:
+    """Render one scene (not timed), measure it like `cellctl measure` (timed) and compare with its truth."""
+    assert scene.sole is not None
+    pair = scene.render()
+    start = time.perf_counter()
+    try:
+        result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
+    except Exception as exc:  # noqa: BLE001 - a crash is a finding of the benchmark, not the end of the run
+        result = SoleMeasurement(None, None, None, None, 0, False, f"{CRASHED}: {type(exc).__name__}: {exc}")
+    seconds = time.perf_counter() - start
+    truth = scene.sole.truth()
+    row = SoleBenchRow(
+        scene.seed,
+        scene.color,
+        truth.length_mm,
+        result.valid,
+        result.reason,
+        None,
+        None,
+        None,
+        None,
+        None,
+        None,
+        seconds,
+        variations,
+        CRASHED
+        if result.failure is None and not result.valid
+        else None
+        if result.failure is None
+        else result.failure.value,
+        truth.half_area_difference,
+    )
+    if result.valid:
+        assert result.length_mm is not None and result.heel_height_mm is not None
+        assert result.toe_height_mm is not None and result.glue_path is not None
+        row.length_error_mm = result.length_mm - truth.length_mm
+        row.heel_error_mm = result.heel_height_mm - truth.heel_height_mm
+        row.toe_error_mm = result.toe_height_mm - truth.toe_height_mm
+        transform = scene.table_from_measured(result.camera_to_table)
+        points = result.glue_path.points @ transform[:3, :3].T + transform[:3, 3]
+        normals = result.glue_path.normals @ transform[:3, :3].T
+        inset, height, normal = glue_truth(scene, points[:, :2])
+        row.glue_inset_error_max_mm = float(np.abs(inset - GLUE_OFFSET_MM).max())
+        row.glue_height_error_max_mm = float(np.abs(points[:, 2] - height).max())
+        cosines = np.clip(np.sum(normals * normal, axis=1), -1.0, 1.0)
+        row.glue_normal_error_max_deg = float(np.degrees(np.arccos(cosines)).max())
+    return row
+
+
+def glue_truth(scene: SoleScene, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At table points: distance inside the true footprint outline, true top height and true surface normal."""
+    assert scene.sole is not None
+    outline = scene.sole.footprint_table().astype(np.float32).reshape(-1, 1, 2)
+    inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in xy])
+    return inset, scene.sole.top_height_at(xy), scene.sole.top_normal_at(xy)
 
 
 def _row_text(row: SoleBenchRow) -> str:
     if not row.valid:
-        return f"sole {row.seed} {row.color}: NOT MEASURED: {row.reason}"
+        return f"sole {row.seed} {row.color} {row.variations}: NOT MEASURED: {row.reason}"
     return (
-        f"sole {row.seed} {row.color}: length {row.length_error_mm:+.2f}, heel {row.heel_error_mm:+.2f}, "
+        f"sole {row.seed} {row.color} {row.variations}: length {row.length_error_mm:+.2f}, heel {row.heel_error_mm:+.2f}, "
         f"toe {row.toe_error_mm:+.2f} mm, {row.seconds:.2f} s"
     )
 

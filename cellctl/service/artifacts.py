@@ -1,16 +1,28 @@
 """What a cycle leaves for people: the sole's cloud as PLY and the left image with the glue path drawn.
 
-Written after the PLC has its answer; a failure here is logged and never fails the cycle. The files go to
-a staging folder that the journal renames into place in the same transaction that records them, so no
-folder is left that no row refers to (Journal.prune_orphans cleans up after a crash at the next start).
+Written after the PLC has its answer, and only while the service is idle: the PLC may trigger again as
+soon as it has read a result, and on 2 cores artifacts written beside a cycle slowed its match by as much
+as they saved (docs/sole-benchmark.md). So `ArtifactWriter` keeps the newest few cycles' jobs and a
+writer thread writes them step by step, each step started only while no cycle runs; jobs that a
+busy line never leaves time for are dropped, oldest first (counted and logged). At stop the daemon's own
+thread writes what is still pending. Files go to a staging folder renamed into state_dir/cycles/<row> when
+complete, so a job given up at stop leaves nothing behind. The journal is only touched from the daemon's
+thread (`attach_finished`), as SQLite connections belong to one thread. A failure here is logged and never
+fails a cycle.
 """
 
 from __future__ import annotations
 
+import collections
 import logging
 import shutil
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
+import numpy as np
 
 from cellctl.cameras.base import StereoFrame
 from cellctl.service.journal import CycleRecord, Journal
@@ -21,36 +33,189 @@ from cellctl.vision.reconstruction import Reconstruction
 
 log = logging.getLogger(__name__)
 
-# Huffman coding only: lossless, ~20 % faster and smaller than zlib level 1 on camera images
-# (63 vs 79 ms for 1280x1024); the next trigger may be waiting for this.
+# Huffman coding only: lossless, ~20 % faster and smaller than zlib level 1 on camera images (63 vs 79 ms).
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
+MAX_PENDING = 4  # jobs kept waiting for idle time (each holds a frame pair and a cloud, ~20 MB)
+# The writer thread keeps normal priority: a niced thread that holds the GIL (Open3D's PLY writer, numpy)
+# and is then starved by the scheduler blocks the daemon's thread behind it (seen at load 20: cycles over
+# the PLC link's 5 s liveness). Starting steps only while idle is what keeps it out of the cycles.
 
 
-def keep_artifacts(
-    journal: Journal,
-    record: CycleRecord,
-    frame: StereoFrame,
-    calib: Calibration,
-    reconstruction: Reconstruction,
-    measurement: SoleMeasurement,
-    keep: int,
-) -> None:
-    """PLY and overlay PNG of the cycle in its artifact folder, then prune to the newest `keep` cycles."""
-    if keep == 0 or record.id is None:
-        return
-    try:
-        folder = journal.staging_dir(record.id)  # renamed into place by attach_artifacts
-        folder.mkdir(parents=True, exist_ok=True)
-        ply = folder / f"cycle-{record.cycle}.ply"
-        import open3d as o3d
+@dataclass(frozen=True)
+class ArtifactJob:
+    """One cycle's artifacts to write: everything needed, nothing shared with the next cycle."""
 
-        if not o3d.io.write_point_cloud(str(ply), reconstruction.point_cloud(), write_ascii=False):
-            raise OSError(f"Open3D could not write {ply}")
-        overlay = folder / f"cycle-{record.cycle}-overlay.png"
-        if not cv2.imwrite(str(overlay), draw_on_left(frame.left, calib, measurement), PNG_FAST):
-            raise OSError(f"cannot write {overlay}")
-        journal.attach_artifacts(record.id, ply.name, overlay.name)
-        journal.prune_artifacts(keep)
-    except Exception as exc:
-        log.warning("cycle %d: artifacts not kept: %s", record.cycle, exc)
-        shutil.rmtree(journal.staging_dir(record.id), ignore_errors=True)
+    row_id: int
+    cycle: int
+    folder: Path
+    frame: StereoFrame
+    reconstruction: Reconstruction
+    measurement: SoleMeasurement
+
+    @property
+    def staging(self) -> Path:
+        """Where the files are written first: the cycle's folder appears whole (renamed) or not at all."""
+        return self.folder.parent.parent / "partial" / self.folder.name
+
+
+@dataclass(frozen=True)
+class WrittenArtifacts:
+    row_id: int
+    cycle: int
+    ply: Path
+    overlay: Path
+
+
+class ArtifactWriter:
+    """Writes artifact jobs on its thread while `idle` is set; the daemon owns the journal side."""
+
+    def __init__(self, calib: Calibration, keep: int) -> None:
+        self.calib = calib
+        self.keep = keep
+        self.dropped = 0
+        self._pending: collections.deque[ArtifactJob] = collections.deque()
+        self._finished: collections.deque[WrittenArtifacts] = collections.deque()
+        self._lock = threading.Lock()
+        self._work = threading.Condition(self._lock)
+        self._idle = False  # the service waits for a trigger: the writer may work
+        self._closing = False
+        self._writing = False
+        self._abandon = False  # the thread's job in progress was given up at stop: discard it
+        self._thread: threading.Thread | None = None
+
+    # ---- the daemon's side ------------------------------------------------------------------------
+
+    def submit(
+        self,
+        journal: Journal,
+        record: CycleRecord,
+        frame: StereoFrame,
+        result: Reconstruction,
+        measurement: SoleMeasurement,
+    ) -> None:
+        """Queue a measured cycle's artifacts (nothing is written now)."""
+        if self.keep == 0 or record.id is None:
+            return
+        job = ArtifactJob(record.id, record.cycle, journal.artifact_dir(record.id), frame, result, measurement)
+        with self._work:
+            self._pending.append(job)
+            limit = min(self.keep, MAX_PENDING)
+            while len(self._pending) > limit:
+                old = self._pending.popleft()
+                self.dropped += 1
+                log.info("cycle %d: artifacts skipped, no idle time before newer cycles", old.cycle)
+            self._start()
+            self._work.notify_all()
+
+    def set_idle(self, idle: bool) -> None:
+        """Whether the service waits for a trigger (the writer works) or runs a cycle (the writer waits)."""
+        with self._work:
+            self._idle = idle
+            self._work.notify_all()
+
+    def attach_finished(self, journal: Journal) -> None:
+        """Record written artifacts in the journal and prune old ones (daemon thread, idle time)."""
+        while True:
+            with self._lock:
+                if not self._finished:
+                    return
+                done = self._finished.popleft()
+            try:
+                journal.attach_artifacts(done.row_id, done.ply, done.overlay)
+                journal.prune_artifacts(self.keep)
+            except Exception as exc:
+                log.warning("cycle %d: artifacts not recorded: %s", done.cycle, exc)
+
+    def flush(self, timeout_s: float) -> bool:
+        """At stop: write the pending jobs in the calling thread, then wait for the thread's job in progress;
+        False (and that job given up) if it does not end within `timeout_s`."""
+        with self._work:
+            jobs = list(self._pending)
+            self._pending.clear()
+            self._idle = True
+            self._work.notify_all()
+        for job in jobs:
+            self._finish(job, self._write(job, wait_idle=False))
+        with self._work:
+            done = self._work.wait_for(lambda: not self._writing, timeout_s)
+            self._abandon = not done
+            return done
+
+    def close(self) -> None:
+        with self._work:
+            self._closing = True
+            self._work.notify_all()
+        if self._thread is not None:
+            self._thread.join(5.0)
+
+    # ---- the writer thread --------------------------------------------------------------------------
+
+    def _start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="artifact writer", daemon=True)
+            self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            with self._work:
+                self._work.wait_for(lambda: (self._pending and self._idle) or self._closing)
+                if self._closing:
+                    return
+                job = self._pending.popleft()
+                self._writing = True
+            self._finish(job, self._write(job, wait_idle=True))
+
+    def _finish(self, job: ArtifactJob, written: WrittenArtifacts | None) -> None:
+        """Publish a written job (its folder renamed into place) unless it was given up at stop."""
+        with self._work:
+            mine = threading.current_thread() is self._thread
+            if written is not None and not (mine and self._abandon):
+                try:
+                    job.folder.parent.mkdir(parents=True, exist_ok=True)
+                    shutil.rmtree(job.folder, ignore_errors=True)
+                    job.staging.rename(job.folder)
+                    self._finished.append(written)
+                except OSError as exc:
+                    log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
+            shutil.rmtree(job.staging, ignore_errors=True)
+            if mine:
+                self._writing = False
+            self._work.notify_all()
+
+    def _write(self, job: ArtifactJob, wait_idle: bool) -> WrittenArtifacts | None:
+        """The job's steps into its staging folder, each started only while the service is idle (wait_idle)."""
+        try:
+            job.staging.mkdir(parents=True, exist_ok=True)
+            for step in self._steps(job):
+                if wait_idle:
+                    with self._work:
+                        self._work.wait_for(lambda: self._idle or self._closing)
+                step()
+        except Exception as exc:
+            log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
+            return None
+        return WrittenArtifacts(job.row_id, job.cycle, *_paths(job, job.folder))
+
+    def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
+        """Short steps (tens of ms each): a trigger arriving meanwhile waits for at most one of them."""
+        ply, overlay = _paths(job, job.staging)
+        picture: list[np.ndarray] = []
+
+        def write_ply() -> None:
+            import open3d as o3d
+
+            if not o3d.io.write_point_cloud(str(ply), job.reconstruction.point_cloud(), write_ascii=False):
+                raise OSError(f"Open3D could not write {ply}")
+
+        def draw() -> None:
+            picture.append(draw_on_left(job.frame.left, self.calib, job.measurement))
+
+        def write_png() -> None:
+            if not cv2.imwrite(str(overlay), picture[0], PNG_FAST):
+                raise OSError(f"cannot write {overlay}")
+
+        return [write_ply, draw, write_png]
+
+
+def _paths(job: ArtifactJob, folder: Path) -> tuple[Path, Path]:
+    return folder / f"cycle-{job.cycle}.ply", folder / f"cycle-{job.cycle}-overlay.png"

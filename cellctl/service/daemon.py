@@ -9,7 +9,11 @@ One cycle, in this order (docs/modbus.md, handshake):
   3. reconstruct and measure; an invalid measurement answers with the matching scene error code;
   4. journal the outcome durably (SQLite commit) - only then
   5. publish it to the PLC (result or error, one atomic update);
-  6. write the PLY and overlay PNG and prune old ones (after publishing: the robot does not wait for them).
+  6. hand the PLY and overlay PNG to the artifact writer, which writes them while the service waits for
+     the next trigger (never during a cycle: cellctl.service.artifacts).
+
+Before READY the service warms up: one cycle's work on a grabbed pair (the table plane learnt, rectification
+maps built, the matchers' buffers allocated), so the first trigger costs what every other one does.
 
 Every accepted trigger gets exactly one answer. While the cameras are failing the service probes them
 between cycles, so CAMERAS_OK and READY come back by themselves when a camera is plugged in again.
@@ -32,7 +36,7 @@ import numpy as np
 from cellctl.cameras import CameraError, FrameSource, StereoFrame, open_frame_source
 from cellctl.cameras.identity import identity_problem
 from cellctl.errors import FailureKind
-from cellctl.service.artifacts import keep_artifacts
+from cellctl.service.artifacts import ArtifactWriter
 from cellctl.service.codes import FAILURE_CODES
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
@@ -43,6 +47,7 @@ from cellctl.service.sdnotify import SystemdNotifier, check_watchdog
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.teach import TaughtTable, TeachError, load_taught
 from firmware_io.handshake import Trigger
 from firmware_io.registers import MAX_GLUE_POINTS, ErrorCode
 from firmware_io.server import PlcLink
@@ -101,7 +106,9 @@ class Daemon:
             limits=plc.limits(),
         )
         self._reconstructor = (
-            None if self.calib is None else SoleReconstructor(self.calib, config.measure.depth_range_mm)
+            None
+            if self.calib is None
+            else SoleReconstructor(self.calib, config.measure.depth_range_mm, taught=_load_taught(config, self.calib))
         )
         self._stop = threading.Event()
         self._stop_at = math.inf  # time.monotonic() of the stop request
@@ -111,6 +118,8 @@ class Daemon:
         self._camera_log = RepeatQuietLog(log, CAMERA_LOG_REPEAT_S)
         self._last_probe = 0.0
         self._journal: Journal | None = None
+        self._artifacts = None if self.calib is None else ArtifactWriter(self.calib, config.journal.keep_artifacts)
+        self._warmed_up = False
         self.cycles_done = 0
         # Observers (operator station, metrics, image log) subscribe here; the daemon only publishes.
         self.events = CellEvents()
@@ -147,6 +156,7 @@ class Daemon:
             # Cameras first: preparing them may take long (the simulator renders its scenes), and the
             # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
             self._probe_cameras(force=True)
+            self._warm_up()
             self.link.start()
             try:
                 self._report_health()
@@ -161,13 +171,16 @@ class Daemon:
                 self.link.stop()
         finally:
             self.source.close()
+            self._finish_artifacts()
             self._journal.close()
             log.info("stopped after %d cycles", self.cycles_done)
 
     def _serve(self) -> None:
         while not self._stop.is_set():
             self.notifier.notify(WATCHDOG=1)
+            self._set_idle(True)
             trigger = self.link.wait_trigger(timeout_s=TICK_S)
+            self._set_idle(False)
             if trigger is None:
                 self._probe_cameras()
                 continue
@@ -233,20 +246,54 @@ class Daemon:
             )
         else:
             log.warning("cycle %d: error %d %s: %s (%.0f ms)", trigger.cycle, code, code.name, reason, cycle_time_ms)
-        if frame is not None and result is not None and self.calib is not None and self._journal is not None:
-            keep_artifacts(
-                self._journal,
-                record,
-                frame,
-                self.calib,
-                result.reconstruction,
-                result.measurement,
-                self.config.journal.keep_artifacts,
-            )
+        if frame is not None and result is not None and self._artifacts is not None:
+            self._artifacts.submit(self._journal, record, frame, result.reconstruction, result.measurement)
         self._busy_cycle = None
         self.events.publish(CycleDone(record, frame, result))
         self._publish_state()
         self.notifier.notify(STATUS=self._status_text())
+
+    # ---- warm-up and artifacts ------------------------------------------------------------------
+
+    def _warm_up(self) -> None:
+        """One cycle's work before READY on a grabbed pair: the table plane learnt (when none is taught),
+        maps built, matcher buffers allocated. Skipped while the cameras fail (the first cycle then pays)."""
+        if self._reconstructor is None or not self._cameras_ok:
+            return
+        start = time.monotonic()
+        try:
+            frame = self.source.grab_pair()
+        except CameraError as exc:
+            log.warning("warm-up skipped, no pair: %s", exc)
+            return
+        if self._reconstructor.table_plane is None:
+            plane = self._reconstructor.learn_table(frame.left, frame.right)
+            log.info("table plane %s", "learnt from the warm-up pair" if plane is not None else "NOT found")
+        measure = self.config.measure
+        result = measure_frame(
+            frame, self._reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
+        )
+        outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
+        log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
+        self._warmed_up = True
+
+    def _set_idle(self, idle: bool) -> None:
+        """Artifacts are written only while waiting for a trigger; their journal rows from this thread."""
+        if self._artifacts is None:
+            return
+        if idle and self._journal is not None:
+            self._artifacts.attach_finished(self._journal)
+        self._artifacts.set_idle(idle)
+
+    def _finish_artifacts(self) -> None:
+        if self._artifacts is None or self._journal is None:
+            return
+        if not self._artifacts.flush(timeout_s=10.0):
+            log.warning("stopping with artifacts not written")
+        self._artifacts.attach_finished(self._journal)
+        self._artifacts.close()
+        if self._artifacts.dropped:
+            log.info("artifacts of %d cycles skipped for lack of idle time", self._artifacts.dropped)
 
     def _grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
         start = time.perf_counter()
@@ -324,8 +371,10 @@ class Daemon:
         if self._identity_problem:
             log.error("calibration does not match the cameras: %s", self._identity_problem)
         if not force:
-            self._report_health()
+            self._report_health()  # READY at once; the warm-up below only if the start could not do it
             self._publish_state()
+            if not self._warmed_up:
+                self._warm_up()
 
     def _report_health(self) -> None:
         calibration_ok = self.calib is not None and self._identity_problem is None
@@ -351,6 +400,17 @@ def _load_calibration(config: CellConfig) -> tuple[Calibration | None, str | Non
     except (OSError, ValueError) as exc:
         log.error("calibration %s not usable: %s", config.calibration.path, exc)
         return None, str(exc)
+
+
+def _load_taught(config: CellConfig, calib: Calibration) -> TaughtTable | None:
+    """The table taught beside the calibration (`cellctl teach`), None if none or unusable (logged)."""
+    try:
+        taught = load_taught(config.calibration.path, calib)
+    except TeachError as exc:
+        log.error("taught table not used: %s", exc)
+        return None
+    log.info("taught table %s", "loaded" if taught is not None else "absent: measuring without (cellctl teach)")
+    return taught
 
 
 def _published_points(points: np.ndarray) -> np.ndarray:

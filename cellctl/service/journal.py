@@ -153,33 +153,31 @@ class Journal:
     def artifact_dir(self, row_id: int) -> Path:
         return self.state_dir / "cycles" / f"{row_id:08d}"
 
-    def staging_dir(self, row_id: int) -> Path:
-        """Where a cycle's artifacts are written before they count: renamed to artifact_dir() on attach."""
-        return self.state_dir / "cycles" / f".partial-{row_id:08d}"
+    def attach_artifacts(self, row_id: int, ply_path: Path | None, overlay_path: Path | None) -> None:
+        """Record a cycle's artifact files (cellctl.service.artifacts renames their folder into place first).
 
-    def attach_artifacts(self, row_id: int, ply_name: str | None, overlay_name: str | None) -> None:
-        """Publish the files written under staging_dir(row_id): rename the folder and record it, together.
-
-        The rename happens inside the row's transaction, so a crash leaves either a recorded folder or
-        an unrecorded one; prune_orphans() removes the latter (and staging leftovers) at the next start.
+        A crash between that rename and this commit leaves a folder no row refers to; prune_orphans()
+        removes it (and staging leftovers) at the next start.
         """
-        staged, final = self.staging_dir(row_id), self.artifact_dir(row_id)
         with self._db:
             self._db.execute(
                 "UPDATE cycles SET ply_path = ?, overlay_path = ? WHERE id = ?",
                 (
-                    None if ply_name is None else str(final / ply_name),
-                    None if overlay_name is None else str(final / overlay_name),
+                    None if ply_path is None else str(ply_path),
+                    None if overlay_path is None else str(overlay_path),
                     row_id,
                 ),
             )
-            staged.replace(final)
 
     def prune_orphans(self) -> int:
         """Delete artifact folders no row refers to (a crash between writing and recording); returns how many."""
         root = self.state_dir / "cycles"
+        staged = self.state_dir / "partial"  # cellctl.service.artifacts writes here before the rename
+        leftovers = list(staged.iterdir()) if staged.is_dir() else []
+        for folder in leftovers:
+            shutil.rmtree(folder, ignore_errors=True)
         if not root.is_dir():
-            return 0
+            return len(leftovers)
         referenced = {
             str(Path(path).parent)
             for row in self._db.execute("SELECT ply_path, overlay_path FROM cycles").fetchall()
@@ -192,7 +190,7 @@ class Journal:
                 shutil.rmtree(folder, ignore_errors=True)
             else:
                 folder.unlink(missing_ok=True)
-        return len(orphans)
+        return len(orphans) + len(leftovers)
 
     def prune_artifacts(self, keep: int) -> int:
         """Delete the artifacts of all but the newest `keep` cycles that have any; returns how many went."""

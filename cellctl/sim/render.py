@@ -1,4 +1,4 @@
-"""Rendering of simulated stereo pairs: a sole on a dark table, seen through a calibrated rig.
+"""Rendering of simulated stereo pairs: a sole on a table, seen through a calibrated rig.
 
 Geometry is exact: every pixel's ray is traced with Open3D's `RaycastingScene` (CPU). Rays start from the
 *distorted* pixel positions, undistorted with the camera's own model (cv2.undistortPoints), so the images
@@ -6,7 +6,9 @@ carry the lens distortion of the calibration. Pixels on geometric edges are supe
 the sole's silhouette has the sub-pixel edge profile a real sensor records. Appearance: diffuse shading
 from two light bars plus ambient, a weak specular term, low-contrast procedural texture (fractal noise,
 not a dot pattern: real soles are weakly textured), a slight lens blur, vignetting, and shot plus read
-noise, quantised to 8 bits.
+noise, quantised to 8 bits. A `SceneLook` (cellctl.sim.look) varies all of this: the table and the sole's
+colours (cellctl.sim.appearance), a low side light with cast shadows (shadow rays to every light), gloss,
+heavy noise, and the right camera's gain and gamma.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ import cv2
 import numpy as np
 import open3d as o3d
 
+from cellctl.sim.appearance import SOLE_MATERIALS, TABLES, ColourScheme, Texture, lights, sole_material, table_texture
+from cellctl.sim.look import SceneLook
 from cellctl.sim.sole import SoleModel
 from cellctl.vision.calibration import Calibration
 
@@ -25,36 +29,17 @@ RIG_HEIGHT_MM = 550.0  # rig (baseline mid-point) above the table
 RIG_TILT_DEG = (2.0, -1.0)  # a rig is never mounted perfectly level: about its x and y axes
 
 TABLE_GEOMETRY, SOLE_GEOMETRY = 0, 1
-PART_TOP, PART_WALL, PART_UNDERSIDE = 0, 1, 2
+PART_TOP, PART_WALL, PART_UNDERSIDE, PART_EDGE = 0, 1, 2, 3  # PART_EDGE: top surface within the edge profile
 
 
-@dataclass(frozen=True)
-class Material:
-    """Surface appearance: BGR albedo (0..1), texture octaves (wavelength mm, relative amplitude), gloss."""
-
-    albedo_bgr: tuple[float, float, float]
-    octaves: tuple[tuple[float, float], ...]
-    specular: float
-    shininess: float
-
-
-TABLE = Material((0.16, 0.15, 0.14), ((14.0, 0.07), (4.0, 0.06), (1.2, 0.06)), 0.01, 8.0)
-SOLE_MATERIALS: dict[str, Material] = {
-    # Roughened white rubber and black leather: a few per cent of texture contrast, nothing more.
-    "white": Material((0.70, 0.72, 0.73), ((8.0, 0.04), (2.5, 0.035), (0.9, 0.035)), 0.02, 10.0),
-    "black": Material((0.20, 0.19, 0.19), ((8.0, 0.04), (2.5, 0.035), (0.9, 0.035)), 0.05, 20.0),
-}
-
-LIGHTS_MM = np.array([[-260.0, 0.0, 640.0], [260.0, 0.0, 640.0]])  # the cell's two LED bars
 AMBIENT = 0.35
 EXPOSURE_DN = 255.0  # pixel value of a white (albedo 1) horizontal surface at the table centre
-READ_NOISE_DN = 1.0
-SHOT_NOISE_DN_PER_DN = 0.02  # variance added per DN of signal (conversion gain of the sensor)
+# Read noise (DN) and variance added per DN of signal (the sensor's conversion gain), per SceneLook.noise.
+SENSOR_NOISE: dict[str, tuple[float, float]] = {"normal": (1.0, 0.02), "heavy": (6.0, 0.15)}
+SHADOW_RAY_LIFT_MM = 0.05  # shadow rays start this far off the surface, so they do not hit it again
 LENS_BLUR_PX = 0.5
 VIGNETTING = 0.12  # relative fall-off at the image corners
-RIGHT_GAIN = 0.97  # the two cameras never expose identically
 SUPERSAMPLE = 4
-PIXEL_FOOTPRINT_SIGMA_MM = 0.2  # texture pre-filter: pixel box (0.39 mm at 550 mm) plus lens blur
 
 
 def rig_pose(
@@ -108,18 +93,32 @@ class SceneRenderer:
     """Renders one scene (table and optional sole) through a calibrated rig."""
 
     def __init__(
-        self, calib: Calibration, camera_pose: np.ndarray, sole: SoleModel | None, color: str = "white", seed: int = 0
+        self,
+        calib: Calibration,
+        camera_pose: np.ndarray,
+        sole: SoleModel | None,
+        color: str = "white",
+        seed: int = 0,
+        look: SceneLook | None = None,
+        noise_seed: int | None = None,
     ) -> None:
         if color not in SOLE_MATERIALS:
             raise ValueError(f"sole colour must be one of {', '.join(SOLE_MATERIALS)}, got {color!r}")
         self.calib = calib
         self.camera_pose = np.asarray(camera_pose, dtype=np.float64)
         self.sole = sole
-        self.material = SOLE_MATERIALS[color]
+        self.look = look or SceneLook()
+        self.material = sole_material(color, self.look)
+        self.table = TABLES[self.look.table]
+        self.lights, self.light_power = lights(self.look)
         rng = np.random.default_rng([seed, 7])
-        self._table_texture = _Texture.fractal(rng, (-400.0, -350.0), (800.0, 700.0), 0.25, TABLE.octaves)
-        self._sole_texture = _Texture.fractal(rng, (-5.0, -80.0), (320.0, 160.0), 0.2, self.material.octaves)
-        self._noise_rng = np.random.default_rng([seed, 11])
+        self._table_texture = table_texture(rng, self.look)
+        self._sole_texture = Texture.fractal(rng, (-5.0, -80.0), (320.0, 160.0), 0.2, self.material.octaves)
+        self._colours = (
+            None if sole is None else ColourScheme.draw(np.random.default_rng([seed, 13]), color, self.look, sole.shape)
+        )
+        # The sensor noise may come from its own seed: the same table (textures from `seed`) shot again.
+        self._noise_rng = np.random.default_rng([seed if noise_seed is None else noise_seed, 11])
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(_table_mesh())  # geometry id 0 = TABLE_GEOMETRY
         self._parts = np.zeros(0, np.int32)
@@ -149,8 +148,8 @@ class SceneRenderer:
             pixels = np.column_stack([edges % width, edges // width]).astype(np.float64)
             radiance[edges] = self._supersample(pixels, K, D, pose)
         image = radiance.reshape(height, width, 3)
-        gain = 1.0 if side == "left" else RIGHT_GAIN
-        image = self._sensor(image * gain, (width, height), K)
+        gain, gamma = (1.0, 1.0) if side == "left" else (self.look.right_gain, self.look.right_gamma)
+        image = self._sensor(image * gain, (width, height), K, gamma)
         depth = np.where(np.isfinite(hits["t"]), hits["t"], np.nan).astype(np.float32).reshape(height, width)
         sole_mask = (hits["geometry"] == SOLE_GEOMETRY).reshape(height, width)
         return image, depth, sole_mask
@@ -195,33 +194,47 @@ class SceneRenderer:
         specular = np.zeros(n, np.float32)
         shininess = np.ones(n, np.float32)
         table = hits["geometry"] == TABLE_GEOMETRY
-        albedo[table] = TABLE.albedo_bgr
+        albedo[table] = self.table.albedo_bgr
         texture[table] = self._table_texture.sample(points[table, 0], points[table, 1])
-        specular[table], shininess[table] = TABLE.specular, TABLE.shininess
+        specular[table], shininess[table] = self.table.specular, self.table.shininess
         sole = hits["geometry"] == SOLE_GEOMETRY
         if np.any(sole):
-            self._shade_sole(hits, sole, normals, texture)
-            albedo[sole] = self.material.albedo_bgr
+            albedo[sole] = self._shade_sole(hits, sole, normals, texture)
             specular[sole], shininess[sole] = self.material.specular, self.material.shininess
-        diffuse, highlight = _lighting(points, normals, pose[:3, 3], shininess)
+        lit = self._unshadowed(points, normals, hits["geometry"] >= 0) if self.look.shadows else None
+        diffuse, highlight = _lighting(points, normals, pose[:3, 3], shininess, self.lights, self.light_power, lit)
         radiance = albedo * (texture * (AMBIENT + diffuse))[:, None] + (specular * highlight)[:, None]
         radiance[hits["geometry"] < 0] = 0.0
         return radiance * EXPOSURE_DN
 
     def _shade_sole(
         self, hits: dict[str, np.ndarray], sole: np.ndarray, normals: np.ndarray, texture: np.ndarray
-    ) -> None:
+    ) -> np.ndarray:
+        """Normals and texture of the sole's hits written in place; returns their albedo."""
+        assert self.sole is not None and self._colours is not None
         shape, pose = self.sole.shape, self.sole.pose
         uv = pose.to_sole(hits["points"][sole, :2], shape.length)
         z = hits["points"][sole, 2]
         part = hits["part"][sole]
-        # Smooth analytic normals on the top surface; the walls and underside are flat facets.
-        top_normals = self.sole.top_normal_at(hits["points"][sole, :2])
+        # Smooth analytic normals on the top surface; the walls, underside and edge profile are fine facets.
+        top_normals = self.sole.interior_normal_at(hits["points"][sole, :2])
         facet = hits["facet_normals"][sole]
         normals[sole] = np.where((part == 0)[:, None], top_normals, facet)
         # Walls take the texture at (u, v + z) so that it varies down the wall too.
-        tex_v = np.where(part == 0, uv[:, 1], uv[:, 1] + z)
+        tex_v = np.where((part == PART_TOP) | (part == PART_EDGE), uv[:, 1], uv[:, 1] + z)
         texture[sole] = self._sole_texture.sample(uv[:, 0], tex_v)
+        return self._colours.albedo(shape, uv, part == PART_WALL)
+
+    def _unshadowed(self, points: np.ndarray, normals: np.ndarray, hit: np.ndarray) -> np.ndarray:
+        """Per light (L x N, bool): whether the straight line from each hit point to the light is free."""
+        lit = np.zeros((len(self.lights), len(points)), bool)
+        start = (points + SHADOW_RAY_LIFT_MM * normals)[hit].astype(np.float32)
+        for k, light in enumerate(self.lights):
+            # Ray direction = the full vector to the light: anything hit at t < 1 lies between point and light.
+            rays = np.hstack([start, light.astype(np.float32) - start])
+            t = self._scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+            lit[k, hit] = ~(t < 1.0)
+        return lit
 
     def _edge_pixels(self, hits: dict[str, np.ndarray], shape: tuple[int, int]) -> np.ndarray:
         """Indices of pixels next to a change of surface or a depth step: these get supersampled."""
@@ -240,36 +253,52 @@ class SceneRenderer:
         radiance = self._shade(self._cast(sub, K, D, pose), pose)
         return radiance.reshape(len(pixels), SUPERSAMPLE * SUPERSAMPLE, 3).mean(axis=1)
 
-    def _sensor(self, radiance: np.ndarray, size: tuple[int, int], K: np.ndarray) -> np.ndarray:
+    def _sensor(self, radiance: np.ndarray, size: tuple[int, int], K: np.ndarray, gamma: float) -> np.ndarray:
         width, height = size
         image = cv2.GaussianBlur(radiance.astype(np.float32), (0, 0), LENS_BLUR_PX)
         ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
         r2 = ((xs - K[0, 2]) ** 2 + (ys - K[1, 2]) ** 2) / (0.25 * (width**2 + height**2))
         image *= (1.0 - VIGNETTING * r2)[..., None]
-        sigma = np.sqrt(READ_NOISE_DN**2 + SHOT_NOISE_DN_PER_DN * np.maximum(image, 0.0))
+        read, shot = SENSOR_NOISE[self.look.noise]
+        sigma = np.sqrt(read**2 + shot * np.maximum(image, 0.0))
         image = image + sigma * self._noise_rng.standard_normal(image.shape, dtype=np.float32)
+        if gamma != 1.0:  # the camera's tone curve acts on the noisy signal, as a sensor's LUT does
+            image = 255.0 * (np.clip(image, 0.0, 255.0) / 255.0) ** gamma
         return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
 def _lighting(
-    points: np.ndarray, normals: np.ndarray, eye: np.ndarray, shininess: np.ndarray
+    points: np.ndarray,
+    normals: np.ndarray,
+    eye: np.ndarray,
+    shininess: np.ndarray,
+    light_positions: np.ndarray,
+    power: np.ndarray,
+    lit: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Diffuse and Blinn-Phong specular terms of the light bars, normalised to 1 - AMBIENT at the table origin."""
+    """Diffuse and Blinn-Phong specular terms of the lights, normalised to 1 - AMBIENT at the table origin.
+
+    `lit` (lights x points, bool) switches a light off where its light is blocked: a cast shadow.
+    """
     points = points.astype(np.float32)
     normals = normals.astype(np.float32)
     diffuse = np.zeros(len(points), np.float32)
     highlight = np.zeros(len(points), np.float32)
     view = _unit(eye.astype(np.float32) - points)
     reference = 0.0
-    for light in LIGHTS_MM:
+    for k, light in enumerate(light_positions):
         to_light = light.astype(np.float32) - points
         distance2 = np.einsum("ij,ij->i", to_light, to_light)
         to_light /= np.sqrt(distance2)[:, None]
         falloff = float(light @ light) / distance2
+        if power[k] != 1.0:
+            falloff *= np.float32(power[k])
+        if lit is not None:
+            falloff *= lit[k]
         diffuse += np.clip(np.einsum("ij,ij->i", normals, to_light), 0.0, None) * falloff
         half = _unit(to_light + view)
         highlight += np.clip(np.einsum("ij,ij->i", normals, half), 0.0, None) ** shininess * falloff
-        reference += light[2] / np.linalg.norm(light)
+        reference += power[k] * light[2] / np.linalg.norm(light)
     return diffuse * np.float32((1.0 - AMBIENT) / reference), highlight
 
 
@@ -304,51 +333,3 @@ def _table_mesh() -> o3d.t.geometry.TriangleMesh:
     )
     mesh.triangle.indices = o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], np.int32))
     return mesh
-
-
-@dataclass
-class _Texture:
-    """A relative brightness map (mean 1) over a rectangle of a surface, sampled bilinearly."""
-
-    image: np.ndarray  # float32
-    origin: tuple[float, float]  # mm at texel (0, 0)
-    texel_mm: float
-
-    @classmethod
-    def fractal(
-        cls,
-        rng: np.random.Generator,
-        origin: tuple[float, float],
-        size_mm: tuple[float, float],
-        texel_mm: float,
-        octaves: tuple[tuple[float, float], ...],
-    ) -> _Texture:
-        """Sum of smooth noise octaves (band-limited noise upsampled with bicubic interpolation)."""
-        width, height = int(size_mm[0] / texel_mm), int(size_mm[1] / texel_mm)
-        image = np.ones((height, width), np.float32)
-        for wavelength, amplitude in octaves:
-            coarse = rng.standard_normal(
-                (max(2, int(size_mm[1] / wavelength) + 1), max(2, int(size_mm[0] / wavelength) + 1))
-            ).astype(np.float32)
-            octave = cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)
-            # A pixel integrates light over its footprint (~0.4 mm on the table) but a ray samples a point:
-            # pre-filtering by the footprint stops the samples from aliasing. The amplitude is set after
-            # the filter, so it is the contrast the camera actually records.
-            octave = cv2.GaussianBlur(octave, (0, 0), PIXEL_FOOTPRINT_SIGMA_MM / texel_mm)
-            image += amplitude * octave / max(float(octave.std()), 1e-6)
-        return cls(image, origin, texel_mm)
-
-    def sample(self, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
-        if len(x_mm) == 0:
-            return np.zeros(0)
-        # cv2.remap does the bilinear lookup; it wants 2-D maps, so fold the points into rows of 1024.
-        n = len(x_mm)
-        rows = -(-n // 1024)
-        mx = np.zeros(rows * 1024, np.float32)
-        my = np.zeros(rows * 1024, np.float32)
-        mx[:n] = (np.asarray(x_mm) - self.origin[0]) / self.texel_mm
-        my[:n] = (np.asarray(y_mm) - self.origin[1]) / self.texel_mm
-        out = cv2.remap(
-            self.image, mx.reshape(rows, 1024), my.reshape(rows, 1024), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
-        )
-        return out.ravel()[:n]

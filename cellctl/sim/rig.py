@@ -31,3 +31,27 @@ def default_rig() -> Calibration:
     right_centre_in_left = np.array([BASELINE_MM, -0.4, 0.6]) * BASELINE_MM / np.linalg.norm([BASELINE_MM, -0.4, 0.6])
     T = -R @ right_centre_in_left.reshape(3, 1)
     return Calibration.from_extrinsics(IMAGE_SIZE, K1, D1, K2, D2, R, T)
+
+
+def distorted_rig() -> Calibration:
+    """A wide-angle rig (6 mm lenses): strong barrel distortion, unequal intrinsics, ~2 degrees between the cameras.
+
+    Images of it are far from a pinhole's: a measurement that forgot to rectify, or rectified with a pinhole
+    model, would be millimetres off at the image edges.
+    """
+    K1 = np.array([[1080.0, 0.0, 652.0], [0.0, 1076.0, 500.0], [0.0, 0.0, 1.0]])
+    K2 = np.array([[1068.0, 0.0, 626.0], [0.0, 1071.0, 523.0], [0.0, 0.0, 1.0]])
+    D1 = np.array([[-0.26, 0.11, 0.0012, -0.0009, -0.02]])
+    D2 = np.array([[-0.24, 0.09, -0.0008, 0.0011, -0.015]])
+    R = cv2.Rodrigues(np.array([0.012, -0.035, 0.01]))[0]
+    right_centre_in_left = np.array([BASELINE_MM, -1.5, 2.0]) * BASELINE_MM / np.linalg.norm([BASELINE_MM, -1.5, 2.0])
+    T = -R @ right_centre_in_left.reshape(3, 1)
+    return Calibration.from_extrinsics(IMAGE_SIZE, K1, D1, K2, D2, R, T)
+
+
+def rig_for(name: str) -> Calibration:
+    """The simulated rig a SceneLook names ("default" or "distorted")."""
+    rigs = {"default": default_rig, "distorted": distorted_rig}
+    if name not in rigs:
+        raise ValueError(f"rig must be one of {', '.join(rigs)}, got {name!r}")
+    return rigs[name]()

@@ -1,6 +1,6 @@
 """Simulated sole scenes: a random sole placed on the table under the rig, rendered, and written to disk.
 
-    scene = SoleScene.random(seed=3, color="black", calib=default_rig())
+    scene = SoleScene.random(seed=3, color="black", calib=default_rig(), look=look_for(("pointed-toe",), 3))
     pair = scene.render()
     scene.write(out_dir, pair)  # left.png, right.png, truth.json, depth_left.npy, outline.npy, calib.yaml
 
@@ -11,12 +11,13 @@ the segmentation and measurement can be checked without the stereo matcher in th
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from cellctl.sim.look import SceneLook
 from cellctl.sim.render import SOLE_MATERIALS, RenderedPair, SceneRenderer, project, rig_pose
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
 from cellctl.vision.calibration import Calibration
@@ -24,6 +25,10 @@ from cellctl.vision.reconstruction import StereoCloud
 
 VIEW_MARGIN_PX = 40  # a random sole keeps this far from the edges of both images
 PLACEMENT_ATTEMPTS = 200
+# Soles whose toe and heel halves differ by less than this (fraction of the area; the measurement refuses
+# below 4 %) are drawn again: a scene should be measurable, and toe and heel tellable apart, by design.
+MEASURABLE_HALF_AREA_DIFFERENCE = 0.07
+SHAPE_ATTEMPTS = 30
 
 
 @dataclass
@@ -35,23 +40,34 @@ class SoleScene:
     calib: Calibration
     camera_pose: np.ndarray  # 4 x 4, table <- left camera
     sole: SoleModel | None
+    look: SceneLook = field(default_factory=SceneLook)
 
     @classmethod
-    def random(cls, seed: int, color: str = "white", calib: Calibration | None = None) -> SoleScene:
-        """A random sole shape at a random pose that both cameras see completely."""
+    def random(
+        cls, seed: int, color: str = "white", calib: Calibration | None = None, look: SceneLook | None = None
+    ) -> SoleScene:
+        """A random sole shape at a random pose that both cameras see completely.
+
+        Without `calib` the rig is the look's (the built-in simulated rig unless the look asks for another).
+        """
         if color not in SOLE_MATERIALS:
             raise ValueError(f"sole colour must be one of {', '.join(SOLE_MATERIALS)}, got {color!r}")
+        look = look or SceneLook()
         if calib is None:
-            from cellctl.sim.rig import default_rig
+            from cellctl.sim.rig import rig_for
 
-            calib = default_rig()
+            calib = rig_for(look.rig)
         rng = np.random.default_rng(seed)
-        shape = SoleShape.random(rng)
+        for _ in range(SHAPE_ATTEMPTS):  # a plain sole always passes at once: the plain scenes stay as they were
+            shape = SoleShape.random(rng, look)
+            upright = SoleModel(shape, SolePose(0.0, 0.0, 0.0, False))
+            if upright.truth().half_area_difference >= MEASURABLE_HALF_AREA_DIFFERENCE:
+                break
         camera_pose = rig_pose(calib)
         for _ in range(PLACEMENT_ATTEMPTS):
             yaw = rng.uniform(-35.0, 35.0) + (180.0 if rng.random() < 0.5 else 0.0)
             pose = SolePose(rng.uniform(-60.0, 60.0), rng.uniform(-50.0, 50.0), yaw, bool(rng.random() < 0.5))
-            scene = cls(seed, color, calib, camera_pose, SoleModel(shape, pose))
+            scene = cls(seed, color, calib, camera_pose, SoleModel(shape, pose), look)
             if scene.in_view(VIEW_MARGIN_PX):
                 return scene
         raise ValueError(
@@ -64,7 +80,9 @@ class SoleScene:
         if self.sole is None:
             return True
         outline = self.sole.outline_table(400)
-        top = self.sole.top_height_at(outline)
+        # The top without its edge profile: at least as high as the sole anywhere near the outline.
+        uv = self.sole.pose.to_sole(outline, self.sole.shape.length)
+        top = self.sole.shape.top_height(uv[:, 0], uv[:, 1])
         corners = np.vstack([np.column_stack([outline, np.zeros(len(outline))]), np.column_stack([outline, top])])
         width, height = self.calib.image_size
         for side in ("left", "right"):
@@ -84,11 +102,16 @@ class SoleScene:
         return self.camera_pose @ rectified_to_raw @ np.linalg.inv(camera_to_table)
 
     def render(self) -> RenderedPair:
-        return SceneRenderer(self.calib, self.camera_pose, self.sole, self.color, self.seed).render()
+        return SceneRenderer(self.calib, self.camera_pose, self.sole, self.color, self.seed, self.look).render()
+
+    def render_empty(self, shot: int = 1) -> RenderedPair:
+        """The same table without the sole, as `cellctl teach` sees it: same textures, new sensor noise (`shot`)."""
+        noise_seed = self.seed + 7919 * shot  # any seed other than the scene's own: another exposure
+        return SceneRenderer(self.calib, self.camera_pose, None, self.color, self.seed, self.look, noise_seed).render()
 
     def truth(self) -> dict[str, object]:
         """truth.json contents: the three measurements from the model, and everything needed to rebuild it."""
-        data: dict[str, object] = {"seed": self.seed, "color": self.color}
+        data: dict[str, object] = {"seed": self.seed, "color": self.color, "look": asdict(self.look)}
         if self.sole is not None:
             data.update(self.sole.truth().to_dict())
             data["sole_pose"] = asdict(self.sole.pose)
@@ -110,7 +133,7 @@ class SoleScene:
                 raise ValueError(f"cannot write {out / name}: check the directory is writable")
         np.save(out / "depth_left.npy", pair.depth_left)
         if self.sole is not None:
-            np.save(out / "outline.npy", self.sole.outline_table(2000))
+            np.save(out / "outline.npy", self.sole.footprint_table(2000))
         (out / "truth.json").write_text(json.dumps(self.truth(), indent=2) + "\n")
         self.calib.save(out / "calib.yaml")
         return out

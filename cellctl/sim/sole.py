@@ -14,19 +14,33 @@ the measuring code, so the simulator can judge the measurement.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass
 
+import cv2
 import numpy as np
+
+from cellctl.sim.look import SceneLook
+from cellctl.sim.sole_profile import EdgeProfile, EndShape
 
 # Parameter ranges of the generated soles (mm unless noted).
 LENGTH_RANGE_MM = (240.0, 300.0)
 HEEL_HEIGHT_RANGE_MM = (20.0, 35.0)
 TOE_HEIGHT_RANGE_MM = (8.0, 28.0)
+# Per SceneLook.height: heel and toe height ranges and the cross curvature's bound.
+HEIGHT_CLASS_RANGES_MM: dict[str, tuple[tuple[float, float], tuple[float, float], float]] = {
+    "normal": (HEEL_HEIGHT_RANGE_MM, TOE_HEIGHT_RANGE_MM, 1.5),
+    "flat": ((6.0, 7.5), (6.0, 7.5), 0.4),
+    "tall": ((40.0, 50.0), (22.0, 45.0), 2.0),
+}
+EDGE_DISTANCE_SAMPLES = 1500  # outline samples (about twice as many points) for exact distances to it
 MIN_EDGE_THICKNESS_MM = 5.0  # thinnest the top surface gets above the sole's underside at the edge
 # Samples of the outline used for the truth; the rendered mesh uses fewer (MESH_U_SAMPLES).
 TRUTH_OUTLINE_SAMPLES = 20000
 MESH_U_SAMPLES = 600
 MESH_S_SAMPLES = 61
+MESH_S_SAMPLES_EDGED = 121  # with an edge profile: columns crowd towards the outline to resolve the profile
+EDGE_NORMAL_STEP_MM = 0.02  # central differences of the edge profile (distances are float32-exact to ~2e-5 mm)
 HEIGHT_POINT_FRACTION = 0.10  # heights are taken 10 % of the length in from each end
 
 
@@ -53,17 +67,22 @@ class SoleShape:
     toe_spring_start: float  # fraction of the length where the toe spring begins
     toe_spring: float  # lift of the underside at the toe tip
     cross_curvature: float  # dome (> 0) or cup (< 0) height across the sole
+    heel_end: EndShape = EndShape()
+    toe_end: EndShape = EndShape()
+    edge: EdgeProfile = EdgeProfile()
 
     @classmethod
-    def random(cls, rng: np.random.Generator) -> SoleShape:
-        """A plausible sole with the parameter ranges of the simulator."""
+    def random(cls, rng: np.random.Generator, look: SceneLook | None = None) -> SoleShape:
+        """A plausible sole with the parameter ranges of the simulator, and the ends and edge of `look`."""
+        look = look or SceneLook()
+        heel_range, toe_range, cross_bound = HEIGHT_CLASS_RANGES_MM[look.height]
         length = rng.uniform(*LENGTH_RANGE_MM)
         heel_half = length * rng.uniform(0.115, 0.135)
         ball_half = length * rng.uniform(0.170, 0.190)
-        heel_height = rng.uniform(*HEEL_HEIGHT_RANGE_MM)
+        heel_height = rng.uniform(*heel_range)
         # A toe higher than the heel is not a shoe: draw the toe height up to the heel height.
-        toe_height = rng.uniform(TOE_HEIGHT_RANGE_MM[0], min(TOE_HEIGHT_RANGE_MM[1], heel_height))
-        cross = rng.uniform(-1.5, 1.5)
+        toe_height = rng.uniform(toe_range[0], min(toe_range[1], heel_height))
+        cross = rng.uniform(-cross_bound, cross_bound)
         spring_start = rng.uniform(0.60, 0.70)
         # The toe spring may take at most what leaves the forefoot MIN_EDGE_THICKNESS_MM thick.
         lift_at_toe_point = rng.uniform(1.0, max(1.0, min(8.0, toe_height - cross - MIN_EDGE_THICKNESS_MM)))
@@ -85,6 +104,10 @@ class SoleShape:
             toe_spring_start=spring_start,
             toe_spring=toe_spring,
             cross_curvature=cross,
+            # Drawn after the plain shape's numbers, so a plain look gives the plain simulator's soles.
+            heel_end=EndShape.draw(look.heel, rng),
+            toe_end=EndShape.draw(look.toe, rng),
+            edge=EdgeProfile(look.wall_slope_deg, look.top_edge_radius_mm),
         )
 
     # ---- outline -------------------------------------------------------------------------------------
@@ -102,11 +125,17 @@ class SoleShape:
             + (self.ball_half_width - self.heel_half_width) * _smoothstep((t - 0.30) / 0.40)
             - arch * np.exp(-(((t - 0.45) / 0.12) ** 2))
         )
-        # Elliptical caps: the width goes to zero at both tips with a vertical tangent, so the ends are round.
-        heel = np.clip(u / self.heel_cap, 0.0, 1.0)
-        toe = np.clip((self.length - u) / self.toe_cap, 0.0, 1.0)
-        cap = np.sqrt(np.clip(1.0 - (1.0 - heel) ** 2, 0.0, 1.0)) * np.sqrt(np.clip(1.0 - (1.0 - toe) ** 2, 0.0, 1.0))
-        return profile * cap
+        # Caps: the width goes to zero at both tips (sole_profile.EndShape: round, square, cusped, pointed).
+        heel = self.heel_end.cap(u / (self.heel_cap * self.heel_end.cap_scale))
+        toe = self.toe_end.cap((self.length - u) / (self.toe_cap * self.toe_end.cap_scale))
+        width = profile * heel * toe
+        return self.toe_end.limit(self.length - u, self.heel_end.limit(u, width))
+
+    def edge_distance_estimate(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """How far (u, v) lies inside the outline across the sole: cheap, for colour bands, not for truth."""
+        offset = np.asarray(v) - self.centre_line(u)
+        half = np.where(offset >= 0, self.half_width(u, True), self.half_width(u, False))
+        return half - np.abs(offset)
 
     def u_samples(self, n: int) -> np.ndarray:
         """n values of u from heel tip to toe tip, dense near the tips where the outline turns fastest."""
@@ -147,6 +176,49 @@ class SoleShape:
         h = 1e-3
         dzdu = (self.top_height(u + h, v) - self.top_height(u - h, v)) / (2 * h)
         dzdv = (self.top_height(u, v + h) - self.top_height(u, v - h)) / (2 * h)
+        n = np.column_stack([-dzdu, -dzdv, np.ones_like(dzdu)])
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    # ---- edge profile (sole_profile.EdgeProfile) -----------------------------------------------------
+
+    @functools.cached_property
+    def _outline_contour(self) -> np.ndarray:
+        """The outline for cv2.pointPolygonTest, in (u - L/2, v): centred so float32 keeps ~1e-5 mm."""
+        outline = self.outline(EDGE_DISTANCE_SAMPLES) - [self.length / 2.0, 0.0]
+        return outline.astype(np.float32).reshape(-1, 1, 2)
+
+    def edge_distance(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Exact distance of (u, v) inside the outline (negative outside)."""
+        contour = self._outline_contour
+        points = np.column_stack([np.asarray(u, np.float64) - self.length / 2.0, np.asarray(v, np.float64)])
+        return np.array([cv2.pointPolygonTest(contour, (float(a), float(b)), True) for a, b in points])
+
+    def surface_height(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Height of the top surface including the edge profile (top_height is the surface without it)."""
+        top = self.top_height(u, v)
+        if self.edge.plain:
+            return top
+        u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
+        bottom = self.underside(u)
+        # Exact distances only where the profile can reach: the lateral distance is at most 1 / cos(30 deg)
+        # of the true one along the sides, and within the caps (plus the band) of the tips anything goes.
+        band = self.edge.band_mm(float(np.max(top - bottom)))
+        near_end = (u < self.heel_cap * self.heel_end.cap_scale + band) | (
+            u > self.length - self.toe_cap * self.toe_end.cap_scale - band
+        )
+        near = near_end | (self.edge_distance_estimate(u, v) < 1.2 * band)
+        height = top.copy()
+        height[near] = self.edge.height(self.edge_distance(u[near], v[near]), top[near], bottom[near])
+        return height
+
+    def surface_normal(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Unit normals (N x 3, in u, v, z) of the top surface including the edge profile."""
+        if self.edge.plain:
+            return self.top_normal(u, v)
+        h = EDGE_NORMAL_STEP_MM
+        u, v = np.asarray(u, np.float64), np.asarray(v, np.float64)
+        dzdu = (self.surface_height(u + h, v) - self.surface_height(u - h, v)) / (2 * h)
+        dzdv = (self.surface_height(u, v + h) - self.surface_height(u, v - h)) / (2 * h)
         n = np.column_stack([-dzdu, -dzdv, np.ones_like(dzdu)])
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
@@ -205,15 +277,27 @@ class SoleModel:
         xy = self.pose.to_table(self.shape.outline(n), self.shape.length)
         return xy[::-1] if self.pose.mirrored else xy  # mirroring flips the winding
 
+    def footprint_table(self, n: int = TRUTH_OUTLINE_SAMPLES) -> np.ndarray:
+        """The footprint as docs/measurements.md defines it (table frame, counter-clockwise): the outline."""
+        return self.outline_table(n)
+
     def top_height_at(self, xy: np.ndarray) -> np.ndarray:
-        """Top-surface height at table points (N x 2); meaningful inside the footprint only."""
+        """Top-surface height (edge profile included) at table points (N x 2); meaningful inside the footprint."""
         uv = self.pose.to_sole(xy, self.shape.length)
-        return self.shape.top_height(uv[:, 0], uv[:, 1])
+        return self.shape.surface_height(uv[:, 0], uv[:, 1])
 
     def top_normal_at(self, xy: np.ndarray) -> np.ndarray:
-        """Unit normals (N x 3) of the top surface at table points, in the table frame."""
+        """Unit normals (N x 3) of the top surface (edge profile included) at table points, in the table frame."""
         uv = self.pose.to_sole(xy, self.shape.length)
-        along, across, up = self.shape.top_normal(uv[:, 0], uv[:, 1]).T
+        return self._to_table_normals(self.shape.surface_normal(uv[:, 0], uv[:, 1]))
+
+    def interior_normal_at(self, xy: np.ndarray) -> np.ndarray:
+        """Normals of the top surface without the edge profile: cheap, for shading away from the edge."""
+        uv = self.pose.to_sole(xy, self.shape.length)
+        return self._to_table_normals(self.shape.top_normal(uv[:, 0], uv[:, 1]))
+
+    def _to_table_normals(self, normals: np.ndarray) -> np.ndarray:
+        along, across, up = normals.T
         if self.pose.mirrored:
             across = -across
         a = np.radians(self.pose.yaw_deg)
@@ -250,12 +334,17 @@ class SoleModel:
     def mesh(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closed triangle mesh in the table frame: vertices (V x 3), triangles (T x 3), part per triangle.
 
-        Parts: 0 top surface, 1 side wall, 2 underside. The top is a (u, s) grid where s in [-1, 1] runs
-        from the lateral to the medial edge; the grid collapses to a point at each tip.
+        Parts: 0 top surface, 1 side wall, 2 underside, 3 top surface within the edge profile. The top is a
+        (u, s) grid where s in [-1, 1] runs from the lateral to the medial edge; the grid collapses to a point
+        at each tip. With an edge profile the columns crowd towards the edges and the top takes the profile.
         """
         shape = self.shape
         u = shape.u_samples(MESH_U_SAMPLES)
-        s = np.linspace(-1.0, 1.0, MESH_S_SAMPLES)
+        if shape.edge.plain:
+            s = np.linspace(-1.0, 1.0, MESH_S_SAMPLES)
+        else:
+            t = np.linspace(-1.0, 1.0, MESH_S_SAMPLES_EDGED)
+            s = np.sign(t) * (1.0 - (1.0 - np.abs(t)) ** 2)
         centre = shape.centre_line(u)
         medial, lateral = shape.half_width(u, True), shape.half_width(u, False)
         uu = np.repeat(u, s.size)
@@ -264,7 +353,9 @@ class SoleModel:
             ss >= 0, ss * np.repeat(medial, s.size), ss * np.repeat(lateral, s.size)
         )
         xy = self.pose.to_table(np.column_stack([uu, vv]), shape.length)
-        top = np.column_stack([xy, shape.top_height(uu, vv)])
+        plain_top = shape.top_height(uu, vv)
+        top_z = shape.surface_height(uu, vv)
+        top = np.column_stack([xy, top_z])
         bottom = np.column_stack([xy, shape.underside(uu)])
         grid = _grid_triangles(u.size, s.size)
         n_grid = top.shape[0]
@@ -278,9 +369,10 @@ class SoleModel:
             walls.append(quads[:, ::-1] if column == 0 else quads)
         vertices = np.vstack([top, bottom])
         triangles = np.vstack([grid, *walls, grid[:, ::-1] + n_grid])
+        on_profile = np.any((plain_top - top_z)[grid] > 1e-9, axis=1)
         parts = np.concatenate(
             [
-                np.zeros(len(grid), np.int32),
+                np.where(on_profile, 3, 0).astype(np.int32),
                 np.ones(sum(len(w) for w in walls), np.int32),
                 np.full(len(grid), 2, np.int32),
             ]

@@ -29,6 +29,12 @@ class StereoCloud:
     timings: dict[str, float] = field(default_factory=dict)
     rectified: tuple[np.ndarray, np.ndarray] | None = None  # grey float32 pair, for sub-pixel refinement
     calibration: Calibration | None = None
+    matched_pixels: int = 0  # pixels the matcher was given (a search region); 0: the whole image
+
+    @property
+    def matched_area(self) -> int:
+        """Pixels the matcher looked at: what the measured fraction is a fraction of."""
+        return self.matched_pixels or self.image_size[0] * self.image_size[1]
 
 
 def disparity_range(calib: Calibration, depth_range_mm: tuple[float, float]) -> tuple[int, int]:
@@ -49,17 +55,31 @@ def disparity_range(calib: Calibration, depth_range_mm: tuple[float, float]) -> 
 
 
 def cloud_from_disparity(
-    calib: Calibration, fixed: np.ndarray, rect_left: np.ndarray, rect_right: np.ndarray, timings: dict[str, float]
+    calib: Calibration,
+    fixed: np.ndarray,
+    rect_left: np.ndarray,
+    rect_right: np.ndarray,
+    timings: dict[str, float],
+    origin: tuple[int, int] = (0, 0),
+    shift: int = 0,
 ) -> StereoCloud:
-    """Every measured pixel of the matcher's final int16 map (x DISP_SCALE, INVALID where unmeasured) as a point."""
+    """Every measured pixel of the matcher's final int16 map (x DISP_SCALE, INVALID where unmeasured) as a point.
+
+    `fixed` may cover a crop of the rectified pair (cellctl.vision.search_region): its pixel (0, 0) is the
+    full image's `origin` (x, y) and its disparities are the full pair's minus `shift`.
+    """
     from cellctl.stereo import DISP_SCALE, INVALID
 
     grey_left, grey_right = grey_f32(rect_left), grey_f32(rect_right)
+    x0, y0 = origin
+    rows, cols = slice(y0, y0 + fixed.shape[0]), slice(x0, x0 + fixed.shape[1])
     # A flat patch (clipped highlight, covered lens) matches at any disparity and can still pass the
     # left-right check: such pixels are not measurements.
-    measured = (fixed != INVALID) & (_local_std(grey_left) >= MIN_TEXTURE_DN)
+    measured = (fixed != INVALID) & (_local_std(grey_left[rows, cols]) >= MIN_TEXTURE_DN)
     ys, xs = np.nonzero(measured)
-    disparity = fixed[ys, xs] / float(DISP_SCALE)
+    disparity = fixed[ys, xs] / float(DISP_SCALE) + shift
+    colours = _smoothed_colours(rect_left[rows, cols])[ys, xs]
+    xs, ys = xs + x0, ys + y0
     # Only the measured pixels through Q ([X Y Z W] = Q [x y d 1], cv2.reprojectImageTo3D's formula), as
     # a perspective transform of (x, y, d): no H x W x 3 map to build and gather from.
     pixel_disparity = np.column_stack([xs, ys, disparity]).reshape(-1, 1, 3).astype(np.float64)
@@ -68,13 +88,14 @@ def cloud_from_disparity(
     points = cv2.perspectiveTransform(pixel_disparity, calib.Q) if len(xs) else np.zeros((0, 3))
     return StereoCloud(
         points=points.reshape(-1, 3),
-        colors=_smoothed_colours(rect_left)[ys, xs],
+        colors=colours,
         pixels=np.column_stack([xs, ys]).astype(np.float64),
         disparity=disparity,
         image_size=calib.image_size,
         timings=timings,
         rectified=(grey_left, grey_right),
         calibration=calib,
+        matched_pixels=0 if fixed.shape == grey_left.shape else fixed.size,
     )
 
 

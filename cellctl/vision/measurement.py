@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision.checks import CheckFailure, check_glue_path, check_outline_depth, check_outline_right
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
@@ -32,13 +34,22 @@ from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
+MAX_UNMEASURED_FRACTION = 0.05  # of the sole's changed pixels without depth: beyond, blame the lost pixels
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
 HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
+GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
+GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: Gaussian over arc length
 GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
-OUTLINE_SMOOTHING_MM = 2.0  # Gaussian along the outline: removes the raster's staircase, keeps the shape
+# Gaussian along the outline: removes the raster's staircase (0.25 mm cells) and pixel noise; wider would cut
+# the tip of a pointed toe (a 2 mm sigma takes ~1 mm off a 35 degree wedge).
+OUTLINE_SMOOTHING_MM = 0.75
+# Without a taught table the edge comes from the colour test, whose noise on black soles biases the extreme
+# projections (the length) outward by 0.3-0.5 mm at 0.75 mm: the 2 mm it was tuned with.
+COLOUR_OUTLINE_SMOOTHING_MM = 2.0
+GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
 @dataclass
@@ -48,6 +59,10 @@ class GluePath:
     points: np.ndarray  # N x 3, mm
     normals: np.ndarray  # N x 3, unit, nz > 0
     closed: bool = True
+    # What the path was made from, for its self-check (cellctl.vision.checks): per point, the height of the
+    # surface patch before smoothing along the path, and the patches' own normals smoothed along it.
+    raw_z: np.ndarray | None = None
+    surface_normals: np.ndarray | None = None
 
     @property
     def length_mm(self) -> float:
@@ -119,14 +134,16 @@ def measure_sole(
     check_glue_settings(glue_offset_mm, glue_spacing_mm)
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
-    base = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)
+    # What every result carries, valid or not; grows as the measurement learns more about the sole.
+    base: dict[str, Any] = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)
     if not reconstruction.valid or reconstruction.footprint is None:
         return _invalid(
             reconstruction.failure or FailureKind.NO_SOLE, reconstruction.reason or "no sole reconstructed", **base
         )
     start = time.perf_counter()
     footprint = reconstruction.footprint
-    outline = _smooth_closed(footprint.outline(), OUTLINE_SMOOTHING_MM)
+    smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
+    outline = _smooth_closed(footprint.outline(), smoothing)
     centroid, axis = _principal_axis(outline)
     proj = (outline - centroid) @ axis
     lo, hi = float(proj.min()), float(proj.max())
@@ -142,6 +159,17 @@ def measure_sole(
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
         )
+    problem = _outline_problem(reconstruction, outline)
+    if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
+        # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
+        return _invalid(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth (glare "
+            f"or no texture), so its edge cannot be confirmed ({problem.reason})",
+            **base,
+        )
+    if problem is not None:
+        return _invalid(problem.kind, problem.reason, **base)
     heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
     toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
     surface = SoleSurface(reconstruction)
@@ -159,15 +187,63 @@ def measure_sole(
     heel_point, toe_point = np.array([*heel_xy, heel_z]), np.array([*toe_xy, toe_z])
     base.update(heel_point=heel_point, toe_point=toe_point)
     start = time.perf_counter()
-    path, problem = glue_path(surface, outline, centroid, axis, glue_offset_mm, glue_spacing_mm)
+    # The line glue_offset_mm inside the edge, from the footprint's distance transform: exact at pointed
+    # and cusped ends too, where moving the outline along its normals would cross itself. Cell centres lie
+    # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
+    inset = footprint.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
+    if len(inset) < 3:
+        return _invalid(
+            FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide", **base
+        )
+    glue_line = _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM)
+    path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
-        return _invalid(FailureKind.SURFACE_NOT_MEASURED, problem or "no glue path", **base)
+        return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
+    sole_z = np.quantile(points[:, 2], [0.01, 0.99])
+    raw_z = path.points[:, 2] if path.raw_z is None else path.raw_z
+    patch_normals = path.normals if path.surface_normals is None else path.surface_normals
+    problem = check_glue_path(
+        path.points, path.normals, raw_z, patch_normals, (float(sole_z[0]), float(sole_z[1])), glue_spacing_mm
+    )
+    if problem is not None:
+        return _invalid(problem.kind, problem.reason, **base)
     implausible = _implausible(length, heel_z, toe_z)
     if implausible:
         return _invalid(FailureKind.MEASUREMENT_INVALID, implausible, **base)
     return SoleMeasurement(
         length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, valid=True, **base
+    )
+
+
+def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> CheckFailure | None:
+    """The outline's self-checks: against the depth step, and against the right image when a table is taught."""
+    ring = _resample_closed(outline, 1.0)
+    outward = _outward_normals(ring)
+    if reconstruction.raised is not None and reconstruction.measured_cells is not None:
+        problem = check_outline_depth(
+            ring, outward, reconstruction.raised, reconstruction.measured_cells, reconstruction.footprint
+        )
+        if problem is not None:
+            return problem
+    changed_right, calib = reconstruction.changed_right, reconstruction.calibration
+    if changed_right is None or calib is None or reconstruction.camera_to_table is None:
+        return None
+    to_camera = np.linalg.inv(reconstruction.camera_to_table)
+    f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
+
+    def right_pixel(table: np.ndarray) -> np.ndarray:
+        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
+        return np.column_stack(
+            [f * (camera[:, 0] - baseline) / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy]
+        )
+
+    centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
+    edge_height = SoleSurface(reconstruction).coarse_heights(ring - 3.0 * outward, 3.0)
+    edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
+    assert reconstruction.footprint is not None
+    return check_outline_right(
+        ring, outward, edge_height, changed_right, right_pixel, centre[:3], reconstruction.footprint
     )
 
 
@@ -183,7 +259,7 @@ def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
     return None
 
 
-def _invalid(failure: FailureKind, reason: str, **fields_: object) -> SoleMeasurement:
+def _invalid(failure: FailureKind, reason: str, **fields_: Any) -> SoleMeasurement:
     return SoleMeasurement(None, None, None, None, valid=False, reason=reason, failure=failure, **fields_)
 
 
@@ -237,11 +313,32 @@ def glue_path(
     # Neighbouring patches overlap but their noise does not all average out; the surface is smooth along
     # the path, so a Gaussian along the arc takes the rest (its bias, z'' sigma^2 / 2, is ~0.01 mm here).
     sigma = GLUE_SMOOTHING_MM / spacing_mm
-    z = _smooth_along(samples.z[: len(path_xy)], sigma)
-    inner = samples.z[len(path_xy) :]
-    inner = np.where(np.isfinite(inner), inner, samples.z[: len(path_xy)])  # no inner sample: flat across
-    across = _smooth_along(inner, sigma) - z
-    return GluePath(np.column_stack([path_xy, z]), _path_normals(path_xy, z, path_inward, across), closed=True), None
+    raw = _without_single_outliers(samples.z[: len(path_xy)])
+    z = _smooth_along(raw, sigma)
+    inner = _without_single_outliers(samples.z[len(path_xy) :])
+    inner = np.where(np.isfinite(inner), inner, raw)  # no inner sample: flat across
+    # The normal turns slowly along a sole's edge but its slopes are differences of noisy heights: they are
+    # smoothed over a longer stretch than the heights themselves.
+    wide = GLUE_NORMAL_SMOOTHING_MM / spacing_mm
+    across = _smooth_along(inner - raw, wide)
+    patch_normals = _smooth_along(samples.normals[: len(path_xy)], sigma)
+    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
+    normals = _path_normals(path_xy, _smooth_along(raw, wide), path_inward, across)
+    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+
+
+def _without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -> np.ndarray:
+    """Heights along a closed path with isolated bad patch fits replaced by their neighbours' median.
+
+    One patch fit can fail (a highlight, a mismatch) and smoothing would spread it over its neighbours;
+    a lone value that departs from the median of the five around it is replaced. Two or more in a row are
+    kept: that is the surface, or a fault the self-check must see (cellctl.vision.checks).
+    """
+    window = np.stack([np.roll(z, k) for k in (-2, -1, 0, 1, 2)])
+    median = np.nanmedian(window, axis=0)
+    bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
+    lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
+    return np.where(lone, median, z)
 
 
 def _path_normals(path_xy: np.ndarray, z: np.ndarray, inward: np.ndarray, across_rise: np.ndarray) -> np.ndarray:

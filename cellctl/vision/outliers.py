@@ -65,7 +65,7 @@ def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm
     if others.size:  # isolated points (spikes, specks): their neighbours lie anywhere, ask a k-d tree
         tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)))
         for k in others:
-            mean[k] = np.mean(np.sqrt(tree.search_knn_vector_3d(points[k], 20)[2]))
+            mean[k] = np.mean(np.sqrt(np.asarray(tree.search_knn_vector_3d(points[k], 20)[2])))
     return mean
 
 

@@ -119,10 +119,13 @@ def _draw_geometry(image: np.ndarray, measurement: SoleMeasurement, to_px) -> No
 def _edge_heights(measurement: SoleMeasurement) -> np.ndarray:
     """Height of the top surface along the outline (from the nearest glue path point): the camera sees the
     edge up there, not on the table."""
+    outline = measurement.outline
+    if outline is None:
+        return np.zeros(0)
     if measurement.glue_path is None:
-        return np.zeros(len(measurement.outline))
+        return np.zeros(len(outline))
     path = measurement.glue_path.points
-    distance = np.linalg.norm(measurement.outline[:, None, :] - path[None, :, :2], axis=2)
+    distance = np.linalg.norm(outline[:, None, :] - path[None, :, :2], axis=2)
     return path[np.argmin(distance, axis=1), 2]
 
 

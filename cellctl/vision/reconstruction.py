@@ -6,6 +6,13 @@
 
 `SoleReconstructor.reconstruct(left, right)` runs all of it; `points_from_disparity` and `segment` are the
 two halves, so a cloud from another source (e.g. the simulator's true depth) can be segmented the same way.
+
+With a known table plane (taught, given, or learnt once with `learn_table`) the cycle matches only what can be the sole
+(cellctl.vision.search_region): a coarse match finds what stands above the table, the full-resolution
+match covers that region and the band of disparities from the table to its top. Whenever that shortcut
+cannot be trusted (the table is not where it was, nothing found above it, the sole reaches the region's
+edge, or the region's result is invalid) the whole pair is matched as without a plane, so the shortcut can
+cost time but never change a refusal into a wrong value.
 """
 
 from __future__ import annotations
@@ -18,15 +25,28 @@ from cellctl.errors import FailureKind, MeasurementInputError
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud, cloud_from_disparity, disparity_range
 from cellctl.vision.defaults import DEPTH_RANGE_MM
+from cellctl.vision.search_region import SearchRegion, coarse_pair, coarse_range, find_region
 from cellctl.vision.segmentation import MIN_HEIGHT_MM, Reconstruction, Segmentation
 from cellctl.vision.table import TablePlane
+from cellctl.vision.teach import TaughtTable, teach_table
 
-__all__ = ["DEFAULT_DEPTH_RANGE_MM", "Reconstruction", "SoleReconstructor", "StereoCloud", "disparity_range"]
+__all__ = [
+    "DEFAULT_DEPTH_RANGE_MM",
+    "Reconstruction",
+    "SoleReconstructor",
+    "StereoCloud",
+    "TaughtTable",
+    "disparity_range",
+]
 
 DEFAULT_DEPTH_RANGE_MM = DEPTH_RANGE_MM
 # Only really measured pixels (no fill); the widest census window, because the sole's texture is weak:
 # on simulated soles it halves the matcher's height noise for the same time.
 SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7)}
+# The coarse match only has to say where something stands above the table: the default window and no
+# medians (a third of its time; search_region's opening and largest region take out its isolated errors).
+COARSE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "median": 0, "weighted_median": 0}
+REGION_CUT_MM = 15.0  # a sole this close to a side of the search region may go on beyond it: match the whole pair
 
 
 class SoleReconstructor:
@@ -38,13 +58,21 @@ class SoleReconstructor:
         depth_range_mm: tuple[float, float] = DEFAULT_DEPTH_RANGE_MM,
         table_plane: TablePlane | None = None,
         min_height_mm: float = MIN_HEIGHT_MM,
+        taught: TaughtTable | None = None,
+        search_region: bool = True,
         **matcher_params: object,
     ) -> None:
+        """search_region: with a known table plane, match only the region and band that can hold the sole
+        (False: always the whole pair, e.g. to compare the two)."""
+        if taught is not None and not taught.matches(calib):
+            raise ValueError("the taught table was taught with another calibration: teach the empty table again")
         self.calib = calib
+        self.taught = taught
         self.depth_range_mm = (float(depth_range_mm[0]), float(depth_range_mm[1]))
         self.min_disparity, self.num_disparities = disparity_range(calib, self.depth_range_mm)
-        self.table_plane = table_plane
+        self.table_plane = table_plane if taught is None else taught.plane
         self.min_height_mm = float(min_height_mm)
+        self.search_region = search_region
         self._matcher_params = {**SOLE_MATCHER_PARAMS, **matcher_params}
         if self._matcher_params["fill"] != "none":
             # Every valid pixel of the final map is taken as measured (points_from_disparity).
@@ -52,41 +80,108 @@ class SoleReconstructor:
                 f"the sole reconstruction needs fill='none' (got {self._matcher_params['fill']!r}): "
                 "filled disparities are guesses, not measurements"
             )
-        self._matcher = None
+        self._matchers: dict[tuple[int, int, bool], object] = {}  # (min, num, coarse) -> StereoMatcher
+        self.last_region: SearchRegion | None = None  # the region the last reconstruct matched (None: whole pair)
+        self.last_fallback: str = ""  # why the last reconstruct matched the whole pair, when it had a plane
+
+    def learn_table(self, left: np.ndarray, right: np.ndarray) -> TablePlane | None:
+        """Without a taught table: find the table plane on one pair (RANSAC and image refinement; a sole may
+        lie on the table) and keep it for the following cycles; None (nothing kept) when no table is found."""
+        self.table_plane = None
+        plane = self.reconstruct(left, right).table_plane
+        self.table_plane = plane
+        return plane
 
     def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
         """The sole's cloud from one raw (unrectified) stereo pair."""
-        return self.segment(self.points_from_disparity(left, right))
+        self._check_pair(left, right)
+        timings: dict[str, float] = {}
+        rect_left, rect_right = self._rectify(left, right, timings)
+        self.last_region, self.last_fallback = None, ""
+        if self.table_plane is not None and self.search_region:
+            region, why = self._search_region(rect_left, rect_right, timings)
+            if region is not None:
+                result = self.segment(self._cloud(rect_left, rect_right, timings, region))
+                cut_px = REGION_CUT_MM * self.calib.focal_px / self.table_plane.offset
+                if result.valid and not region.cuts(result.sole_pixels, cut_px):
+                    self.last_region = region
+                    return result
+                why = "the sole reaches the search region's edge" if result.valid else f"refused: {result.reason}"
+                spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
+                timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
+            self.last_fallback = why
+        return self.segment(self._cloud(rect_left, rect_right, timings, None))
 
     def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
-        """Rectify, match and reproject: every really measured pixel as a 3-D point."""
+        """Rectify, match the whole pair and reproject: every really measured pixel as a 3-D point."""
+        self._check_pair(left, right)
+        timings: dict[str, float] = {}
+        rect_left, rect_right = self._rectify(left, right, timings)
+        return self._cloud(rect_left, rect_right, timings, None)
+
+    def _check_pair(self, left: np.ndarray, right: np.ndarray) -> None:
         for image in (left, right):
             try:
                 self.calib.check_image(image)
             except ValueError as exc:
                 raise MeasurementInputError(FailureKind.CALIBRATION_MISMATCH, str(exc)) from None
-        timings: dict[str, float] = {}
+
+    def _rectify(self, left: np.ndarray, right: np.ndarray, timings: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
         start = time.perf_counter()
-        rect_left, rect_right = self.calib.rectify(left, right)
+        pair = self.calib.rectify(left, right)
         timings["rectify"] = time.perf_counter() - start
+        return pair
+
+    def _search_region(
+        self, rect_left: np.ndarray, rect_right: np.ndarray, timings: dict[str, float]
+    ) -> tuple[SearchRegion | None, str]:
+        """The region and band worth matching, from a match at a quarter of the resolution."""
+        from cellctl.stereo import to_float
+
+        assert self.table_plane is not None
+        start = time.perf_counter()
+        low, num = coarse_range(self.min_disparity, self.num_disparities)
+        small_left, small_right = coarse_pair(rect_left, rect_right)
+        coarse = to_float(self._stereo_matcher(low, num, coarse=True).compute_fixed(small_left, small_right))
+        region = find_region(self.calib, self.table_plane, coarse, (self.min_disparity, self.num_disparities))
+        timings["coarse"] = time.perf_counter() - start
+        return region
+
+    def _cloud(
+        self, rect_left: np.ndarray, rect_right: np.ndarray, timings: dict[str, float], region: SearchRegion | None
+    ) -> StereoCloud:
+        """Match the whole pair (region None) or a search region, and reproject the measured pixels."""
         start = time.perf_counter()
         # The final map alone (int16, x DISP_SCALE): without fill ("none") the medians keep unmeasured pixels
         # invalid, so a valid pixel of it is one that passed the left-right check. compute_detailed would
         # convert five maps to float for nothing.
-        fixed = self._stereo_matcher().compute_fixed(rect_left, rect_right)
+        if region is None:
+            fixed = self._stereo_matcher(self.min_disparity, self.num_disparities).compute_fixed(rect_left, rect_right)
+            origin, shift = (0, 0), 0
+        else:
+            crop_left, crop_right = region.crop_pair(rect_left, rect_right)
+            fixed = self._stereo_matcher(0, region.num_disparities).compute_fixed(crop_left, crop_right)
+            origin, shift = (region.x0, region.y0), region.shift
         timings["match"] = time.perf_counter() - start
         start = time.perf_counter()
-        cloud = cloud_from_disparity(self.calib, fixed, rect_left, rect_right, timings)
+        cloud = cloud_from_disparity(self.calib, fixed, rect_left, rect_right, timings, origin, shift)
         timings["reproject"] = time.perf_counter() - start
         return cloud
 
     def segment(self, cloud: StereoCloud) -> Reconstruction:
         """Table plane, background removal, largest region and outlier removal on a measured cloud."""
-        return Segmentation(cloud, self.table_plane, self.min_height_mm).run()
+        return Segmentation(cloud, self.table_plane, self.min_height_mm, self.taught).run()
 
-    def _stereo_matcher(self):  # noqa: ANN202 - StereoMatcher is imported lazily (compiled core)
-        if self._matcher is None:
+    def teach(self, left: np.ndarray, right: np.ndarray) -> TaughtTable:
+        """The taught table from a raw pair of the EMPTY fixture (cellctl.vision.teach); TeachError if not empty."""
+        return teach_table(self.points_from_disparity(left, right), self.calib)
+
+    def _stereo_matcher(self, low: int, num: int, coarse: bool = False):  # noqa: ANN202 - lazily imported core
+        """One matcher per disparity range, kept: its buffers stay allocated between cycles of one size."""
+        key = (low, num, coarse)
+        if key not in self._matchers:
             from cellctl.stereo import StereoMatcher
 
-            self._matcher = StereoMatcher(self.min_disparity, self.num_disparities, **self._matcher_params)
-        return self._matcher
+            params = COARSE_MATCHER_PARAMS if coarse else self._matcher_params
+            self._matchers[key] = StereoMatcher(low, num, **params)
+        return self._matchers[key]

@@ -25,10 +25,12 @@ import open3d as o3d
 
 from cellctl.errors import FailureKind
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.outliers import statistical_inliers
 from cellctl.vision.table import TABLE_INLIER_MM, TablePlane, find_table, refine_table
+from cellctl.vision.teach import TaughtTable, check_drift
 
 MIN_HEIGHT_MM = 3.0  # points lower than this belong to the table (its height noise is well below 1 mm)
 MAX_HEIGHT_MM = 150.0  # anything higher is not a sole lying on the table (a hand, the robot)
@@ -37,6 +39,11 @@ MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles
 BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
 FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is not quantised to a coarse grid
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
+FOOTPRINT_OPEN_MM = 1.0  # specks thinner than this go; a pointed toe's tip (radius >= 0.5 mm) stays
+COLOUR_OPEN_MM = 2.0  # the same without a taught table: the colour edge's noise needs the wider opening
+WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
+EDGE_BAND_MM = 6.0
+UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 
 
@@ -60,6 +67,12 @@ class Reconstruction:
     calibration: Calibration | None = None
     rectified: tuple[np.ndarray, np.ndarray] | None = None  # grey float32 rectified pair
     sole_mask: np.ndarray | None = None  # bool, rectified left pixels on the sole (off its very edge)
+    # The depth step on the footprint's raster, for the outline's self-check (cellctl.vision.checks):
+    raised: Footprint | None = None  # cells where most measured points rise above the table
+    measured_cells: Footprint | None = None  # cells with any measured point
+    taught: TaughtTable | None = None  # the taught table the sole was found against, if any
+    changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
+    unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
 
     @property
     def valid(self) -> bool:
@@ -77,17 +90,27 @@ class Reconstruction:
 class Segmentation:
     """One run of the segmentation; a class only to keep the steps short and their shared state named."""
 
-    def __init__(self, cloud: StereoCloud, table_plane: TablePlane | None, min_height_mm: float) -> None:
+    def __init__(
+        self,
+        cloud: StereoCloud,
+        table_plane: TablePlane | None,
+        min_height_mm: float,
+        taught: TaughtTable | None = None,
+    ) -> None:
         self.cloud = cloud
+        self.taught = taught
         self.plane = table_plane
         self.min_height = min_height_mm
         self.timings = dict(cloud.timings)
-        width, height = cloud.image_size
         self.measured = len(cloud.points)
-        self.fraction = self.measured / float(width * height)
+        self.fraction = self.measured / float(cloud.matched_area)  # of the pixels matched (a search region)
         self.transform: np.ndarray | None = None
         self.colour_filter = False
         self.separation = 0.0
+        self.raised: Footprint | None = None  # cells where most measured points rise above the table
+        self.measured_cells: Footprint | None = None  # cells with any measured point
+        self.changed_right: np.ndarray | None = None
+        self._changed_left: np.ndarray | None = None
 
     def run(self) -> Reconstruction:
         if self.fraction < MIN_VALID_FRACTION:
@@ -106,6 +129,11 @@ class Segmentation:
             return self._fail(
                 FailureKind.NO_TABLE, "no table plane found: the table must fill most of the view, below the sole"
             )
+        if self.taught is not None:
+            drift = check_drift(self.taught, self.cloud.points)
+            self.timings["table_drift"] = time.perf_counter() - start
+            if drift.problem is not None:
+                return self._fail(FailureKind.TABLE_MOVED, drift.problem)
         transform = self.plane.camera_to_table()
         points = self.cloud.points @ transform[:3, :3].T + transform[:3, 3]
         # The table frame's z is the height above the plane: no second pass over the ~10^6 points for it.
@@ -125,16 +153,31 @@ class Segmentation:
         high = np.flatnonzero((z > self.min_height) & (z < MAX_HEIGHT_MM))
         no_sole = f"no sole in view: nothing larger than {MIN_SOLE_AREA_MM2:.0f} mm^2 above the table"
         if high.size == 0:
-            return self._fail(FailureKind.NO_SOLE, no_sole)
+            return self._no_sole(points, no_sole)
         # One raster for both footprints, over the high points only (cells elsewhere cannot be sole); its
         # cells lie on the same lattice whatever it covers (Footprint.empty_like).
         raster = Footprint.empty_like(xy[high], FOOTPRINT_CELL_MM)
         every = raster.counts(xy)  # all measured points per cell: "most of a cell's points" needs them
         footprint = _footprint(raster, every, xy[high])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
-            return self._fail(FailureKind.NO_SOLE, no_sole)
-        keep = high[self._colour_filter(points, footprint, high)]
-        if not self.colour_filter:
+            return self._no_sole(points, no_sole)
+        high_counts = raster.counts(xy[high])
+        # The raster is finer than the pixels: cells between measured ones are filled from their neighbours.
+        self.raised = Footprint(
+            ((high_counts > 0) & (2 * high_counts >= every)).astype(np.uint8), raster.origin, raster.cell_mm
+        ).morphology(close_mm=1.5, open_mm=0.0)
+        self.measured_cells = Footprint((every > 0).astype(np.uint8), raster.origin, raster.cell_mm).dilated(0.75)
+        if self.taught is not None:
+            changed = self._change_filter(points, footprint, high)
+            if changed is None:
+                return self._fail(
+                    FailureKind.TABLE_MOVED,
+                    "too little of the taught table is visible around the sole to compare with: clear the table",
+                )
+            keep = changed
+        else:
+            keep = high[self._colour_filter(points, footprint, high)]
+        if self.taught is None and not self.colour_filter:
             # Without the colour edge, matching halos widen the sole by 1-5 mm (simulated soles): no length.
             return self._fail(
                 FailureKind.COLOURS_TOO_SIMILAR,
@@ -142,10 +185,12 @@ class Segmentation:
                 f"{self.separation:.1f} standard deviations, need {MIN_COLOUR_SEPARATION:g}): use a table "
                 "surface that contrasts with the sole",
             )
-        footprint = _footprint(raster, every, xy[keep])
+        # The colour edge is noisier than the change edge (a black sole's colour noise): it keeps the coarser
+        # opening it was tuned with; the change edge keeps a pointed toe's tip.
+        footprint = _footprint(raster, every, xy[keep], FOOTPRINT_OPEN_MM if self.taught else COLOUR_OPEN_MM)
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._fail(FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour")
-        index = keep[footprint.contains(xy[keep])]
+        index = keep[footprint.contains(xy[keep]) & (z[keep] > self.min_height)]  # the foot of a wall: outline only
         self.timings["background"] = time.perf_counter() - start
         start = time.perf_counter()
         index = self._without_outliers(index, points)
@@ -160,6 +205,7 @@ class Segmentation:
             footprint=footprint,
             rectified=self.cloud.rectified,
             sole_mask=self._sole_mask(index),
+            unmeasured_fraction=self._unmeasured_fraction(index),
         )
 
     def _without_outliers(self, index: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -180,8 +226,86 @@ class Segmentation:
         mask = np.zeros((height, width), np.uint8)
         x, y = np.round(self.cloud.pixels[index]).astype(int).T
         mask[y, x] = 1
-        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-        return cv2.erode(mask, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
+        closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+        return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
+
+    def _no_sole(self, points: np.ndarray, reason: str) -> Reconstruction:
+        """NO_SOLE, unless the taught table shows a sole-sized change that depth did not measure.
+
+        Heavy sensor noise or glare on a dark sole can leave too few matched points to raise a sole-sized
+        footprint: the sole is there, and "no sole in view" would send the operator looking for nothing.
+        """
+        if self.taught is None or self.cloud.rectified is None or self.plane is None:
+            return self._fail(FailureKind.NO_SOLE, reason)
+        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
+        current = self.cloud.rectified[0]
+        test = ChangeTest.fit(current, self.taught.left, np.round(self.cloud.pixels[table]).astype(np.int64))
+        if test is None:
+            return self._fail(FailureKind.NO_SOLE, reason)
+        changed = test.changed(current, self.taught.left).astype(np.uint8)
+        count, _, stats, _ = cv2.connectedComponentsWithStats(changed, connectivity=8)
+        largest = int(stats[1:, cv2.CC_STAT_AREA].max()) if count > 1 else 0
+        pixel_mm = self.plane.offset / self.cloud.calibration.focal_px if self.cloud.calibration else 0.0
+        area = largest * pixel_mm**2
+        if area < MIN_SOLE_AREA_MM2:
+            return self._fail(FailureKind.NO_SOLE, reason)
+        return self._fail(
+            FailureKind.TOO_FEW_POINTS,
+            f"something sole-sized lies on the table ({area:.0f} mm^2 changed against the taught table) but too "
+            "little of it was measured in depth (sensor noise, glare or no texture): check lighting and exposure",
+        )
+
+    def _unmeasured_fraction(self, index: np.ndarray) -> float:
+        """Share of the sole's changed pixels (taught table only) without a measured point: glare, no texture.
+
+        The sole's image region is its measured pixels closed over UNMEASURED_CLOSE_PX; where that holds
+        many changed pixels without depth, an outline that disagrees with the depth step has lost part of
+        the sole to unmeasured pixels, and that is the reason to give (cellctl.vision.measurement).
+        """
+        if self._changed_left is None or index.size == 0:
+            return 0.0
+        width, height = self.cloud.image_size
+        sole = np.zeros((height, width), np.uint8)
+        x, y = np.round(self.cloud.pixels[index]).astype(int).T
+        sole[y, x] = 1
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (UNMEASURED_CLOSE_PX, UNMEASURED_CLOSE_PX))
+        region = cv2.morphologyEx(sole, cv2.MORPH_CLOSE, kernel) > 0
+        measured = np.zeros((height, width), bool)
+        mx, my = np.round(self.cloud.pixels).astype(int).T
+        measured[my, mx] = True
+        lost = region & self._changed_left & ~measured
+        return float(np.count_nonzero(lost)) / max(float(np.count_nonzero(region)), 1.0)
+
+    def _change_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray | None:
+        """The sole's points (indices): changed against the taught table (cellctl.vision.change), and either
+        high or within EDGE_BAND_MM of the raised footprint; None if the table around is not seen.
+
+        Stereo edge fattening drags the sole's height onto table pixels next to it, but those pixels still
+        show the table's own texture: unchanged, so dropped. The foot of a wall that leans out lies lower
+        than MIN_HEIGHT_MM but has changed: kept, so the outline is the footprint on the table.
+        """
+        assert self.taught is not None and self.cloud.rectified is not None
+        current, reference = self.cloud.rectified[0], self.taught.left
+        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
+        outside = table[~footprint.dilated(15.0).contains(points[table, :2])]
+        test = ChangeTest.fit(current, reference, np.round(self.cloud.pixels[outside]).astype(np.int64))
+        if test is None:
+            return None
+        changed = test.changed(current, reference)
+        self._changed_left = changed
+        # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
+        right_table = self.cloud.pixels[outside] - np.column_stack(
+            [self.cloud.disparity[outside], np.zeros(len(outside))]
+        )
+        right_test = ChangeTest.fit(self.cloud.rectified[1], self.taught.right, np.round(right_table).astype(np.int64))
+        if right_test is not None:
+            self.changed_right = right_test.changed(self.cloud.rectified[1], self.taught.right)
+        # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
+        near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= self.min_height))
+        near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
+        candidates = np.concatenate([high, near])
+        x, y = np.round(self.cloud.pixels[candidates]).astype(np.int64).T
+        return np.sort(candidates[changed[y, x]])
 
     def _colour_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray:
         """Which of the `high` points (indices) are sole-coloured (all when the colours do not separate).
@@ -248,14 +372,20 @@ class Segmentation:
             failure=failure,
             timings=self.timings,
             calibration=self.cloud.calibration,
+            raised=self.raised,
+            measured_cells=self.measured_cells,
+            taught=self.taught,
+            changed_right=self.changed_right,
             **sole,
         )
 
 
-def _footprint(raster: Footprint, every: np.ndarray, sole_xy: np.ndarray) -> Footprint:
+def _footprint(
+    raster: Footprint, every: np.ndarray, sole_xy: np.ndarray, open_mm: float = FOOTPRINT_OPEN_MM
+) -> Footprint:
     """Largest region of `raster` where most measured points of a cell (`every`, per cell) are sole points
     (`sole_xy`), closed and hole-free."""
     sole = raster.counts(sole_xy)
     # A cell is sole if most of its own points are; cells without points are decided by the closing.
     mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
-    return Footprint(mask, raster.origin, raster.cell_mm).morphology(close_mm=2.0, open_mm=2.0).largest_region()
+    return Footprint(mask, raster.origin, raster.cell_mm).morphology(close_mm=2.0, open_mm=open_mm).largest_region()

@@ -113,12 +113,16 @@ def fit_disparity_planes(
     order = np.argsort(ids, kind="stable")
     ids = np.asarray(ids, np.int64)[order]
     x = np.asarray(pixels, np.float64)[order, 0].astype(np.float32)
-    y = np.asarray(pixels, np.float64)[order, 1].astype(np.float32)
+    y_image = np.asarray(pixels, np.float64)[order, 1].astype(np.float32)
+    # Rectified pixels are only ever sampled on their own row: blurring and differentiating the rows the
+    # patches cover (plus the filters' reach) gives the same samples at a fraction of the whole images' cost.
+    top, bottom = _row_span(y_image, left.shape[0])
+    left, right, y = left[top:bottom], right[top:bottom], y_image - np.float32(top)
     centres = np.asarray(centres, np.float64).reshape(-1, 2)
     count = len(centres)
     params = np.array(start, np.float64).reshape(count, 3)
     dx = x - centres[ids, 0]
-    dy = y - centres[ids, 1]
+    dy = y_image - centres[ids, 1]
     sums = PatchSums(ids, count)
     sizes = sums.sizes
     # Products of the Jacobian's columns (1, dx, dy) that the normal equations need: fixed per fit.
@@ -139,8 +143,20 @@ def fit_disparity_planes(
             params += np.clip(step, -MAX_STEP_PX, MAX_STEP_PX)
             last_step = np.abs(step[:, 0])
     ok = (sizes >= MIN_PATCH_PIXELS) & (last_step < 0.02) & np.all(np.isfinite(params), axis=1)
-    xy = np.column_stack([x, y]).astype(np.float64)
+    xy = np.column_stack([x, y_image]).astype(np.float64)
     return PatchFit(params, ok, np.split(xy, np.cumsum(sizes)[:-1]), ids, xy)
+
+
+# Rows beyond the patches that the filters reach: the widest Gaussian's kernel (OpenCV: radius 4 sigma for
+# float images), Sobel's 1 and bicubic sampling's 2, rounded up.
+_ROW_MARGIN_PX = int(4 * max(sigma for sigma, _ in BLUR_LEVELS)) + 8
+
+
+def _row_span(y: np.ndarray, height: int) -> tuple[int, int]:
+    """[top, bottom) of the image rows the fit can read."""
+    if len(y) == 0:
+        return 0, height
+    return max(int(y.min()) - _ROW_MARGIN_PX, 0), min(int(np.ceil(y.max())) + _ROW_MARGIN_PX + 1, height)
 
 
 def _gauss_newton_step(

@@ -17,6 +17,7 @@ from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
 
 MIN_CLOUD_POINTS = 12
+MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
 TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
 
 
@@ -47,7 +48,7 @@ class SoleSurface:
         if self.rec.rectified is None:
             z, normals = self._from_cloud(xy, radius_mm)
             return SurfaceSamples(z, normals, refined)
-        z = self._coarse_heights(xy, radius_mm)
+        z = self.coarse_heights(xy, radius_mm)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
         if np.any(np.isfinite(z)):
             self._refine(xy, z, normals, refined, radius_mm)
@@ -57,8 +58,8 @@ class SoleSurface:
             z[rest], normals[rest] = self._from_cloud(xy[rest], radius_mm)
         return SurfaceSamples(z, normals, refined)
 
-    def _coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
-        """Median height of the cloud's points within the radius: only the start of the refinement."""
+    def coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
+        """Median height of the cloud's points within the radius (NaN where too few): the refinement's start."""
         points = self.rec.sole_points
         z = np.full(len(xy), np.nan)
         for k, (x, y) in enumerate(xy):
@@ -83,21 +84,25 @@ class SoleSurface:
         self, xy: np.ndarray, z: np.ndarray, normals: np.ndarray, refined: np.ndarray, radius_mm: float
     ) -> None:
         rec = self.rec
-        calib = rec.calibration
-        left, right = rec.rectified
-        table_to_camera = np.linalg.inv(rec.camera_to_table)
+        calib, rectified, to_table, mask = rec.calibration, rec.rectified, rec.camera_to_table, rec.sole_mask
+        if calib is None or rectified is None or to_table is None or mask is None:
+            return  # not a stereo reconstruction: the cloud answers every query
+        left, right = rectified
+        table_to_camera = np.linalg.inv(to_table)
         known = np.flatnonzero(np.isfinite(z))
         guess = np.column_stack([xy[known], z[known]]) @ table_to_camera[:3, :3].T + table_to_camera[:3, 3]
         focal = calib.focal_px
         centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
         start = focal * calib.baseline_mm / guess[:, 2]
         radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
-        fit = refine_patches(left, right, rec.sole_mask, centres, radius_px, start)
+        fit = refine_patches(left, right, mask, centres, radius_px, start)
         homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
         camera = homogeneous[:, :3] / homogeneous[:, 3:4]
-        table = camera @ rec.camera_to_table[:3, :3].T + rec.camera_to_table[:3, 3]
+        table = camera @ to_table[:3, :3].T + to_table[:3, 3]
         patch_z, patch_normals = _planes_at(table, fit.ids, xy[known])
-        done = fit.ok & np.isfinite(patch_z)
+        # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the cloud's
+        # plane takes over there.
+        done = fit.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known]) < MAX_REFINE_SHIFT_MM)
         z[known[done]], normals[known[done]], refined[known[done]] = patch_z[done], patch_normals[done], True
 
 

@@ -72,7 +72,7 @@ def find_table(points: np.ndarray, sample: int = 60000, seed: int = 0, refit_str
     if len(inliers) < 0.2 * len(subset):
         return None
     plane = TablePlane(np.asarray(model[:3], np.float64), float(model[3]))
-    scale = np.linalg.norm(plane.normal)
+    scale = float(np.linalg.norm(plane.normal))
     plane = TablePlane(plane.normal / scale, plane.offset / scale)
     spread = points[::refit_stride]  # measured pixels in image order: a stride samples the whole view
     for _ in range(2):  # refit, then refit once more on the refined inliers
@@ -89,6 +89,9 @@ def refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 80, ra
     patches on a grid rather than one plane over the whole table: each patch gets its own brightness
     correction, so the cameras' different vignetting cannot tilt the plane.
     """
+    calib, rectified = cloud.calibration, cloud.rectified
+    if calib is None or rectified is None:  # not a stereo cloud: nothing to refine on
+        return plane
     width, height = cloud.image_size
     near = np.abs(plane.heights(cloud.points)) < TABLE_INLIER_MM
     mask = np.zeros((height, width), bool)
@@ -100,7 +103,6 @@ def refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 80, ra
     if len(centres) < 10:
         return plane
     # Start from the plane itself: in rectified images a plane n.p + o = 0 has d = -B (n . (x - cx, y - cy, f)) / o.
-    calib = cloud.calibration
     f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
     n, o = plane.normal, plane.offset
     start = np.column_stack(
@@ -110,7 +112,7 @@ def refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 80, ra
             np.full(len(centres), -baseline * n[1] / o),
         ]
     )
-    left, right = cloud.rectified
+    left, right = rectified
     fit = refine_patches(left, right, mask, centres, radius_px, start)
     if np.count_nonzero(fit.ok) < 10:
         return plane

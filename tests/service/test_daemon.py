@@ -64,7 +64,7 @@ class Service:
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
-        assert self.daemon.wait_started(60), f"service did not start: {self.error}"
+        assert self.daemon.wait_started(300), f"service did not start: {self.error}"  # warm-up on a loaded machine
 
     def _run(self) -> None:
         try:
@@ -265,6 +265,9 @@ EXPECTED_CODES = {
     FailureKind.COLOURS_TOO_SIMILAR: ErrorCode.COLOURS_TOO_SIMILAR,
     FailureKind.ENDS_TOO_CLOSE_TO_CALL: ErrorCode.ENDS_TOO_CLOSE_TO_CALL,
     FailureKind.MEASUREMENT_INVALID: ErrorCode.MEASUREMENT_INVALID,
+    FailureKind.TABLE_MOVED: ErrorCode.TABLE_MOVED,
+    FailureKind.OUTLINE_INCONSISTENT: ErrorCode.OUTLINE_INCONSISTENT,
+    FailureKind.GLUE_PATH_INCONSISTENT: ErrorCode.GLUE_PATH_INCONSISTENT,
     FailureKind.CALIBRATION_MISMATCH: ErrorCode.CALIBRATION_MISMATCH,
     FailureKind.CALIBRATION_MISSING: ErrorCode.CALIBRATION_MISSING,
     FailureKind.CAMERA_MISSING: ErrorCode.CAMERA_MISSING,

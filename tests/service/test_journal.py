@@ -63,10 +63,10 @@ def test_artifacts_beyond_the_retention_limit_are_deleted(tmp_path: Path) -> Non
     journal = Journal.open(tmp_path)
     for cycle in range(1, 6):
         row = journal.record(ok(cycle))
-        folder = journal.staging_dir(row)
+        folder = journal.artifact_dir(row)
         folder.mkdir(parents=True)
         (folder / "sole.ply").write_text("ply")
-        journal.attach_artifacts(row, "sole.ply", None)
+        journal.attach_artifacts(row, folder / "sole.ply", None)
     assert journal.prune_artifacts(keep=2) == 3
     kept = [r for r in journal.last() if r.ply_path is not None]
     assert [r.cycle for r in kept] == [4, 5]
@@ -78,18 +78,17 @@ def test_artifacts_beyond_the_retention_limit_are_deleted(tmp_path: Path) -> Non
 def test_artifact_folders_no_row_refers_to_are_pruned_at_start(tmp_path: Path) -> None:
     journal = Journal.open(tmp_path)
     kept = journal.record(ok(1))
-    journal.staging_dir(kept).mkdir(parents=True)
-    (journal.staging_dir(kept) / "sole.ply").write_text("ply")
-    journal.attach_artifacts(kept, "sole.ply", None)
-    assert journal.find(1).ply_path == str(journal.artifact_dir(kept) / "sole.ply")
-    # kill -9 while writing (staging left), and between a rename and its commit (unreferenced folder):
-    crashed = journal.record(ok(2))
-    journal.staging_dir(crashed).mkdir(parents=True)
+    journal.artifact_dir(kept).mkdir(parents=True)
+    (journal.artifact_dir(kept) / "sole.ply").write_text("ply")
+    journal.attach_artifacts(kept, journal.artifact_dir(kept) / "sole.ply", None)
+    # kill -9 while writing (a staging folder left), and between a rename and its commit (unreferenced folder):
+    (tmp_path / "partial" / "00000002").mkdir(parents=True)
     journal.artifact_dir(99).mkdir(parents=True)
     journal.close()
     again = Journal.open(tmp_path)
     assert again.prune_orphans() == 2
     assert [p.name for p in (tmp_path / "cycles").iterdir()] == [journal.artifact_dir(kept).name]
+    assert not any((tmp_path / "partial").iterdir())
     assert (journal.artifact_dir(kept) / "sole.ply").is_file()
 
 

@@ -1,0 +1,72 @@
+"""`cellctl teach`: teach the empty table once at set-up (docs/measurements.md, Teaching the table).
+
+Writes <calib>.table.npz and <calib>.table.json beside the calibration; `cellctl measure` and the service
+use them from then on. Exit status: 0 taught, 2 bad input or the table could not be taught.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from cellctl.errors import UserError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "teach",
+        help="teach the empty table (plane and reference images) beside the calibration",
+        description=(
+            "Measure the EMPTY fixture from a raw left/right pair and store its table plane, reference images "
+            "and reference disparity beside the calibration (<calib>.table.npz and .table.json). Teach again "
+            "whenever the table, the fixture or the cameras move, and after every calibration."
+        ),
+    )
+    parser.add_argument("--calib", required=True, type=Path, metavar="calib.yaml", help="stereo calibration")
+    parser.add_argument(
+        "images",
+        type=Path,
+        nargs="+",
+        metavar="LEFT RIGHT",
+        help="one or more left/right pairs of the empty table (several are averaged: less sensor noise)",
+    )
+    parser.add_argument(
+        "--depth-range",
+        nargs=2,
+        type=float,
+        metavar=("MIN", "MAX"),
+        help="working distance from the cameras in mm (default 450 650), as for `cellctl measure`",
+    )
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import cv2
+
+    from cellctl.vision.calibration import Calibration
+    from cellctl.vision.defaults import DEPTH_RANGE_MM
+    from cellctl.vision.reconstruction import SoleReconstructor
+    from cellctl.vision.teach import TeachError, average_exposures, save_taught
+
+    calib = Calibration.load(args.calib)
+    if len(args.images) % 2:
+        raise UserError(f"give the images as LEFT RIGHT pairs, got {len(args.images)} images")
+    images = []
+    for path in args.images:
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise UserError(f"cannot read image {path}: give the path of a PNG or JPEG of the empty table")
+        images.append(image)
+    depth_range = tuple(args.depth_range) if args.depth_range else DEPTH_RANGE_MM
+    try:
+        left, right = average_exposures(images[0::2]), average_exposures(images[1::2])
+        taught = SoleReconstructor(calib, depth_range).teach(left, right)
+    except TeachError as exc:
+        raise UserError(f"table not taught: {exc}") from None
+    arrays, meta = save_taught(taught, args.calib)
+    normal = taught.plane.normal
+    print(
+        f"taught the empty table: {taught.plane.offset:.1f} mm from the left camera, normal "
+        f"({normal[0]:+.4f}, {normal[1]:+.4f}, {normal[2]:+.4f}); wrote {meta} and {arrays}"
+    )
+    return 0

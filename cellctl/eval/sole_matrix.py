@@ -1,0 +1,231 @@
+"""The sole benchmark over the variation matrix (`cellctl bench-sole --matrix`, issue 11).
+
+Every sole of `cellctl.sim.matrix.matrix_soles` is rendered with its variations, measured and judged:
+
+* measured and within the acceptance tolerances: right;
+* measured but outside a tolerance: WRONG, the worst outcome (a silent wrong number for the robot);
+* the measurement raised an exception: CRASH (a defect: the cell would stop, not answer);
+* refused with a reason its variations make fair (`cellctl.sim.look`, e.g. "too few points" under heavy
+  noise): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
+
+The table prints, per variation (every sole that has it), soles measured / refused (with reasons), the length, heel and toe
+errors (mean and max of |error|), the glue path's worst inset, height and normal errors, and the time.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from cellctl.errors import FailureKind
+from cellctl.eval.sole_bench import CRASHED, SoleBenchRow, measure_scene, taught_reconstructor
+from cellctl.sim.matrix import MatrixSole
+from cellctl.sim.rig import rig_for
+from cellctl.sim.scene import SoleScene
+from cellctl.vision.calibration import Calibration
+from cellctl.vision.measurement import MIN_HALF_AREA_DIFFERENCE
+from cellctl.vision.reconstruction import SoleReconstructor
+
+# The acceptance of issue 11, per valid result: |error| at most these.
+TOLERANCES: dict[str, float] = {
+    "length_error_mm": 1.0,
+    "heel_error_mm": 0.5,
+    "toe_error_mm": 0.5,
+    "glue_inset_error_max_mm": 1.0,
+    "glue_height_error_max_mm": 1.0,
+    "glue_normal_error_max_deg": 5.0,
+}
+MIN_MEASURED_FRACTION = 0.9
+# A sole whose true half-areas differ by less than the measurement's threshold plus this may fairly be
+# refused as "too close to call": the measured footprint's halves scatter by a per cent or so.
+ENDS_CALL_MARGIN = 0.02
+
+
+@dataclass
+class MatrixRow:
+    """One matrix sole's benchmark row and its verdict."""
+
+    sole: MatrixSole
+    row: SoleBenchRow
+    verdict: str  # "right", "WRONG", "fair refusal", "missed", "CRASH"
+    out_of_tolerance: tuple[str, ...] = ()
+
+
+def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
+    if not row.valid and row.failure == CRASHED:
+        return MatrixRow(sole, row, "CRASH")
+    if not row.valid:
+        fair_kinds = set(sole.fair_refusals)
+        if row.half_area_difference_true is not None and (
+            row.half_area_difference_true < MIN_HALF_AREA_DIFFERENCE + ENDS_CALL_MARGIN
+        ):
+            fair_kinds.add(FailureKind.ENDS_TOO_CLOSE_TO_CALL)
+        fair = row.failure is not None and row.failure in {kind.value for kind in fair_kinds}
+        return MatrixRow(sole, row, "fair refusal" if fair else "missed")
+    bad = tuple(name for name, limit in TOLERANCES.items() if abs(getattr(row, name)) > limit)
+    return MatrixRow(sole, row, "WRONG" if bad else "right", bad)
+
+
+def bench_matrix(
+    soles: list[MatrixSole],
+    calib: Calibration | None = None,
+    progress: Callable[[str], None] | None = None,
+    taught: bool = False,
+) -> list[MatrixRow]:
+    """Render, measure and judge every sole; `calib` replaces the looks' rigs (default: each look's own rig).
+
+    taught: teach each scene's empty table first (not timed), as the cell does once at set-up.
+    """
+    reconstructors: dict[str, SoleReconstructor] = {}
+    rows = []
+    for sole in soles:
+        look = sole.look
+        key = "given" if calib is not None else look.rig
+        if key not in reconstructors:
+            reconstructors[key] = SoleReconstructor(calib if calib is not None else rig_for(look.rig))
+        reconstructor = reconstructors[key]
+        scene = SoleScene.random(sole.seed, sole.color, reconstructor.calib, look)
+        if taught:
+            reconstructor = taught_reconstructor(reconstructor.calib, scene)
+        result = judge(sole, measure_scene(reconstructor, scene, sole.label))
+        rows.append(result)
+        if progress:
+            progress(_progress_text(result))
+    return rows
+
+
+def _progress_text(result: MatrixRow) -> str:
+    r = result.row
+    head = f"sole {r.seed} {r.color} {r.variations}: {result.verdict}"
+    if not r.valid:
+        return f"{head}: {r.reason}"
+    return (
+        f"{head}: length {r.length_error_mm:+.2f}, heel {r.heel_error_mm:+.2f}, toe {r.toe_error_mm:+.2f} mm, "
+        f"glue {r.glue_inset_error_max_mm:.2f} / {r.glue_height_error_max_mm:.2f} mm / "
+        f"{r.glue_normal_error_max_deg:.1f} deg, {r.seconds:.2f} s"
+    )
+
+
+def _stats(values: list[float | None]) -> str:
+    a = np.abs(np.array([v for v in values if v is not None], dtype=np.float64))
+    return f"{a.mean():.2f} / {a.max():.2f}" if a.size else "-"
+
+
+def _worst(values: list[float | None], digits: int = 2) -> str:
+    a = np.abs(np.array([v for v in values if v is not None], dtype=np.float64))
+    return f"{a.max():.{digits}f}" if a.size else "-"
+
+
+def _group_line(name: str, group: list[MatrixRow]) -> str:
+    rows = [g.row for g in group]
+    valid = [r for r in rows if r.valid]
+    reasons = Counter(
+        f"{g.row.failure}{'' if g.verdict in ('fair refusal', 'CRASH') else ' (wrong reason)'}"
+        for g in group
+        if not g.row.valid
+    )
+    refused = ", ".join(f"{n} {k}" for k, n in sorted(reasons.items())) or "0"
+    wrong = sum(g.verdict == "WRONG" for g in group)
+    return (
+        f"| {name} | {len(valid)}/{len(rows)} | {refused} | {wrong} | "
+        f"{_stats([r.length_error_mm for r in valid])} | {_stats([r.heel_error_mm for r in valid])} | "
+        f"{_stats([r.toe_error_mm for r in valid])} | {_worst([r.glue_inset_error_max_mm for r in valid])} | "
+        f"{_worst([r.glue_height_error_max_mm for r in valid])} | "
+        f"{_worst([r.glue_normal_error_max_deg for r in valid], 1)} | {np.mean([r.seconds for r in rows]):.2f} s |"
+    )
+
+
+@dataclass(frozen=True)
+class Acceptance:
+    """The issue's acceptance figures over a run."""
+
+    soles: int
+    measured: int
+    wrong: int  # valid but outside a tolerance
+    fair_refusals: int
+    missed: int  # refused with a reason the scene does not justify
+    crashed: int  # the measurement raised an exception
+
+    @property
+    def measured_fraction(self) -> float:
+        return self.measured / self.soles if self.soles else 0.0
+
+    @property
+    def passed(self) -> bool:
+        return (
+            self.soles > 0
+            and self.measured_fraction >= MIN_MEASURED_FRACTION
+            and not (self.wrong or self.missed or self.crashed)
+        )
+
+
+def acceptance(results: list[MatrixRow]) -> Acceptance:
+    verdicts = Counter(r.verdict for r in results)
+    return Acceptance(
+        len(results),
+        sum(r.row.valid for r in results),
+        verdicts["WRONG"],
+        verdicts["fair refusal"],
+        verdicts["missed"],
+        verdicts["CRASH"],
+    )
+
+
+def matrix_markdown(results: list[MatrixRow], command: str) -> str:
+    """The matrix table (one line per variation, per colour, then all), the acceptance figures and every sole."""
+    acc = acceptance(results)
+    lines = [
+        f"Command: `{command}`. {acc.measured} of {acc.soles} soles measured "
+        f"({100 * acc.measured_fraction:.0f} %), {acc.wrong} valid but outside a tolerance (WRONG), "
+        f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason, {acc.crashed} crashed. "
+        f"Acceptance {'met' if acc.passed else 'NOT met'}.",
+        "",
+        "A row per variation over every sole that has it (soles mix variations, so a sole counts in several "
+        "rows; plain = no variation). Errors are |measured - true|, mean / max over the measured soles; glue "
+        "columns are the worst point of any sole. Tolerances: length 1.0 mm, heel and toe 0.5 mm, glue inset "
+        "and height 1.0 mm, normal 5 deg.",
+        "",
+        "| variation | measured | refused (reason) | WRONG | length mm | heel mm | toe mm | glue inset | glue z | "
+        "glue normal deg | time |",
+        "| :-- | --: | :-- | --: | --: | --: | --: | --: | --: | --: | --: |",
+    ]
+    # A row per variation over every sole that has it (as its primary or a mixed-in one), so a sole counts
+    # in each of its variations' rows; "plain" is the soles with no variation at all.
+    names = [r.sole.primary for r in results] + [v for r in results for v in r.sole.variations[1:]]
+    for name in dict.fromkeys(names):
+        if name == "plain":
+            group = [r for r in results if set(r.sole.variations) == {"plain"}]
+        else:
+            group = [r for r in results if name in r.sole.variations]
+        if group:
+            lines.append(_group_line(name, group))
+    for colour in ("white", "black", "grey"):
+        group = [r for r in results if r.sole.color == colour]
+        if group:
+            lines.append(_group_line(f"*{colour} soles*", group))
+    lines.append(_group_line("**all**", results))
+    lines += ["", "| sole | colour | variations | verdict | length | heel | toe | glue inset | glue z | normal |"]
+    lines.append("| --: | :-- | :-- | :-- | --: | --: | --: | --: | --: | --: |")
+    for r in results:
+        row = r.row
+        if row.valid:
+            lines.append(
+                f"| {row.seed} | {row.color} | {row.variations} | {r.verdict} | {row.length_error_mm:+.2f} | "
+                f"{row.heel_error_mm:+.2f} | {row.toe_error_mm:+.2f} | {row.glue_inset_error_max_mm:.2f} | "
+                f"{row.glue_height_error_max_mm:.2f} | {row.glue_normal_error_max_deg:.1f} |"
+            )
+        else:
+            lines.append(f"| {row.seed} | {row.color} | {row.variations} | {r.verdict}: {row.reason} | | | | | | |")
+    return "\n".join(lines)
+
+
+def as_json(results: list[MatrixRow]) -> dict[str, object]:
+    return {
+        "soles": [
+            {**asdict(r.row), "verdict": r.verdict, "out_of_tolerance": list(r.out_of_tolerance)} for r in results
+        ],
+        "acceptance": {**asdict(acceptance(results)), "passed": acceptance(results).passed},
+    }

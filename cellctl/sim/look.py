@@ -1,0 +1,183 @@
+"""The variation matrix of simulated sole scenes: named, switchable, combinable departures from the plain scene.
+
+A `SceneLook` holds every switch of a scene beyond the sole's seed and colour: the shapes of the toe and
+heel ends, the side wall and top edge profile, the sole's height class, its colour scheme, the table, the
+light (cast shadows), the right camera's gain and gamma, gloss, sensor noise and the rig. The default
+`SceneLook()` is the plain scene the simulator has always made (same draws, same pixels).
+
+`VARIATIONS` names the entries of the matrix. Each one changes a few fields and draws its numbers (a gain
+of 0.80-0.85, a tip radius, ...) from the scene's own seed, so a (seed, colour, variations) triple always
+gives the same scene. Variations that touch different fields combine: `look_for(("pointed-toe",
+"gain-low"), seed)`. Each variation also says which refusals (`FailureKind`) are a correct answer to it;
+the matrix's entries are meant to be measurable, so most list none: a refusal of such a scene is a missed
+measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
+False, e.g. "camouflage") are unmeasurable by design: only a refusal with one of their kinds is right.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from cellctl.errors import FailureKind
+
+END_KINDS = ("round", "pointed", "square", "cusped")
+HEIGHT_CLASSES = ("normal", "flat", "tall")
+COLOUR_SCHEMES = ("plain", "rim", "logo", "patches")
+TABLE_LOOKS = ("dark", "grey", "patterned")
+NOISE_LEVELS = ("normal", "heavy")
+RIGS = ("default", "distorted")
+DEFAULT_RIGHT_GAIN = 0.97  # the two cameras never expose identically
+
+
+@dataclass(frozen=True)
+class SceneLook:
+    """Every switch of a simulated scene; the defaults are the plain scene."""
+
+    toe: str = "round"  # END_KINDS
+    heel: str = "round"
+    wall_slope_deg: float = 0.0  # side wall leaning out towards the table (0: vertical)
+    top_edge_radius_mm: float = 0.0  # rounded (bevelled) top edge (0: sharp)
+    height: str = "normal"  # HEIGHT_CLASSES: flat ~6 mm, normal 8-35 mm, tall up to 50 mm
+    colours: str = "plain"  # COLOUR_SCHEMES: rim = dark (or light) band round the edge and on the wall
+    table: str = "dark"  # TABLE_LOOKS
+    shadows: bool = False  # a low side light: the sole casts a long shadow onto the table
+    right_gain: float = DEFAULT_RIGHT_GAIN
+    right_gamma: float = 1.0  # output = input ** gamma on the right camera only (1: linear)
+    gloss: bool = False  # strong view-dependent highlights: they sit at different places in the two views
+    noise: str = "normal"  # NOISE_LEVELS
+    rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
+    camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
+
+    def __post_init__(self) -> None:
+        for name, allowed in (
+            ("toe", END_KINDS),
+            ("heel", END_KINDS),
+            ("height", HEIGHT_CLASSES),
+            ("colours", COLOUR_SCHEMES),
+            ("table", TABLE_LOOKS),
+            ("noise", NOISE_LEVELS),
+            ("rig", RIGS),
+        ):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
+        if not 0.0 <= self.wall_slope_deg < 45.0 or self.top_edge_radius_mm < 0.0:
+            raise ValueError("wall slope must be in [0, 45) degrees and the top edge radius >= 0 mm")
+        if self.right_gain <= 0.0 or self.right_gamma <= 0.0:
+            raise ValueError("right camera gain and gamma must be positive")
+
+
+@dataclass(frozen=True)
+class Variation:
+    """One named entry of the matrix: which fields it sets (values drawn from the seed) and fair refusals."""
+
+    name: str
+    description: str
+    fields: tuple[str, ...]  # the SceneLook fields it sets: two variations setting one field do not combine
+    apply: Callable[[SceneLook, np.random.Generator], SceneLook]
+    refusals: frozenset[FailureKind] = field(default_factory=frozenset)
+    in_matrix: bool = True  # False: unmeasurable by design, only run when named
+
+
+def _set(**values: object) -> Callable[[SceneLook, np.random.Generator], SceneLook]:
+    return lambda look, rng: replace(look, **values)  # type: ignore[arg-type]
+
+
+def _draw(name: str, low: float, high: float) -> Callable[[SceneLook, np.random.Generator], SceneLook]:
+    return lambda look, rng: replace(look, **{name: float(rng.uniform(low, high))})  # type: ignore[arg-type]
+
+
+# Low-texture soles under heavy noise or with highlights that differ between the views can lose so much of
+# the matched surface that a fair measurement refuses: those reasons are the right ones, "no sole" is not.
+_SURFACE_LOST = frozenset({FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED})
+
+VARIATIONS: dict[str, Variation] = {
+    v.name: v
+    for v in (
+        Variation("plain", "the plain scene", (), _set()),
+        Variation("pointed-toe", "toe a 35-60 degree wedge with a 1-5 mm tip radius", ("toe",), _set(toe="pointed")),
+        Variation(
+            "pointed-heel", "heel a 35-60 degree wedge with a 1-5 mm tip radius", ("heel",), _set(heel="pointed")
+        ),
+        Variation("square-toe", "toe squared off (superelliptic cap)", ("toe",), _set(toe="square")),
+        Variation("square-heel", "heel squared off (superelliptic cap)", ("heel",), _set(heel="square")),
+        Variation("cusped-toe", "toe ending in a cusp (concave sides, zero tip radius)", ("toe",), _set(toe="cusped")),
+        Variation("cusped-heel", "heel ending in a cusp", ("heel",), _set(heel="cusped")),
+        Variation(
+            "sloped-wall", "side wall leaning out 8-20 degrees", ("wall_slope_deg",), _draw("wall_slope_deg", 8, 20)
+        ),
+        Variation(
+            "rounded-edge",
+            "top edge rounded, 3-5 mm radius",
+            ("top_edge_radius_mm",),
+            _draw("top_edge_radius_mm", 3, 5),
+        ),
+        Variation("flat", "flat sole, about 6 mm thick", ("height",), _set(height="flat")),
+        Variation("tall", "tall sole, heel up to 50 mm", ("height",), _set(height="tall")),
+        Variation("rim", "a contrasting band round the top edge and on the wall", ("colours",), _set(colours="rim")),
+        Variation("logo", "a contrasting logo and lettering on the top surface", ("colours",), _set(colours="logo")),
+        Variation(
+            "patches", "multi-colour: patches of other colours on the top", ("colours",), _set(colours="patches")
+        ),
+        Variation("grey-table", "mid-grey table", ("table",), _set(table="grey")),
+        Variation(
+            "patterned-table",
+            "grey table with a high-contrast cutting-mat pattern",
+            ("table",),
+            _set(table="patterned"),
+        ),
+        Variation("shadows", "low side light: long cast shadows", ("shadows",), _set(shadows=True)),
+        Variation("gain-low", "right camera 15-20 % darker", ("right_gain",), _draw("right_gain", 0.80, 0.85)),
+        Variation("gain-high", "right camera 15-20 % brighter", ("right_gain",), _draw("right_gain", 1.15, 1.20)),
+        Variation(
+            "gamma",
+            "right camera gamma 0.75-0.85 or 1.2-1.35",
+            ("right_gamma",),
+            lambda look, rng: replace(
+                look, right_gamma=float(rng.choice([rng.uniform(0.75, 0.85), rng.uniform(1.2, 1.35)]))
+            ),
+        ),
+        Variation(
+            "gloss", "glossy sole: highlights differ between the views", ("gloss",), _set(gloss=True), _SURFACE_LOST
+        ),
+        Variation("heavy-noise", "heavy sensor noise", ("noise",), _set(noise="heavy"), _SURFACE_LOST),
+        Variation(
+            "camouflage",
+            "sole coloured like the grey table: unmeasurable by design",
+            ("table", "colours", "camouflage"),
+            _set(table="grey", camouflage=True),
+            frozenset({FailureKind.COLOURS_TOO_SIMILAR}),
+            in_matrix=False,
+        ),
+        Variation(
+            "distorted-rig", "wide-angle rig: strong distortion, 2 degree misalignment", ("rig",), _set(rig="distorted")
+        ),
+    )
+}
+
+
+def look_for(names: tuple[str, ...] | list[str], seed: int) -> SceneLook:
+    """The scene look of a combination of variations; their numbers are drawn from `seed`."""
+    rng = np.random.default_rng([seed, 23])
+    look = SceneLook()
+    taken: dict[str, str] = {}
+    for name in names:
+        if name not in VARIATIONS:
+            raise ValueError(f"unknown variation {name!r}: choose from {', '.join(VARIATIONS)}")
+        variation = VARIATIONS[name]
+        for field_name in variation.fields:
+            if field_name in taken:
+                raise ValueError(f"variations {taken[field_name]!r} and {name!r} both set {field_name}: pick one")
+            taken[field_name] = name
+        look = variation.apply(look, rng)
+    return look
+
+
+def fair_refusals(names: tuple[str, ...] | list[str]) -> frozenset[FailureKind]:
+    """The refusal kinds that are a correct answer to a scene with these variations."""
+    kinds: frozenset[FailureKind] = frozenset()
+    for name in names:
+        kinds |= VARIATIONS[name].refusals
+    return kinds

@@ -1,0 +1,108 @@
+"""Change against the taught empty table: which pixels no longer show the table, whatever the sole's colour.
+
+The taught reference image predicts every table pixel (its own texture, vignetting and all) up to the
+camera's gain of the moment. A pixel is changed where the current image departs from that prediction by
+more than the sensor noise allows. This replaces a colour discriminant between "sole colour" and "table
+colour": a sole with a black rim on a dark table, a patterned table, or two-tone soles all differ from the
+table's own recorded texture, and the decision is per pixel, so no window moves the edge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+CHANGE_SIGMAS = 4.0  # gain fit: residuals beyond this many sigmas are not table
+PIXEL_SIGMAS = 3.0  # a pixel is changed beyond this many sigmas (0.3 % false flags, removed by the majority)
+MIN_TABLE_PIXELS = 2000  # table pixels needed to estimate the gain and the noise
+CONTRAST_WINDOW_PX = 11  # local contrast of the change: ~4 mm, narrower than a sole's rim or logo
+NCC_WINDOW_PX = 7
+TABLE_NCC = 0.5  # table under a shadow correlates with its reference well above this; a covered table near 0
+UNANIMOUS = 0.9  # share of the windows covering a pixel that must agree (a sole pixel at the edge: ~half)
+MIN_TEXTURED_SHARE = 0.3  # of the windows covering a pixel: fewer with texture to compare and there is no vote
+FAINT_CONTRAST_SIGMAS = 8.0  # a change fainter than this (local contrast) may be found by texture alone
+TEXTURE_SIGMAS = 2.0  # the reference has texture where its local spread exceeds this many residual sigmas
+NOISE_FLOOR_DN = 0.5  # a quantised 8-bit image never has less residual noise than this
+
+
+@dataclass(frozen=True)
+class ChangeTest:
+    """Gain (current / reference) and residual noise of one image against its taught reference."""
+
+    gain: float
+    offset: float
+    sigma: float  # DN, robust standard deviation of the residual on the table
+
+    @classmethod
+    def fit(cls, current: np.ndarray, reference: np.ndarray, table: np.ndarray) -> ChangeTest | None:
+        """Fit gain and offset on pixels known to be table (bool mask, or N x 2 integer (x, y) pixels)."""
+        if table.ndim == 2 and table.shape[1] == 2 and table.dtype.kind in "iu":
+            x, y = table[:, 0], table[:, 1]
+            cur, ref = current[y, x].astype(np.float64), reference[y, x].astype(np.float64)
+        else:
+            cur, ref = current[table].astype(np.float64), reference[table].astype(np.float64)
+        if cur.size < MIN_TABLE_PIXELS:
+            return None
+        # Least squares, then once more without the pixels the first fit calls changed (a missed object).
+        keep = np.ones(cur.size, bool)
+        gain, offset, sigma = 1.0, 0.0, 1.0
+        for _ in range(3):
+            design = np.column_stack([ref[keep], np.ones(int(keep.sum()))])
+            (gain, offset), *_ = np.linalg.lstsq(design, cur[keep], rcond=None)
+            residual = cur - (gain * ref + offset)
+            sigma = max(1.4826 * float(np.median(np.abs(residual[keep]))), NOISE_FLOOR_DN)
+            keep = np.abs(residual) < CHANGE_SIGMAS * sigma
+        return cls(float(gain), float(offset), sigma)
+
+    def residual(self, current: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        return current.astype(np.float32) - (self.gain * reference.astype(np.float32) + self.offset)
+
+    def changed(self, current: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        """Bool image: pixels that no longer show the taught table.
+
+        A pixel is changed when its residual exceeds half the local contrast of the change around it (the
+        mean residual of the clearly changed pixels within CONTRAST_WINDOW_PX), and at least PIXEL_SIGMAS
+        of noise. Half the local contrast is where a pixel half covered by the sole lies, so the edge sits
+        on the sole's edge for a white sole as for a black rim on a dark table; a global threshold would put
+        it a pixel out on strong contrast and cut a weakly contrasting rim off. A 3 x 3 majority (median)
+        then removes isolated flags and misses; a straight edge stays where it is.
+        """
+        magnitude = np.abs(self.residual(current, reference))
+        floor = PIXEL_SIGMAS * self.sigma
+        clear = (magnitude > floor).astype(np.float32)
+        window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
+        contrast = cv2.blur(magnitude * clear, window) / np.maximum(cv2.blur(clear, window), 1e-6)
+        raw = magnitude > np.maximum(floor, 0.5 * contrast)
+        still_table, texture_gone = self._texture(current, reference)
+        # Next to a strong step every window covering a table pixel also covers the step and correlates
+        # poorly: the texture vote would move the edge out. It only speaks where the change is faint.
+        texture_gone &= contrast < FAINT_CONTRAST_SIGMAS * self.sigma
+        mask = ((raw | texture_gone) & ~still_table).astype(np.uint8)
+        return cv2.medianBlur(mask, 3) > 0
+
+    def _texture(self, current: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(still table, texture gone): the table's own texture is still there, only darker or lighter (a
+        shadow), or it is gone (covered by something of whatever brightness).
+
+        Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
+        brightness. Still table: nearly all the textured windows covering the pixel correlate, so a sole
+        pixel next to the table, about half of whose windows lie further inside, is not vetoed. Texture
+        gone: nearly none correlates, which finds a sole of the table's own brightness but does not reach
+        past its edge. Only windows where the reference has texture to compare vote.
+        """
+        window = (NCC_WINDOW_PX, NCC_WINDOW_PX)
+        cur, ref = current.astype(np.float32), reference.astype(np.float32)
+        mean_c, mean_r = cv2.blur(cur, window), cv2.blur(ref, window)
+        var_c = cv2.blur(cur * cur, window) - mean_c * mean_c
+        var_r = cv2.blur(ref * ref, window) - mean_r * mean_r
+        ncc = (cv2.blur(cur * ref, window) - mean_c * mean_r) / np.sqrt(np.maximum(var_c * var_r, 1e-6))
+        textured = var_r > (TEXTURE_SIGMAS * self.sigma) ** 2
+        # Votes of the textured windows covering each pixel: nearly all correlate, or nearly none does.
+        share = cv2.blur(textured.astype(np.float32), window)
+        agree = cv2.blur((textured & (ncc > TABLE_NCC)).astype(np.float32), window)
+        enough = share > MIN_TEXTURED_SHARE
+        still = enough & (agree > UNANIMOUS * share)
+        gone = enough & (agree < (1.0 - UNANIMOUS) * share)
+        return still, gone

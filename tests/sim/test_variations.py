@@ -1,0 +1,322 @@
+"""The variation matrix: each variation renders what it claims, its truth is analytic, combinations are
+deterministic and exclusive, and the matrix benchmark judges a tiny set. Renders use the half-size rig."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import open3d as o3d
+import pytest
+
+from cellctl.cli import main
+from cellctl.errors import FailureKind
+from cellctl.eval.sole_bench import SoleBenchRow, measure_scene
+from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
+from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
+from cellctl.sim.matrix import END_VARIATIONS, MATRIX_COLOURS, MATRIX_ENTRIES, MatrixSole, matrix_soles
+from cellctl.sim.render import SceneRenderer
+from cellctl.sim.scene import SoleScene
+from cellctl.sim.sole import SoleModel, SolePose, SoleShape
+from cellctl.sim.sole_profile import FOOT_MM, EdgeProfile, EndShape
+from tests.sim_rig import half_size_rig, write_half_size_rig
+
+
+def shape_with(look: SceneLook, seed: int = 3) -> SoleShape:
+    return SoleShape.random(np.random.default_rng(seed), look)
+
+
+def grey(image: np.ndarray) -> np.ndarray:
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY).astype(np.float64)
+
+
+# ---- the registry and the matrix ----------------------------------------------------------------------
+
+
+def test_looks_combine_deterministically_and_exclusively() -> None:
+    look = look_for(("pointed-toe", "gain-low", "rounded-edge"), 7)
+    assert look == look_for(("pointed-toe", "gain-low", "rounded-edge"), 7)
+    assert look.toe == "pointed" and 0.80 <= look.right_gain <= 0.85 and 3.0 <= look.top_edge_radius_mm <= 5.0
+    assert look_for(("gain-low",), 8).right_gain != look.right_gain
+    assert look_for((), 7) == SceneLook()
+    with pytest.raises(ValueError, match="both set toe"):
+        look_for(("pointed-toe", "square-toe"), 7)
+    with pytest.raises(ValueError, match="unknown variation"):
+        look_for(("purple-sole",), 7)
+    assert FailureKind.TOO_FEW_POINTS in fair_refusals(("pointed-toe", "heavy-noise"))
+    assert fair_refusals(("pointed-toe", "rim")) == frozenset()
+
+
+def test_matrix_visits_every_entry_with_colours_and_ends_mixed() -> None:
+    soles = matrix_soles(2 * len(MATRIX_ENTRIES), first_seed=40)
+    assert [s.primary for s in soles[: len(MATRIX_ENTRIES)]] == list(MATRIX_ENTRIES)
+    assert soles == matrix_soles(2 * len(MATRIX_ENTRIES), first_seed=40)
+    assert {s.color for s in soles} == set(MATRIX_COLOURS)
+    assert "camouflage" in VARIATIONS and not any("camouflage" in s.variations for s in soles)
+    # Every entry meets more than one colour over two rounds, and ends are mixed into other entries.
+    for name in MATRIX_ENTRIES:
+        assert len({s.color for s in soles if s.primary == name}) == 2
+    assert sum(any(v in END_VARIATIONS for v in s.variations[1:]) for s in soles) >= len(MATRIX_ENTRIES) // 2
+    for sole in soles:
+        sole.look  # every combination the matrix makes is a valid one  # noqa: B018
+
+
+# ---- geometry: ends and edges ---------------------------------------------------------------------------
+
+
+def test_pointed_end_is_a_wedge_with_the_drawn_tip_radius() -> None:
+    shape = shape_with(SceneLook(toe="pointed"))
+    end = shape.toe_end
+    assert 35.0 <= end.wedge_deg <= 60.0 and 1.0 <= end.tip_radius <= 5.0
+    r, half = end.tip_radius, np.radians(end.wedge_deg / 2)
+    tangent = r * (1 - np.sin(half))
+    d = np.array([0.05, 0.2, 0.5]) * tangent
+    # Near the apex the half-width is the tip circle's; where the circle ends the sides leave at the
+    # wedge's angle (then curve out to the full width: an ogive).
+    for medial in (True, False):
+        np.testing.assert_allclose(shape.half_width(shape.length - d, medial), np.sqrt(r * r - (r - d) ** 2), rtol=1e-6)
+    near = tangent + np.array([0.001, 0.002])
+    slope = np.diff(shape.half_width(shape.length - near, True)) / np.diff(near)
+    assert slope[0] == pytest.approx(np.tan(half), rel=1e-2)
+    model = SoleModel(shape, SolePose(0.0, 0.0, 0.0, False))
+    assert model.outline_table()[:, 0].max() == pytest.approx(shape.length / 2, abs=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["square", "cusped", "round"])
+def test_end_caps_reach_the_tip_and_differ(kind: str) -> None:
+    end = EndShape.draw(kind, np.random.default_rng(1))
+    t = np.array([0.0, 0.01, 0.1, 1.0])
+    cap = end.cap(t)
+    assert cap[0] == 0.0 and cap[-1] == pytest.approx(1.0)
+    ellipse = np.sqrt(1 - (1 - t) ** 2)
+    if kind == "square":
+        assert cap[1] > ellipse[1]  # blunter than round
+    elif kind == "cusped":
+        assert cap[1] < ellipse[1]  # sharper, concave sides
+    else:
+        np.testing.assert_allclose(cap, ellipse)
+
+
+def test_rounded_edge_profile_and_its_normals() -> None:
+    profile = EdgeProfile(0.0, 4.0)
+    top, bottom = np.full(4, 25.0), np.zeros(4)
+    z = profile.height(np.array([0.0, 2.0, 4.0, 9.0]), top, bottom)
+    np.testing.assert_allclose(z, [21.0, 21.0 + np.sqrt(16 - 4), 25.0, 25.0])
+    shape = replace(shape_with(SceneLook()), edge=profile)
+    model = SoleModel(shape, SolePose(5.0, -3.0, 30.0, True))
+    # A point about 2 mm inside the lateral edge at mid-length: on the fillet, whose surface leans out by
+    # asin((r - d) / r) at distance d from the outline (plus the top's own slope of a degree or two).
+    u = np.array([0.5 * shape.length])
+    edge_v = shape.centre_line(u) - shape.half_width(u, False)
+    xy = model.pose.to_table(np.column_stack([u, edge_v + 2.0]), shape.length)
+    d = shape.edge_distance(u, edge_v + 2.0)[0]
+    assert 1.5 < d <= 2.0
+    tilt = np.degrees(np.arccos(model.top_normal_at(xy)[0, 2]))
+    assert tilt == pytest.approx(np.degrees(np.arcsin((4 - d) / 4)), abs=2.0)
+    plain = SoleModel(replace(shape, edge=EdgeProfile()), model.pose)
+    drop = plain.top_height_at(xy)[0] - model.top_height_at(xy)[0]
+    assert drop == pytest.approx(4 - np.sqrt(16 - (4 - d) ** 2), abs=1e-6)
+
+
+def test_sloped_wall_rises_from_its_foot() -> None:
+    profile = EdgeProfile(15.0, 0.0)
+    dist = np.array([0.0, 3.0, 50.0])
+    z = profile.height(dist, np.full(3, 30.0), np.zeros(3))
+    np.testing.assert_allclose(z, [FOOT_MM, FOOT_MM + 3.0 / np.tan(np.radians(15.0)), 30.0])
+
+
+def test_mesh_follows_the_edge_profile() -> None:
+    look = SceneLook(toe="pointed", heel="square", wall_slope_deg=12.0, top_edge_radius_mm=4.0, height="tall")
+    model = SoleModel(shape_with(look), SolePose(0.0, 0.0, 20.0, False))
+    vertices, triangles, _ = model.mesh()
+    scene = o3d.t.geometry.RaycastingScene()
+    mesh = o3d.t.geometry.TriangleMesh()
+    mesh.vertex.positions = o3d.core.Tensor(vertices.astype(np.float32))
+    mesh.triangle.indices = o3d.core.Tensor(triangles)
+    scene.add_triangles(mesh)
+    outline = model.outline_table(300)
+    centroid = outline.mean(axis=0)
+    # Probes 1-15 mm inside the outline, on the profile, all round the sole.
+    inward = centroid - outline
+    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
+    probes = np.vstack([outline + d * inward for d in (1.0, 3.0, 6.0, 15.0)])
+    rays = np.column_stack([probes, np.full(len(probes), 300.0), np.zeros((len(probes), 2)), -np.ones(len(probes))])
+    hit_z = 300.0 - scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()
+    true_z = model.top_height_at(probes)
+    inside = np.isfinite(hit_z)
+    assert inside.mean() > 0.95
+    assert np.median(np.abs(hit_z - true_z)[inside]) < 0.05
+    assert np.percentile(np.abs(hit_z - true_z)[inside], 95) < 0.3
+
+
+@pytest.mark.parametrize(("height", "heel_range"), [("flat", (5.0, 8.0)), ("tall", (38.0, 52.0))])
+def test_height_classes(height: str, heel_range: tuple[float, float]) -> None:
+    for seed in range(4):
+        truth = SoleModel(shape_with(SceneLook(height=height), seed), SolePose(0, 0, 0, False)).truth()
+        low, high = heel_range
+        assert low <= max(truth.heel_height_mm, truth.toe_height_mm) <= high
+
+
+# ---- appearance -----------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def rim_gain_noise() -> tuple[SoleScene, object]:
+    look = look_for(("rim", "gain-low", "heavy-noise"), 11)
+    scene = SoleScene.random(11, "white", half_size_rig(), look)
+    return scene, scene.render()
+
+
+def test_gain_darkens_the_right_camera(rim_gain_noise) -> None:  # noqa: ANN001
+    scene, pair = rim_gain_noise
+    ratio = grey(pair.right).mean() / grey(pair.left).mean()
+    assert ratio == pytest.approx(scene.look.right_gain, abs=0.03)
+    assert ratio < 0.9
+
+
+def test_rim_is_dark_round_a_white_sole(rim_gain_noise) -> None:  # noqa: ANN001
+    _, pair = rim_gain_noise
+    mask = pair.sole_mask_left.astype(np.uint8)
+    image = cv2.GaussianBlur(grey(pair.left), (0, 0), 1.5)  # heavy noise: compare local means
+    band = (cv2.erode(mask, np.ones((3, 3), np.uint8)) > 0) & ~(
+        cv2.erode(mask, np.ones((5, 5), np.uint8), iterations=1) > 0
+    )
+    interior = cv2.erode(mask, np.ones((31, 31), np.uint8)) > 0
+    assert np.median(image[band]) < 50 < 120 < np.median(image[interior])
+
+
+def test_heavy_noise_is_heavy(rim_gain_noise) -> None:  # noqa: ANN001
+    scene, pair = rim_gain_noise
+    plain = SoleScene.random(11, "white", half_size_rig(), replace(scene.look, noise="normal")).render()
+    table = ~(cv2.dilate(pair.sole_mask_left.astype(np.uint8), np.ones((41, 41), np.uint8)) > 0)
+    # The same scene with normal noise differs only by noise: ~1.3 DN per channel normally, ~6.5 DN heavy.
+    difference = pair.left.astype(np.float64) - plain.left.astype(np.float64)
+    assert np.std(difference[table]) > 4.0
+    assert abs(np.mean(difference[table])) < 0.5
+
+
+def test_side_light_casts_the_soles_shadow() -> None:
+    look = SceneLook(shadows=True, height="tall")
+    scene = SoleScene.random(2, "black", half_size_rig(), look)
+    renderer = SceneRenderer(scene.calib, scene.camera_pose, scene.sole, "black", 2, look)
+    assert scene.sole is not None
+    outline = scene.sole.outline_table(400)
+    side_light = renderer.lights[-1]
+    # Table points just beyond the outline on the side away from the side light are in its shadow;
+    # points on the side facing it are lit.
+    centre = outline.mean(axis=0)
+    direction = (outline - centre) / np.linalg.norm(outline - centre, axis=1, keepdims=True)
+    to_light = (side_light[:2] - centre) / np.linalg.norm(side_light[:2] - centre)
+    facing = direction @ to_light
+    beyond = outline + 3.0 * direction
+    points = np.column_stack([beyond, np.zeros(len(beyond))])
+    normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    lit = renderer._unshadowed(points, normals, np.ones(len(points), bool))
+    # The outline is concave at the arch, so only the clearest cases are asserted: the point most facing the
+    # light is lit, the one most turned away is not, and the far side is mostly in shadow.
+    assert lit[-1][np.argmax(facing)] and not lit[-1][np.argmin(facing)]
+    assert lit[-1][facing < -0.7].mean() < 0.1
+    assert lit[0].mean() > lit[-1].mean()  # the high LED bars throw far shorter shadows
+
+
+def test_camouflaged_sole_has_the_tables_colour() -> None:
+    from cellctl.sim.appearance import TABLES, ColourScheme
+
+    look = look_for(("camouflage",), 1)
+    scheme = ColourScheme.draw(np.random.default_rng(0), "black", look, shape_with(look))
+    assert scheme.base == TABLES["grey"].albedo_bgr and look.table == "grey"
+    assert fair_refusals(("camouflage",)) == {FailureKind.COLOURS_TOO_SIMILAR}
+
+
+def test_patterned_table_has_strong_contrast() -> None:
+    rng = np.random.default_rng(0)
+    from cellctl.sim.appearance import table_texture
+
+    plain, patterned = table_texture(rng, SceneLook()), table_texture(rng, SceneLook(table="patterned"))
+    assert patterned.image.std() > 2.5 * plain.image.std()
+
+
+# ---- the matrix benchmark -------------------------------------------------------------------------------
+
+
+def _row(**errors: float) -> SoleBenchRow:
+    values = {name: 0.0 for name in TOLERANCES} | errors
+    return SoleBenchRow(1, "white", 250.0, True, None, seconds=1.0, **values)  # type: ignore[arg-type]
+
+
+def test_judging_valid_and_refused_results() -> None:
+    sole = MatrixSole(1, "white", ("heavy-noise",))
+    assert judge(sole, _row()).verdict == "right"
+    wrong = judge(sole, _row(length_error_mm=-1.2, glue_normal_error_max_deg=6.0))
+    assert wrong.verdict == "WRONG" and wrong.out_of_tolerance == ("length_error_mm", "glue_normal_error_max_deg")
+    refused = SoleBenchRow(1, "white", 250.0, False, "few", *(None,) * 6, 1.0, "heavy-noise", "too_few_points")
+    assert judge(sole, refused).verdict == "fair refusal"
+    assert judge(MatrixSole(1, "white", ("rim",)), refused).verdict == "missed"
+    no_sole = replace(refused, failure=FailureKind.NO_SOLE.value)
+    assert judge(sole, no_sole).verdict == "missed"
+    too_close = replace(refused, failure=FailureKind.ENDS_TOO_CLOSE_TO_CALL.value, half_area_difference_true=0.05)
+    assert judge(sole, too_close).verdict == "fair refusal"
+    assert judge(sole, replace(too_close, half_area_difference_true=0.09)).verdict == "missed"
+    results = [judge(sole, _row()), judge(sole, refused)]
+    assert acceptance(results).measured_fraction == 0.5 and not acceptance(results).passed
+
+
+def test_matrix_bench_runs_on_a_tiny_set() -> None:
+    soles = [MatrixSole(21, "black", ("pointed-toe", "gain-high"))]
+    results = bench_matrix(soles, half_size_rig())
+    assert len(results) == 1 and results[0].verdict in ("right", "WRONG", "fair refusal", "missed")
+    row = results[0].row
+    assert row.variations == "pointed-toe+gain-high"
+    assert row.length_true_mm == pytest.approx(
+        SoleScene.random(21, "black", half_size_rig(), soles[0].look).sole.truth().length_mm  # type: ignore[union-attr]
+    )
+
+
+def test_bench_sole_matrix_command_lists_and_rejects(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench-sole", "--matrix", "--variations", "list"]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in VARIATIONS)
+    assert main(["bench-sole", "--matrix", "--variations", "purple-sole"]) == 2
+    assert "unknown variation 'purple-sole'" in capsys.readouterr().err
+    assert main(["bench-sole", "--variations", "rim"]) == 2
+
+
+def test_simulate_sole_applies_variations(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    calib = write_half_size_rig(tmp_path)
+    args = ["simulate", "sole", "--out", str(tmp_path / "scene"), "--seed", "6", "--color", "grey"]
+    assert main([*args, "--calib", str(calib), "--variations", "rim,square-toe"]) == 0
+    truth = json.loads((tmp_path / "scene" / "truth.json").read_text())
+    assert truth["look"]["colours"] == "rim" and truth["look"]["toe"] == "square"
+    assert truth["sole_shape"]["toe_end"]["kind"] == "square"
+    assert "rim,square-toe" in capsys.readouterr().out
+    assert main([*args, "--variations", "purple-sole"]) == 2
+    assert "unknown variation" in capsys.readouterr().err
+
+
+def test_distorted_rig_bends_straight_lines_and_is_the_looks_rig() -> None:
+    from cellctl.sim.rig import default_rig, distorted_rig
+
+    def corner_shift(calib) -> float:  # noqa: ANN001
+        # How far the lens moves the image corner from where a pinhole camera would put it, in pixels.
+        corner = np.array([[[0.0, 0.0]]])
+        ideal = cv2.undistortPoints(corner, calib.K1, calib.D1, P=calib.K1).reshape(2)
+        return float(np.linalg.norm(ideal - corner.reshape(2)))
+
+    assert corner_shift(distorted_rig()) > 4 * corner_shift(default_rig()) > 40.0
+    scene = SoleScene.random(3, "white", look=look_for(("distorted-rig",), 3))
+    np.testing.assert_allclose(scene.calib.D1, distorted_rig().D1)
+
+
+def test_a_measurement_that_raises_is_a_crash_not_the_end_of_the_run() -> None:
+    class Raising:
+        def reconstruct(self, left: np.ndarray, right: np.ndarray) -> None:
+            raise np.linalg.LinAlgError("Singular matrix")
+
+    scene = SoleScene.random(5, "white", half_size_rig())
+    row = measure_scene(Raising(), scene)  # type: ignore[arg-type]
+    assert not row.valid and row.reason is not None and "LinAlgError" in row.reason
+    assert judge(MatrixSole(5, "white", ("plain",)), row).verdict == "CRASH"
+    assert not acceptance([judge(MatrixSole(5, "white", ("plain",)), row)]).passed

@@ -1,0 +1,88 @@
+"""Self-checks of a measurement (cellctl.vision.checks): a wrong result is refused with its kind, a right one passes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cellctl.errors import FailureKind
+from cellctl.vision.checks import check_glue_path, check_outline_depth
+from cellctl.vision.footprint import Footprint
+from cellctl.vision.measurement import _without_single_outliers
+
+
+def _ring(radius: float, count: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    angle = np.linspace(0.0, 2 * np.pi, count, endpoint=False)
+    outward = np.column_stack([np.cos(angle), np.sin(angle)])
+    return radius * outward, outward
+
+
+def _glue(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    xy, _ = _ring(50.0, len(z))
+    normals = np.tile([0.0, 0.0, 1.0], (len(z), 1))
+    return np.column_stack([xy, z]), normals
+
+
+def test_a_smooth_glue_path_on_the_sole_passes() -> None:
+    z = 20.0 + np.sin(np.linspace(0, 2 * np.pi, 150, endpoint=False))
+    points, normals = _glue(z)
+    assert check_glue_path(points, normals, z + 0.3, normals, (15.0, 25.0), 2.0) is None
+
+
+def test_a_glue_point_below_the_table_is_refused() -> None:
+    z = np.full(150, 20.0)
+    z[40:60] = -15.0 + np.abs(np.arange(20) - 10.0)  # what a 200 mm patch fit spread by smoothing looks like
+    points, normals = _glue(z)
+    problem = check_glue_path(points, normals, z, normals, (15.0, 25.0), 2.0)
+    assert problem is not None and problem.kind is FailureKind.GLUE_PATH_INCONSISTENT
+    assert "outside the sole's heights" in problem.reason
+
+
+def test_a_height_jump_and_a_path_off_its_samples_are_refused() -> None:
+    z = np.full(150, 20.0)
+    z[70:] = 22.5
+    points, normals = _glue(z)
+    problem = check_glue_path(points, normals, z, normals, (15.0, 25.0), 2.0)
+    assert problem is not None and "jumps" in problem.reason
+    smooth = np.full(150, 20.0)
+    raw = smooth.copy()
+    raw[30] = 24.0
+    points, normals = _glue(smooth)
+    problem = check_glue_path(points, normals, raw, normals, (15.0, 25.0), 2.0)
+    assert problem is not None and "from the surface measured there" in problem.reason
+
+
+def test_a_glue_normal_against_the_surface_is_refused() -> None:
+    z = np.full(150, 20.0)
+    points, normals = _glue(z)
+    tilted = normals.copy()
+    tilted[10] = [np.sin(np.radians(40)), 0.0, np.cos(np.radians(40))]
+    problem = check_glue_path(points, tilted, z, normals, (15.0, 25.0), 2.0)
+    assert problem is not None and "degrees from the surface" in problem.reason
+
+
+def test_a_lone_failed_patch_fit_is_repaired_two_in_a_row_are_kept() -> None:
+    z = np.full(50, 20.0)
+    z[10] = 200.0
+    z[30:32] = 40.0
+    repaired = _without_single_outliers(z)
+    assert repaired[10] == 20.0 and np.all(repaired[30:32] == 40.0)
+
+
+def _disc_footprint(radius: float) -> Footprint:
+    cell = 0.25
+    size = int(2 * (radius + 20) / cell)
+    origin = (-(radius + 20), -(radius + 20))
+    centres = (np.arange(size) + 0.5) * cell + origin[0]
+    xx, yy = np.meshgrid(centres, centres)
+    return Footprint((np.hypot(xx, yy) <= radius).astype(np.uint8), origin, cell)
+
+
+def test_outline_on_the_depth_step_passes_one_inside_it_is_refused() -> None:
+    raised = _disc_footprint(60.0)  # what the depth says, fattening of 3 mm included
+    measured = _disc_footprint(75.0)
+    outline, outward = _ring(57.0)  # the true edge
+    assert check_outline_depth(outline, outward, raised, measured) is None
+    inner, inner_out = _ring(49.0)  # a rim of 8 mm taken for table
+    problem = check_outline_depth(inner, inner_out, raised, measured)
+    assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
+    assert "still raised" in problem.reason

@@ -1,0 +1,182 @@
+"""The taught empty table (cellctl.vision.teach) and the change test against it (cellctl.vision.change).
+
+End to end on one simulated scene taught from its own empty-table exposure, and on synthetic images for
+the change test: a gain change, a sole of the table's own brightness and a shadow.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from cellctl.cli import main
+from cellctl.errors import FailureKind
+from cellctl.sim.look import look_for
+from cellctl.sim.rig import default_rig
+from cellctl.sim.scene import SoleScene
+from cellctl.vision.change import ChangeTest
+from cellctl.vision.measurement import measure_sole
+from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.table import TablePlane
+from cellctl.vision.teach import TaughtTable, TeachError, calibration_fingerprint, load_taught, save_taught
+
+
+@pytest.fixture(scope="module")
+def taught_scene():  # noqa: ANN201
+    rig = default_rig()
+    scene = SoleScene.random(2, "white", rig)
+    empty = scene.render_empty()
+    taught = SoleReconstructor(rig).teach(empty.left, empty.right)
+    return rig, scene, scene.render(), taught
+
+
+def test_a_sole_on_the_taught_table_is_measured_within_tolerance(taught_scene) -> None:  # noqa: ANN001
+    rig, scene, pair, taught = taught_scene
+    reconstruction = SoleReconstructor(rig, taught=taught).reconstruct(pair.left, pair.right)
+    assert reconstruction.taught is taught and reconstruction.changed_right is not None
+    result = measure_sole(reconstruction)
+    assert result.valid, result.reason
+    truth = scene.sole.truth()
+    assert abs(result.length_mm - truth.length_mm) < 1.0
+    assert abs(result.heel_height_mm - truth.heel_height_mm) < 0.5
+    assert abs(result.toe_height_mm - truth.toe_height_mm) < 0.5
+    # The taught plane is the table: its frame maps onto the simulator's z = 0.
+    transform = scene.table_from_measured(reconstruction.camera_to_table)
+    assert abs(transform[2, 3]) < 0.1
+
+
+def test_the_taught_disparity_band_covers_the_table_and_the_sole(taught_scene) -> None:  # noqa: ANN001
+    rig, _, _, taught = taught_scene
+    table = taught.table_disparity(rig)
+    measured = np.isfinite(taught.disparity)
+    assert np.median(np.abs(table[measured] - taught.disparity[measured])) < 0.25  # the matcher locks to 1/16 px
+    low, count = taught.disparity_band(rig, 150.0)
+    assert low <= table.min() and low + count - 1 >= table.max() * 550.0 / 400.0
+
+
+def test_teaching_refuses_a_table_with_a_sole_on_it(taught_scene) -> None:  # noqa: ANN001
+    rig, _, pair, _ = taught_scene
+    with pytest.raises(TeachError, match="above the table"):
+        SoleReconstructor(rig).teach(pair.left, pair.right)
+
+
+def test_a_moved_table_is_refused_not_measured(taught_scene) -> None:  # noqa: ANN001
+    rig, _, pair, taught = taught_scene
+    moved = dataclasses.replace(taught, plane=TablePlane(taught.plane.normal, taught.plane.offset + 2.0))
+    reconstruction = SoleReconstructor(rig, taught=moved).reconstruct(pair.left, pair.right)
+    assert reconstruction.failure is FailureKind.TABLE_MOVED, reconstruction.reason
+    assert "teach" in reconstruction.reason
+
+
+def test_taught_table_saved_beside_the_calibration_and_checked_on_load(tmp_path: Path, taught_scene) -> None:  # noqa: ANN001
+    rig, _, _, taught = taught_scene
+    calib_path = tmp_path / "calib.yaml"
+    rig.save(calib_path)
+    arrays, meta = save_taught(taught, calib_path)
+    assert arrays == tmp_path / "calib.table.npz" and meta == tmp_path / "calib.table.json"
+    loaded = load_taught(calib_path, rig)
+    assert loaded is not None and loaded.calibration_fingerprint == calibration_fingerprint(rig)
+    assert np.allclose(loaded.plane.normal, taught.plane.normal) and np.array_equal(loaded.left, taught.left)
+    other = dataclasses.replace(rig, T=rig.T * 1.01)
+    with pytest.raises(TeachError, match="another calibration"):
+        load_taught(calib_path, other)
+    assert load_taught(tmp_path / "none.yaml", rig) is None
+
+
+def test_teach_command_writes_the_table_and_refuses_a_sole(
+    tmp_path: Path, taught_scene, capsys: pytest.CaptureFixture[str]
+) -> None:  # noqa: ANN001
+    rig, scene, pair, _ = taught_scene
+    rig.save(tmp_path / "calib.yaml")
+    empty = scene.render_empty(shot=2)
+    for name, image in (("empty_l.png", empty.left), ("empty_r.png", empty.right), ("l.png", pair.left)):
+        cv2.imwrite(str(tmp_path / name), image)
+    calib = str(tmp_path / "calib.yaml")
+    assert main(["teach", "--calib", calib, str(tmp_path / "empty_l.png"), str(tmp_path / "empty_r.png")]) == 0
+    assert (tmp_path / "calib.table.json").exists() and "taught the empty table" in capsys.readouterr().out
+    cv2.imwrite(str(tmp_path / "r.png"), pair.right)
+    assert main(["teach", "--calib", calib, str(tmp_path / "l.png"), str(tmp_path / "r.png")]) == 2
+    err = capsys.readouterr().err
+    assert "table not taught" in err and "remove everything" in err and "Traceback" not in err
+
+
+def test_a_sole_on_a_patterned_table_with_shadows_is_found_by_change(taught_scene) -> None:  # noqa: ANN001
+    rig = taught_scene[0]
+    scene = SoleScene.random(16, "black", rig, look_for(("shadows", "patterned-table"), 16))
+    empty = scene.render_empty()
+    taught = SoleReconstructor(rig).teach(empty.left, empty.right)
+    pair = scene.render()
+    result = measure_sole(SoleReconstructor(rig, taught=taught).reconstruct(pair.left, pair.right))
+    assert result.valid, result.reason
+    assert abs(result.length_mm - scene.sole.truth().length_mm) < 1.0
+
+
+# ---- the change test on synthetic images ---------------------------------------------------------------
+
+
+def _table_texture(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
+    return (60.0 + 6.0 * cv2.GaussianBlur(rng.standard_normal(shape).astype(np.float32), (0, 0), 1.5) / 0.19).astype(
+        np.float32
+    )
+
+
+def test_change_test_finds_a_sole_of_the_tables_brightness_and_ignores_gain_and_shadow() -> None:
+    rng = np.random.default_rng(1)
+    shape = (200, 300)
+    reference = _table_texture(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current = 0.8 * _table_texture(np.random.default_rng(1), shape)  # the same table, camera 20 % darker
+    sole = np.zeros(shape, bool)
+    sole[60:140, 40:140] = True
+    current[sole] = _table_texture(rng, shape)[sole] * 0.8  # same brightness, other texture
+    shadow = np.zeros(shape, bool)
+    shadow[60:140, 180:260] = True
+    current[shadow] *= 0.6
+    current += rng.normal(0.0, 1.0, shape).astype(np.float32)
+    table = ~sole & ~shadow
+    test = ChangeTest.fit(current, reference, table)
+    assert test is not None and test.gain == pytest.approx(0.8, abs=0.05)
+    changed = test.changed(current, reference)
+    inner = np.zeros(shape, bool)
+    inner[62:138, 42:138] = True
+    assert changed[inner].mean() > 0.75  # the sole, whatever its brightness (per pixel alone: ~0.55)
+    # A shadow keeps the table's texture: most of it is not called changed (without the texture vote, all).
+    assert changed[shadow].mean() < 0.3
+    outer = np.ones(shape, bool)
+    outer[57:143, 37:143] = False
+    assert changed[outer & ~shadow].mean() < 0.01
+
+
+def test_change_test_needs_table_pixels() -> None:
+    image = np.zeros((10, 10), np.float32)
+    assert ChangeTest.fit(image, image, np.ones((10, 10), bool)) is None
+
+
+def test_taught_table_of_another_calibration_is_refused_by_the_reconstructor(taught_scene) -> None:  # noqa: ANN001
+    rig, _, _, taught = taught_scene
+    stale = TaughtTable(taught.plane, taught.left, taught.right, taught.disparity, "0" * 16, taught.taught_at)
+    with pytest.raises(ValueError, match="another calibration"):
+        SoleReconstructor(rig, taught=stale)
+
+
+def test_a_sole_without_measured_depth_is_too_few_points_not_no_sole(taught_scene) -> None:  # noqa: ANN001
+    rig, _, pair, taught = taught_scene
+    reconstructor = SoleReconstructor(rig, taught=taught)
+    cloud = reconstructor.points_from_disparity(pair.left, pair.right)
+    table = np.abs(taught.plane.heights(cloud.points)) < 1.0  # what heavy noise leaves of a dark sole: nothing
+    lost = dataclasses.replace(
+        cloud,
+        points=cloud.points[table],
+        colors=cloud.colors[table],
+        pixels=cloud.pixels[table],
+        disparity=cloud.disparity[table],
+    )
+    reconstruction = reconstructor.segment(lost)
+    assert reconstruction.failure is FailureKind.TOO_FEW_POINTS, reconstruction.reason
+    assert "changed against the taught table" in reconstruction.reason
+    # The same table without the sole is "no sole in view".
+    empty = taught_scene[1].render_empty(shot=3)
+    assert reconstructor.reconstruct(empty.left, empty.right).failure is FailureKind.NO_SOLE
