@@ -61,6 +61,18 @@ OPERATOR_TEXT: dict[ErrorCode, tuple[str, str]] = {
         "The table was not found below the sole (view blocked, or the table is not at the configured distance).",
         "Clear the table and the camera view of other objects; if it repeats, check the camera mount and depth range.",
     ),
+    ErrorCode.TABLE_MOVED: (
+        "The table no longer lies where it was taught: the table, fixture or cameras moved.",
+        "Check the fixture and camera mount, clear the table and teach it again (`cellctl teach`).",
+    ),
+    ErrorCode.OUTLINE_INCONSISTENT: (
+        "The sole's outline disagrees with its depth edge or between the two cameras, so its length is not trusted.",
+        "Check that one sole lies flat with nothing touching it and the lenses are clean; re-trigger.",
+    ),
+    ErrorCode.GLUE_PATH_INCONSISTENT: (
+        "The glue path leaves the sole's surface (height jump, out of the sole's height range, or tilted normal).",
+        "Re-trigger; if it repeats for this sole, check lighting for glare and call the line engineer.",
+    ),
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",
         "Re-trigger once the heartbeat runs again.",
