@@ -6,9 +6,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # Compiler and headers for the C core; libgomp for its threads; libusb for Open3D; chromium and its
-# driver for the operator station's browser tests; mbpoll, a Modbus master nobody here wrote, reads the
-# register map in tests/firmware_io.
-APT_PACKAGES := python3-venv python3-dev gcc libc6-dev libgomp1 libusb-1.0-0 chromium chromium-driver mbpoll
+# driver for the operator station's browser tests; mbpoll (libmodbus) and socat for the Modbus
+# conformance test (a master nobody here wrote, over TCP and an RTU pty pair).
+APT_PACKAGES := python3-venv python3-dev gcc libc6-dev libgomp1 libusb-1.0-0 chromium chromium-driver mbpoll socat
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 SANITIZE := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 
@@ -57,11 +57,11 @@ sysdeps:
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing; \
 	fi
 
-$(STAMP): pyproject.toml setup.py $(wildcard csrc/*.c csrc/*.h csrc/*.py)
+$(STAMP): pyproject.toml constraints.txt setup.py $(wildcard csrc/*.c csrc/*.h csrc/*.py)
 	$(MAKE) sysdeps
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -m pip install -q -c constraints.txt -e '.[test]'
 	touch $@
 
 clean:

@@ -1,6 +1,12 @@
-"""Image conversions used across the package, written once (grey and BGR views of camera images)."""
+"""Image conversions used across the package, written once (grey and BGR views of camera images), and
+reading image files with their size checked before they are decoded."""
 
 from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+from typing import BinaryIO
 
 import cv2
 import numpy as np
@@ -22,3 +28,61 @@ def grey_f32(image: np.ndarray) -> np.ndarray:
 def bgr(image: np.ndarray) -> np.ndarray:
     """The image as three BGR channels (grey replicated; BGR returned as it is)."""
     return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
+
+
+# ---- reading image files without decoding a bomb --------------------------------------------------------
+# Why the header is read by hand: OpenCV decodes the whole image before anyone can look at its size (cv2 has
+# no header-only read; its own limit, OPENCV_IO_MAX_IMAGE_PIXELS, is 2^30 px and fixed when the library
+# loads), so a 20000 x 20000 PNG cost 3.7 GB before a size check could refuse it. PNG (IHDR), JPEG (SOFn)
+# and BMP (BITMAPINFOHEADER) keep the size at fixed, documented places of their headers.
+
+#: Larger than any camera of this cell (1280 x 1024 = 1.3 Mpx); far below what would exhaust memory.
+MAX_PIXELS = 50_000_000
+
+
+def image_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
+    """(width, height) from a PNG, JPEG or BMP header; None for other formats or an unreadable header."""
+    with open(path, "rb") as file:
+        head = file.read(32)
+        if head.startswith(b"\x89PNG\r\n\x1a\n") and head[12:16] == b"IHDR":
+            width, height = struct.unpack(">II", head[16:24])
+            return width, height
+        if head.startswith(b"BM") and len(head) >= 26:
+            width, height = struct.unpack("<ii", head[18:26])
+            return abs(width), abs(height)
+        if head.startswith(b"\xff\xd8"):
+            file.seek(2)
+            return _jpeg_size(file)
+    return None
+
+
+def _jpeg_size(file: BinaryIO) -> tuple[int, int] | None:
+    while True:
+        marker = file.read(4)
+        if len(marker) < 4 or marker[0] != 0xFF:
+            return None
+        kind, length = marker[1], struct.unpack(">H", marker[2:4])[0]
+        if 0xC0 <= kind <= 0xCF and kind not in (0xC4, 0xC8, 0xCC):  # SOFn: precision, height, width
+            frame = file.read(5)
+            if len(frame) < 5:
+                return None
+            height, width = struct.unpack(">HH", frame[1:5])
+            return width, height
+        file.seek(length - 2, os.SEEK_CUR)
+
+
+def read_image(path: str | os.PathLike[str], flags: int = cv2.IMREAD_COLOR, what: str = "image") -> np.ndarray:
+    """Decode an image file; ValueError naming the problem (missing, not a file, too large, undecodable)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{what} {path} does not exist or is not a regular file")
+    size = image_size(path)
+    if size is not None and size[0] * size[1] > MAX_PIXELS:
+        raise ValueError(
+            f"{what} {path} is {size[0]}x{size[1]} px, larger than any camera image ({MAX_PIXELS / 1e6:.0f} Mpx "
+            "at most): wrong file?"
+        )
+    image = cv2.imread(str(path), flags)
+    if image is None:
+        raise ValueError(f"{what} {path} cannot be read as an image (PNG, BMP, JPEG, TIFF...)")
+    return image

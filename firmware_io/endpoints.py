@@ -55,6 +55,13 @@ class SerialEndpoint:
 Endpoint = TcpEndpoint | SerialEndpoint
 
 
+class LinkStartError(RuntimeError):
+    """The TCP port or serial line cannot be opened; the message names it and what to check.
+
+    Here rather than in firmware_io.server so the command line can catch it without loading the server.
+    """
+
+
 def check_unit_id(unit_id: int, endpoint: Endpoint) -> int:
     """Validate a Modbus unit (slave) id for the endpoint; 0 means "any" on TCP only."""
     if isinstance(endpoint, SerialEndpoint):

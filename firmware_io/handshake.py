@@ -35,8 +35,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from numpy.typing import ArrayLike
-from pymodbus.constants import ExcCodes
 
+from firmware_io.pdu import ExceptionCode
 from firmware_io.registers import (
     MAX_GLUE_POINTS,
     ErrorCode,
@@ -90,7 +90,9 @@ class PlcHandshake:
         self._flags = StatusBit(0)  # RESULT_VALID, ERROR, CAMERAS_OK, CALIBRATION_OK; the rest is derived
         self._running: int | None = None
         self._running_recipe = 0
+        self._running_since: float | None = None
         self._last_accepted = 0
+        self._timed_out: int | None = None  # the cycle the link answered with CYCLE_TIMEOUT itself
         self._pending: Trigger | None = None
         self._closed = False
         self._controller_seen_at = time.monotonic()
@@ -99,16 +101,26 @@ class PlcHandshake:
 
     # ---- PLC side: called by the Modbus server for each request -------------------------------
 
+    @property
+    def map_size(self) -> int:
+        """Registers in the served map (firmware_io.pdu refuses reads beyond it)."""
+        return self.layout.size
+
+    @property
+    def plc_writable(self) -> frozenset[int]:
+        """Registers a PLC may write in the served map version."""
+        return self.layout.plc_writable
+
     def plc_read(self, address: int, count: int) -> list[int]:
         """Registers [address, address + count) as the PLC sees them now."""
         with self._changed:
             return self._image[address : address + count]
 
-    def plc_write(self, address: int, values: Sequence[int]) -> ExcCodes | None:
+    def plc_write(self, address: int, values: Sequence[int]) -> ExceptionCode | None:
         """Apply a PLC write to the trigger; returns the Modbus exception to answer with, or None.
 
-        Writes to read-only registers never get here: the server refuses them first (pymodbus'
-        read-only flag, exception 0x02), so anything else is a bug in the server wiring.
+        Writes to read-only registers never get here: firmware_io.pdu refuses them first (exception
+        0x02), so anything else is a bug in the server wiring.
         """
         if address not in self.layout.plc_writable or len(values) != 1:
             also = " (and recipe select, map v2)" if self.layout.version >= 2 else ""
@@ -125,18 +137,43 @@ class PlcHandshake:
             if self._running is not None:
                 refused = self._image[Register.REFUSED_TRIGGERS]
                 self._image[Register.REFUSED_TRIGGERS] = (refused + 1) & 0xFFFF
-                return ExcCodes.DEVICE_BUSY
+                return ExceptionCode.DEVICE_BUSY
             self._accept(cycle)
             return None
 
+    def expire_overdue(self, cycle_timeout_s: float | None) -> int | None:
+        """Answer a cycle older than cycle_timeout_s with CYCLE_TIMEOUT; returns its number, if any.
+
+        The link does this itself because the controller may be stuck inside the cycle: the PLC gets
+        an answer with a reason instead of waiting into its own timeout.
+        """
+        with self._changed:
+            started = self._running_since
+            if self._running is None or started is None or cycle_timeout_s is None:
+                return None
+            age_s = time.monotonic() - started
+            if age_s <= cycle_timeout_s:
+                return None
+            expired = self._timed_out = self._running
+            measurement = self._map.encode_floats([_NAN, _NAN, _NAN, age_s * 1000.0])
+            self._finish(expired, measurement, [], ErrorCode.CYCLE_TIMEOUT)
+            return expired
+
     def beat(self, liveness_timeout_s: float | None) -> bool:
-        """Advance the heartbeat if the controller was seen recently enough; True if it advanced."""
+        """Advance the heartbeat if the controller is alive and working; True if it advanced.
+
+        "Working": a cycle is running (expire_overdue bounds how long that lasts), or the controller
+        made a call (a waiting wait_trigger() counts) within liveness_timeout_s.
+        """
         with self._changed:
             silent_for = time.monotonic() - self._controller_seen_at
-            if liveness_timeout_s is not None and silent_for > liveness_timeout_s:
+            if self._running is None and liveness_timeout_s is not None and silent_for > liveness_timeout_s:
                 return False
-            self._image[Register.HEARTBEAT] = (self._image[Register.HEARTBEAT] + 1) & 0xFFFF
+            self._advance_heartbeat()
             return True
+
+    def _advance_heartbeat(self) -> None:
+        self._image[Register.HEARTBEAT] = (self._image[Register.HEARTBEAT] + 1) & 0xFFFF
 
     # ---- controller side -----------------------------------------------------------------------
 
@@ -165,6 +202,24 @@ class PlcHandshake:
                         return None
                 self._changed.wait(wait)
 
+    def timed_out(self, cycle: int) -> bool:
+        """True if the link answered `cycle` with CYCLE_TIMEOUT itself (its result will not be published)."""
+        with self._changed:
+            return cycle == self._timed_out and cycle != self._running
+
+    def restore_last_cycle(self, cycle: int) -> None:
+        """After a restart: the cycle answered last (from the journal); writing it again starts nothing.
+
+        The trigger register shows it, as the PLC left it, so `max(reg 2, reg 3) + 1` stays the next number.
+        """
+        if not 0 <= cycle <= 0xFFFF:
+            raise ValueError(f"last cycle {cycle} is not a cycle number 0..65535")
+        with self._changed:
+            if self._last_accepted != 0 or self._running is not None:
+                raise RuntimeError("restore_last_cycle() is for a fresh link, before the PLC triggered anything")
+            self._last_accepted = cycle
+            self._image[Register.TRIGGER] = cycle
+
     def set_health(self, *, cameras_ok: bool, calibration_ok: bool) -> None:
         """Report camera and calibration state (status bits 4, 5 and hence READY)."""
         with self._changed:
@@ -184,11 +239,12 @@ class PlcHandshake:
         glue_points: ArrayLike,
         path: PathInfo | None = None,
         inspection: Inspection | None = None,
-    ) -> None:
+    ) -> bool:
         """Hand the PLC the measurement of `cycle`; refuses values that are not finite.
 
         Map version 2 needs `path` (normals); `inspection` None means no tolerances were checked (neither
-        tolerance bit set). Version 1 publishes neither.
+        tolerance bit set). Version 1 publishes neither. False (and nothing published) if the cycle was
+        already answered with CYCLE_TIMEOUT.
         """
         values = {
             "heel_height_mm": heel_height_mm,
@@ -209,16 +265,19 @@ class PlcHandshake:
             points = self._map.encode_path(glue_points, path.normals)
             extra = self._path_registers(path, inspection)
         with self._changed:
-            self._finish(cycle, measurement, points, ErrorCode.NONE, extra, inspection)
+            return self._finish(cycle, measurement, points, ErrorCode.NONE, extra, inspection)
 
-    def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> None:
-        """Tell the PLC that `cycle` ended with `code`; measurements read NaN and no glue points."""
+    def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> bool:
+        """Tell the PLC that `cycle` ended with `code`; measurements read NaN and no glue points.
+
+        False (and nothing published) if the cycle was already answered with CYCLE_TIMEOUT.
+        """
         code = ErrorCode(code)
         if code is ErrorCode.NONE:
             raise ValueError("publish_error needs an error code other than ErrorCode.NONE")
         measurement = self._map.encode_floats([_NAN, _NAN, _NAN, cycle_time_ms], what="measurement")
         with self._changed:
-            self._finish(cycle, measurement, [], code)
+            return self._finish(cycle, measurement, [], code)
 
     def close(self) -> None:
         """Wake any wait_trigger() so the controller can stop."""
@@ -231,6 +290,7 @@ class PlcHandshake:
     def _accept(self, cycle: int) -> None:
         self._image[Register.TRIGGER] = cycle
         self._running = self._last_accepted = cycle
+        self._running_since = time.monotonic()
         self._clear_result()
         self._update_status()
         self._running_recipe = self._image[Register.RECIPE_SELECT] if self.layout.version >= 2 else 0
@@ -245,8 +305,10 @@ class PlcHandshake:
         code: ErrorCode,
         extra: dict[int, list[int]] | None = None,
         inspection: Inspection | None = None,
-    ) -> None:
+    ) -> bool:
         self._controller_seen_at = time.monotonic()
+        if cycle == self._timed_out and cycle != self._running:
+            return False  # the link answered it with CYCLE_TIMEOUT already; the late result is dropped
         if cycle != self._running:
             raise RuntimeError(
                 f"cannot publish cycle {cycle}: the running cycle is {self._running} "
@@ -269,7 +331,9 @@ class PlcHandshake:
         self._set_flag(StatusBit.IN_TOLERANCE, checked and inspection is not None and not inspection.failed)
         self._set_flag(StatusBit.OUT_OF_TOLERANCE, checked and inspection is not None and bool(inspection.failed))
         self._running = None
+        self._running_since = None
         self._update_status()
+        return True
 
     def _clear_result(self) -> None:
         image = self._image

@@ -170,6 +170,7 @@ class ErrorCode(enum.IntEnum):
     GLUE_PATH_INCONSISTENT = 39
     RECIPE_UNKNOWN = 40
     CYCLE_ABORTED = 90
+    CYCLE_TIMEOUT = 91
     INTERNAL_ERROR = 99
 
     @property
@@ -254,6 +255,11 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",
         "Re-trigger once the heartbeat runs again.",
+    ),
+    ErrorCode.CYCLE_TIMEOUT: (
+        "The cycle took longer than the configured cycle_timeout_s and was abandoned.",
+        "Re-trigger; if it repeats, the controller PC is overloaded or a camera hangs: save the service log and "
+        "call support.",
     ),
     ErrorCode.INTERNAL_ERROR: (
         "Unexpected fault in the controller software.",

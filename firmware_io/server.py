@@ -1,21 +1,19 @@
 """PlcLink: the controller's Modbus slave towards the robot PLC (TCP server or RTU over a serial port).
 
-Threading: pymodbus' server is asyncio-only, while the controller (cameras, C matching core, SQLite
-journal) is plain blocking code. PlcLink therefore runs pymodbus in one background thread with its
-own event loop, and the controller talks to it through thread-safe calls. The Modbus side keeps
-answering the PLC and the heartbeat keeps running while the controller thread is busy measuring,
-and no asyncio leaks into the rest of the code base.
+Threading: the server is asyncio, while the controller (cameras, C matching core, SQLite journal) is
+plain blocking code. PlcLink therefore runs the server in one background thread with its own event
+loop, and the controller talks to it through thread-safe calls. The Modbus side keeps answering the
+PLC and the heartbeat keeps running while the controller thread is busy measuring, and no asyncio
+leaks into the rest of the code base.
 
-Register storage: pymodbus 3.16's SimDevice keeps the registers; its documented `action` hook runs
-on every request, and we use it to (a) refuse function codes other than holding-register access,
-(b) route trigger writes into the handshake and (c) copy the requested range from the handshake's
-register image just before pymodbus answers a read. The image (firmware_io.handshake) is the single
-source of truth and is updated under one lock, which is what makes results atomic for the PLC.
-Writes to read-only registers are refused by pymodbus itself (SimData readonly=True), with
-exception 0x02 ILLEGAL DATA ADDRESS. SimDevice rather than ModbusServerContext/ModbusDeviceContext:
-3.16 deprecates the latter (a warning at construction, removal announced for v4) and points to
-SimDevice, although pymodbus still labels it experimental; tests/test_modbus.py pins the behaviour
-we rely on.
+Protocol: requests are parsed and executed by firmware_io.pdu against the handshake's register image
+(firmware_io.handshake), the single source of truth, updated under one lock: results are atomic for
+the PLC. Framing is firmware_io.tcp (MBAP, connection limits) and firmware_io.rtu (CRC, silence).
+Until version 3.16, pymodbus' server did all this; it was replaced because it executed a request
+piecewise (a refused fc 23 had already started a cycle), answered function codes this map does not
+serve (8, 17, 43 naming the stack; on RTU for any unit id), fell silent for ~22 requests after one bad
+frame and had no connection cap or idle timeout (docs/modbus.md lists what is answered now).
+pymodbus remains the client of the PLC simulator, a master this server did not write.
 """
 
 from __future__ import annotations
@@ -23,36 +21,29 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from collections.abc import Sequence
 
+import serial
 from numpy.typing import ArrayLike
-from pymodbus.constants import ExcCodes
-from pymodbus.exceptions import NoSuchIdException
-from pymodbus.framer import FramerType
-from pymodbus.server import ModbusBaseServer, ModbusSerialServer, ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
 
-from firmware_io.endpoints import Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
+from firmware_io.endpoints import Endpoint, LinkStartError, SerialEndpoint, TcpEndpoint, check_unit_id
 from firmware_io.handshake import Inspection, PathInfo, PlcHandshake, Trigger
+from firmware_io.pdu import ExceptionCode, exception_reply, execute
 from firmware_io.registers import ErrorCode, MapLayout, RegisterMap, StatusBit, WordOrder
+from firmware_io.rtu import SerialLine, serve_serial_line
+from firmware_io.tcp import ConnectionLimits, TcpFrontEnd
 
 log = logging.getLogger(__name__)
-
-#: Holding-register function codes: read (3), write single (6), write multiple (16), read/write (23).
-#: Everything else (coils, input registers, mask write) is answered with ILLEGAL FUNCTION, because
-#: the map is holding registers only and a second view of the same memory would be a second way in.
-HOLDING_REGISTER_FUNCTIONS = frozenset({3, 6, 16, 23})
-
-#: How often a lost serial port is retried.
-SERIAL_REOPEN_PERIOD_S = 1.0
 
 
 class PlcLink:
     """The controller's side of the PLC handshake, served over Modbus TCP or RTU.
 
+    The field side's one facade (lifetime, the controller API, the server thread); the work is in
+    handshake, pdu, tcp and rtu, and most of its length is the public methods' documentation.
+
     Typical controller loop::
 
-        with PlcLink(TcpEndpoint("0.0.0.0", 5020), unit_id=1) as link:
+        with PlcLink(TcpEndpoint("192.168.10.2", 5020), unit_id=1, cycle_timeout_s=4.0) as link:
             link.set_status(cameras_ok=True, calibration_ok=True)
             while running:
                 trigger = link.wait_trigger(timeout_s=0.5)
@@ -73,37 +64,45 @@ class PlcLink:
         heartbeat_period_s: float = 0.25,
         liveness_timeout_s: float | None = 5.0,
         map_version: int = 1,
+        cycle_timeout_s: float | None = None,
+        limits: ConnectionLimits = ConnectionLimits(),
     ) -> None:
         """Configure the link; nothing is opened until start().
 
         unit_id: Modbus unit (slave) id answered; on TCP 0 answers any id. Requests for another id
             get exception 0x0B on TCP and no answer at all on RTU (the bus may have other slaves).
         heartbeat_period_s: heartbeat increment period; must stay below 0.5 s (the documented limit).
-        liveness_timeout_s: the heartbeat stops when the controller has made no PlcLink call (a
-            waiting wait_trigger() counts) for this long, so the PLC sees a hung controller.
-            None keeps it beating whenever the link runs.
+        liveness_timeout_s: between cycles, the heartbeat stops when the controller has made no
+            PlcLink call (a waiting wait_trigger() counts) for this long. None: never stops.
         map_version: register map layout served (docs/modbus.md): 1, or 2 with recipes and normals.
+        cycle_timeout_s: while a cycle runs the heartbeat keeps beating; a cycle not published within
+            this time is answered with ErrorCode.CYCLE_TIMEOUT by the link itself, and the liveness
+            rule applies again from then on. None: no limit.
+        limits: TCP connection cap, idle timeout and allowed client addresses.
         """
         if not 0 < heartbeat_period_s < 0.5:
             raise ValueError(f"heartbeat period {heartbeat_period_s} s must be above 0 and below 0.5 s")
         if liveness_timeout_s is not None and liveness_timeout_s <= heartbeat_period_s:
             raise ValueError(f"liveness timeout {liveness_timeout_s} s must be longer than the heartbeat period")
+        if cycle_timeout_s is not None and cycle_timeout_s <= 0:
+            raise ValueError(f"cycle timeout {cycle_timeout_s} s must be positive")
         self._endpoint = endpoint
         self._unit_id = check_unit_id(unit_id, endpoint)
-        self._map = RegisterMap(word_order)
         self._heartbeat_period_s = heartbeat_period_s
         self._liveness_timeout_s = liveness_timeout_s
+        self._cycle_timeout_s = cycle_timeout_s
+        self._limits = limits
         self._layout = MapLayout.of(map_version)
-        self._handshake = PlcHandshake(self._map, self._layout)
+        self._handshake = PlcHandshake(RegisterMap(word_order), self._layout)
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_requested: asyncio.Event | None = None
-        self._line_lost: asyncio.Event | None = None
         self._started = threading.Event()
         self._start_error: BaseException | None = None
         self._bound: Endpoint = endpoint
+        self._tcp: TcpFrontEnd | None = None
+        self._serial_open = False
         # For the operator station and /metrics (read from other threads; ints are replaced atomically).
-        self.connected_clients = 0  # TCP connections open now (RTU: 1 while the serial line is open)
         self.heartbeat_stalls = 0  # times the heartbeat stopped because the controller went silent
         self.heartbeat_stalled = False
 
@@ -120,7 +119,7 @@ class PlcLink:
             raise RuntimeError(f"Modbus server on {self._endpoint} did not start within {timeout_s} s")
         if self._start_error is not None:
             self._thread.join(timeout_s)
-            raise RuntimeError(_start_failure_text(self._endpoint, self._start_error)) from self._start_error
+            raise LinkStartError(_start_failure_text(self._endpoint, self._start_error)) from None
         log.info("Modbus %s serving unit id %d", self._bound, self._unit_id)
 
     def stop(self, timeout_s: float = 5.0) -> None:
@@ -146,6 +145,13 @@ class PlcLink:
         self.stop()
 
     @property
+    def connected_clients(self) -> int:
+        """TCP connections open now (RTU: 1 while the serial line is open)."""
+        if isinstance(self._endpoint, SerialEndpoint):
+            return int(self._serial_open)
+        return 0 if self._tcp is None else self._tcp.connection_count
+
+    @property
     def endpoint(self) -> Endpoint:
         """Where the link serves; for TCP port 0, the port actually bound once started."""
         return self._bound
@@ -167,6 +173,14 @@ class PlcLink:
         slice_s = self._heartbeat_period_s if self._liveness_timeout_s is None else self._liveness_timeout_s / 2
         return self._handshake.wait_trigger(timeout_s, liveness_slice_s=slice_s)
 
+    def timed_out(self, cycle: int) -> bool:
+        """True if the link already answered `cycle` with CYCLE_TIMEOUT (see cycle_timeout_s)."""
+        return self._handshake.timed_out(cycle)
+
+    def restore_last_cycle(self, cycle: int) -> None:
+        """After a restart, the cycle answered last (from the journal): writing it again starts nothing."""
+        self._handshake.restore_last_cycle(cycle)
+
     def set_status(self, *, cameras_ok: bool, calibration_ok: bool) -> None:
         """Report camera and calibration health (status bits 4 and 5; READY needs both)."""
         self._handshake.set_health(cameras_ok=cameras_ok, calibration_ok=calibration_ok)
@@ -182,12 +196,13 @@ class PlcLink:
         glue_points: ArrayLike,
         path: PathInfo | None = None,
         inspection: Inspection | None = None,
-    ) -> None:
+    ) -> bool:
         """Publish the measurement of `cycle` atomically; glue_points is (N, 3) mm, N <= 2000.
 
-        Map version 2 also publishes `path` (normals, frame, offsets; required) and `inspection`.
+        Map version 2 also publishes `path` (normals, frame, offsets; required) and `inspection`. False if
+        the link had already answered the cycle with CYCLE_TIMEOUT (nothing published).
         """
-        self._handshake.publish_result(
+        return self._handshake.publish_result(
             cycle,
             heel_height_mm=heel_height_mm,
             toe_height_mm=toe_height_mm,
@@ -198,9 +213,19 @@ class PlcLink:
             inspection=inspection,
         )
 
-    def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> None:
-        """Publish that `cycle` failed with `code` (ERROR bit set, RESULT_VALID clear)."""
-        self._handshake.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
+    def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> bool:
+        """Publish that `cycle` failed with `code`; False if it had already timed out (see publish_result)."""
+        return self._handshake.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
+
+    # ---- requests ------------------------------------------------------------------------------
+
+    def _answer(self, unit: int, pdu: bytes) -> bytes | None:
+        """The reply PDU for a request to `unit`, or None for no answer at all (RTU, other slave)."""
+        if isinstance(self._endpoint, SerialEndpoint):
+            return execute(pdu, self._handshake) if unit == self._unit_id else None
+        if self._unit_id != 0 and unit != self._unit_id:
+            return exception_reply(pdu[0], ExceptionCode.GATEWAY_NO_RESPONSE)
+        return execute(pdu, self._handshake)
 
     # ---- server thread -------------------------------------------------------------------------
 
@@ -216,176 +241,70 @@ class PlcLink:
     async def _serve(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop_requested = asyncio.Event()
-        self._line_lost = asyncio.Event()
-        try:
-            server = await self._open_server()
-        except Exception as exc:
-            self._start_error = exc
-            return
-        self._bound = _bound_endpoint(server, self._endpoint)
         heartbeat = asyncio.create_task(self._heartbeat(), name="plc heartbeat")
-        self._started.set()
         try:
-            while server is not None and await self._line_lost_or_stop():
-                await server.shutdown()
-                server = await self._reopen_serial_line()
+            if isinstance(self._endpoint, SerialEndpoint):
+                await self._serve_rtu(self._endpoint)
+            else:
+                await self._serve_tcp(self._endpoint)
         finally:
             heartbeat.cancel()
-            if server is not None:
-                await server.shutdown()
-            # Let the transports' close callbacks run so sockets and the tty are released before
-            # the loop is torn down.
-            await asyncio.sleep(0)
-            await asyncio.sleep(0)
+            await asyncio.gather(heartbeat, return_exceptions=True)
 
-    async def _open_server(self) -> ModbusBaseServer:
-        server = self._make_server()
-        await server.serve_forever(background=True)  # RuntimeError if the port cannot be opened
-        return server
+    async def _serve_tcp(self, endpoint: TcpEndpoint) -> None:
+        assert self._stop_requested is not None
+        self._tcp = TcpFrontEnd(self._limits, self._answer)
+        try:
+            server = await self._tcp.start(endpoint.host, endpoint.port)
+        except OSError as exc:
+            self._start_error = exc
+            return
+        host, port = server.sockets[0].getsockname()[:2]
+        self._bound = TcpEndpoint(str(host), int(port))
+        self._started.set()
+        try:
+            await self._stop_requested.wait()
+        finally:
+            server.close()
+            await self._tcp.close_all()
+            await server.wait_closed()
 
-    async def _line_lost_or_stop(self) -> bool:
-        """Wait; True when the serial line was lost, False when stop() was called."""
-        stop = asyncio.create_task(self._stop_requested.wait())
-        lost = asyncio.create_task(self._line_lost.wait())
-        await asyncio.wait({stop, lost}, return_when=asyncio.FIRST_COMPLETED)
-        stop.cancel()
-        lost.cancel()
-        return not self._stop_requested.is_set()
+    async def _serve_rtu(self, endpoint: SerialEndpoint) -> None:
+        assert self._stop_requested is not None
+        try:
+            line = SerialLine(endpoint, self._answer)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            self._start_error = exc
+            return
+        self._started.set()
+        self._serial_open = True
+        try:
+            await serve_serial_line(line, endpoint, self._answer, self._stop_requested, self._on_serial_state)
+        finally:
+            self._serial_open = False
 
-    async def _reopen_serial_line(self) -> ModbusBaseServer | None:
-        """Reopen a serial port that went away (USB adapter unplugged) until it is back or stop()."""
-        # pymodbus' serial server does not reopen its port after an I/O error; we do, so replugging
-        # the adapter (same /dev/serial/by-id name) brings the link back without a service restart.
-        log.warning("Modbus RTU line %s lost; reopening every %.0f s", self._endpoint, SERIAL_REOPEN_PERIOD_S)
-        while not self._stop_requested.is_set():
-            try:
-                await asyncio.wait_for(self._stop_requested.wait(), SERIAL_REOPEN_PERIOD_S)
-                return None
-            except TimeoutError:
-                pass
-            self._line_lost.clear()
-            try:
-                server = await self._open_server()
-            except RuntimeError:
-                continue
-            log.info("Modbus RTU line %s open again", self._endpoint)
-            return server
-        return None
-
-    def _on_connection(self, connected: bool) -> None:
-        """pymodbus trace_connect hook: a TCP client came or went, or the serial line opened or failed."""
-        log.debug("Modbus %s: connection %s", self._endpoint, "opened" if connected else "closed")
-        self.connected_clients = max(0, self.connected_clients + (1 if connected else -1))
-        stopping = self._stop_requested is not None and self._stop_requested.is_set()
-        if not connected and isinstance(self._endpoint, SerialEndpoint) and not stopping:
-            self._line_lost.set()
+    def _on_serial_state(self, line_open: bool) -> None:
+        self._serial_open = line_open
 
     async def _heartbeat(self) -> None:
         while True:
+            expired = self._handshake.expire_overdue(self._cycle_timeout_s)
             beating = self._handshake.beat(self._liveness_timeout_s)
             if not beating and not self.heartbeat_stalled:
                 self.heartbeat_stalls += 1
             self.heartbeat_stalled = not beating
+            if expired is not None:
+                log.error(
+                    "cycle %d: not published within cycle_timeout_s = %g s; answered CYCLE_TIMEOUT",
+                    expired,
+                    self._cycle_timeout_s,
+                )
             await asyncio.sleep(self._heartbeat_period_s)
-
-    def _make_server(self) -> ModbusBaseServer:
-        device = SimDevice(id=self._unit_id, simdata=_map_blocks(self._layout), action=self._on_request)
-        if isinstance(self._endpoint, SerialEndpoint):
-            ep = self._endpoint
-            server: ModbusBaseServer = ModbusSerialServer(
-                device,
-                framer=FramerType.RTU,
-                port=ep.port,
-                baudrate=ep.baudrate,
-                parity=ep.parity,
-                stopbits=ep.stopbits,
-                bytesize=ep.bytesize,
-                ignore_missing_devices=True,
-                trace_connect=self._on_connection,
-            )
-        else:
-            server = ModbusTcpServer(
-                device, address=(self._endpoint.host, self._endpoint.port), trace_connect=self._on_connection
-            )
-        if self._unit_id != 0:
-            server.context = _SingleUnit(server.context, self._unit_id)
-        return server
-
-    async def _on_request(
-        self,
-        function_code: int,
-        start_address: int,
-        address: int,
-        count: int,
-        current_registers: list[int],
-        set_values: list[int] | list[bool] | None,
-    ) -> ExcCodes | None:
-        """pymodbus SimDevice action: runs after pymodbus' address/read-only checks, before it answers."""
-        if function_code not in HOLDING_REGISTER_FUNCTIONS:
-            return ExcCodes.ILLEGAL_FUNCTION
-        if set_values is not None:
-            return self._handshake.plc_write(address, [int(v) for v in set_values])
-        offset = address - start_address
-        current_registers[offset : offset + count] = self._handshake.plc_read(address, count)
-        return None
-
-
-class _SingleUnit:
-    """Answers only one unit id.
-
-    pymodbus 3.16's SimCore falls back to unit 0 for unknown ids and fails with KeyError when there
-    is none, which the server turns into exception 0x04 with a traceback in the log, and answers even
-    on an RTU bus. Raising NoSuchIdException instead gives pymodbus' documented behaviour:
-    exception 0x0B on TCP, silence on RTU (ignore_missing_devices=True).
-    """
-
-    def __init__(self, inner: object, unit_id: int) -> None:
-        self._inner = inner
-        self._unit_id = unit_id
-
-    def _check(self, device_id: int) -> None:
-        if device_id != self._unit_id:
-            raise NoSuchIdException(f"this controller answers unit id {self._unit_id}, not {device_id}")
-
-    async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):  # noqa: N802
-        self._check(device_id)
-        return await self._inner.async_getValues(device_id, func_code, address, count)  # type: ignore[attr-defined]
-
-    async def async_setValues(self, device_id: int, func_code: int, address: int, values: Sequence[int]):  # noqa: N802
-        self._check(device_id)
-        return await self._inner.async_setValues(device_id, func_code, address, values)  # type: ignore[attr-defined]
-
-    def device_ids(self) -> list[int]:
-        return [self._unit_id]
-
-
-def _map_blocks(layout: MapLayout) -> list[SimData]:
-    """The whole map as register blocks: PLC-writable ones read-write, every other one read-only."""
-    blocks: list[SimData] = []
-    start = 0
-    size, plc_writable = layout.size, layout.plc_writable
-    while start < size:
-        writable = start in plc_writable
-        end = start + 1
-        while end < size and (end in plc_writable) == writable:
-            end += 1
-        blocks.append(
-            SimData(address=start, count=end - start, values=0, datatype=DataType.REGISTERS, readonly=not writable)
-        )
-        start = end
-    return blocks
-
-
-def _bound_endpoint(server: ModbusBaseServer, endpoint: Endpoint) -> Endpoint:
-    if isinstance(endpoint, TcpEndpoint) and endpoint.port == 0:
-        host, port = server.transport.sockets[0].getsockname()[:2]  # type: ignore[union-attr]
-        return TcpEndpoint(host, port)
-    return endpoint
 
 
 def _start_failure_text(endpoint: Endpoint, error: BaseException) -> str:
     if isinstance(endpoint, SerialEndpoint):
         hint = "does the serial port exist, is another program using it, is the user in group dialout?"
     else:
-        hint = "is the port already in use (another cellctl running?) and is the address local to this PC?"
+        hint = "is the port already in use (another cellctl running?) and is the address one of this PC's?"
     return f"cannot serve Modbus on {endpoint}: {error} ({hint})"

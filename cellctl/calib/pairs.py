@@ -28,6 +28,8 @@ def find_pairs(directory: str | os.PathLike[str]) -> list[PairFiles]:
     for path in folder.iterdir():
         match = re.fullmatch(r"(left|right)_(.+)", path.stem)
         if match and path.suffix.lower() in IMAGE_EXTENSIONS:
+            if not path.is_file():  # a FIFO would block the image reader forever
+                raise ValueError(f"{path} is not a regular image file (a FIFO, device or directory?): move it away")
             found.setdefault(match.group(2), {})[match.group(1)] = path
     if not found:
         raise ValueError(f"no left_NN.png / right_NN.png images in {folder}: capture checkerboard pairs there first")

@@ -16,6 +16,7 @@ import numpy as np
 from cellctl.calib.board import Checkerboard, find_corners
 from cellctl.calib.pairs import PairFiles
 from cellctl.calib.report import CalibrationResult, PairResult
+from cellctl.images import read_image
 from cellctl.vision.calibration import Calibration
 
 MIN_PAIRS = 6  # below this the distortion and extrinsics are poorly constrained
@@ -52,9 +53,10 @@ def _detect_view(pair: PairFiles, board: Checkerboard) -> BoardView:
     for side, path in (("left", pair.left), ("right", pair.right)):
         if path is None:
             return BoardView(pair.name, None, None, problem=f"{side}_{pair.name} image missing")
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            return BoardView(pair.name, None, None, problem=f"cannot read {path.name}")
+        try:
+            image = read_image(path, cv2.IMREAD_GRAYSCALE)
+        except (OSError, ValueError) as exc:
+            return BoardView(pair.name, None, None, problem=f"cannot read {path.name}: {exc}")
         images[side], names[side] = image, path.name
     left, right = images["left"], images["right"]
     size = (left.shape[1], left.shape[0])

@@ -36,6 +36,8 @@ class FrameSource(Protocol):
     def open(self) -> None:
         """Connect and prepare (called at service start); raises a CameraError if not possible now."""
 
-    def grab_pair(self) -> StereoFrame: ...
+    def grab_pair(self, not_before: float | None = None) -> StereoFrame:
+        """A synchronised pair; with not_before (time.monotonic()), both frames were taken at or after it."""
+        ...
 
     def close(self) -> None: ...

@@ -5,10 +5,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import cv2
-
 from cellctl.calib.pairs import find_pairs
 from cellctl.cameras.base import CameraMissing, StereoFrame
+from cellctl.images import read_image
 
 
 class ReplayCameras:
@@ -34,13 +33,15 @@ class ReplayCameras:
     def open(self) -> None:
         self.pairs()
 
-    def grab_pair(self) -> StereoFrame:
+    def grab_pair(self, not_before: float | None = None) -> StereoFrame:
+        """The next stored pair, stamped now (so always after not_before)."""
         pairs = self.pairs()
         left_path, right_path = pairs[self._next % len(pairs)]
         self._next += 1
-        left, right = cv2.imread(str(left_path), cv2.IMREAD_COLOR), cv2.imread(str(right_path), cv2.IMREAD_COLOR)
-        if left is None or right is None:
-            raise CameraMissing(f"replay pair {left_path.name}/{right_path.name} cannot be read as images")
+        try:
+            left, right = read_image(left_path, what="replay image"), read_image(right_path, what="replay image")
+        except (OSError, ValueError) as exc:
+            raise CameraMissing(f"replay pair {left_path.name}/{right_path.name}: {exc}") from None
         now = time.monotonic()
         return StereoFrame(
             left, right, now, now, {"backend": "replay", "left": str(left_path), "right": str(right_path)}

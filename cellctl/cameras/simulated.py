@@ -87,7 +87,7 @@ class SimulatedCameras:
         for seed in self.seeds:
             self.scene_for(seed)
 
-    def grab_pair(self) -> StereoFrame:
+    def grab_pair(self, not_before: float | None = None) -> StereoFrame:
         self._check_plugged()
         seed = self.seeds[self._next % len(self.seeds)]
         self._next += 1
@@ -102,7 +102,7 @@ class SimulatedCameras:
             return TimedFrame(timestamp, None)
 
         left, right = grab_synchronised(
-            lambda: grab("left"), lambda: grab("right"), self.sync_tolerance_s, self.max_regrabs
+            lambda: grab("left"), lambda: grab("right"), self.sync_tolerance_s, self.max_regrabs, not_before
         )
         pair, info = self.scene_for(seed)
         return StereoFrame(pair.left, pair.right, left.timestamp, right.timestamp, dict(info))

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from cellctl.cameras.base import CameraMissing, FrameTimeout, StereoFrame
+from cellctl.cameras.identity import camera_identity
 from cellctl.cameras.sync import TimedFrame, grab_synchronised
 
 log = logging.getLogger(__name__)
@@ -135,20 +136,19 @@ class V4l2Cameras:
             self.close()
             raise
 
-    def grab_pair(self) -> StereoFrame:
+    def grab_pair(self, not_before: float | None = None) -> StereoFrame:
         try:
-            left, right = grab_synchronised(self.left.grab, self.right.grab, self.sync_tolerance_s, self.max_regrabs)
+            left, right = grab_synchronised(
+                self.left.grab, self.right.grab, self.sync_tolerance_s, self.max_regrabs, not_before
+            )
             images = left.payload.retrieve(), right.payload.retrieve()
         except (CameraMissing, FrameTimeout):
             self.close()  # reopen both next time: a replugged camera restarts its stream
             raise
-        return StereoFrame(
-            images[0],
-            images[1],
-            left.timestamp,
-            right.timestamp,
-            {"backend": "v4l2", "left": self.left.device, "right": self.right.device},
-        )
+        info: dict[str, str | None] = {"backend": "v4l2", "left": self.left.device, "right": self.right.device}
+        # Identities are looked up per pair (a readdir of /dev/v4l/by-id): a replug may change them.
+        info |= {"left_id": camera_identity(self.left.device), "right_id": camera_identity(self.right.device)}
+        return StereoFrame(images[0], images[1], left.timestamp, right.timestamp, info)
 
     def close(self) -> None:
         self.left.close()

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from cellctl.errors import UserError
+from firmware_io.endpoints import LinkStartError
 
 # Modules under cellctl.cli, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -64,8 +66,18 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (UserError, ValueError, FileNotFoundError) as exc:
-        print(f"cellctl {args.command}: error: {exc}", file=sys.stderr)
+    except BrokenPipeError:  # e.g. `cellctl results --json | head`: the reader has all it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 141
+    except (UserError, ValueError, FileNotFoundError, LinkStartError) as exc:
+        print(f"cellctl {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file or device the command needs: unreadable, missing, no permission
+        print(f"cellctl {args.command}: error: {_one_line(exc)}: check the path and its permissions", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -32,10 +33,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--fit-k3", action="store_true", help="also fit the third radial distortion term (wide-angle lenses)"
     )
+    parser.add_argument(
+        "--left-camera",
+        metavar="ID",
+        help="identity of the left camera, recorded in the calibration and checked by the service: its "
+        "/dev/v4l/by-id name or USB serial (give --right-camera too)",
+    )
+    parser.add_argument("--right-camera", metavar="ID", help="identity of the right camera (see --left-camera)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if (args.left_camera is None) != (args.right_camera is None):
+        raise UserError("--left-camera and --right-camera go together: give both camera identities or neither")
     # Imported here, not at the top: `cellctl --help` and the light commands must not load them.
     import cv2
 
@@ -58,7 +68,10 @@ def run(args: argparse.Namespace) -> int:
         views, board, min_pairs=MIN_PAIRS if args.min_pairs is None else args.min_pairs, fit_k3=args.fit_k3
     )
     print(result.table())
-    result.calibration.save(args.out)
+    calibration = result.calibration
+    if args.left_camera is not None:
+        calibration = replace(calibration, cameras=(args.left_camera, args.right_camera))
+    calibration.save(args.out)
     chart = args.chart or args.out.with_name(f"{args.out.stem}-errors.png")
     if not cv2.imwrite(str(chart), result.error_chart()):
         raise UserError(f"cannot write the error chart {chart}: check the directory exists and is writable")

@@ -60,14 +60,16 @@ def run(args: argparse.Namespace) -> int:
 
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
-    from cellctl.vision.measurement import measure_sole
+    from cellctl.vision.measurement import check_glue_settings, measure_sole
     from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
     from cellctl.vision.teach import TeachError, load_taught
 
     offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset
     spacing = GLUE_SPACING_MM if args.glue_spacing is None else args.glue_spacing
-    if offset < 0 or spacing <= 0:
-        raise UserError(f"--glue-offset must be >= 0 and --glue-spacing > 0 mm, got {offset:g} and {spacing:g}")
+    try:
+        check_glue_settings(offset, spacing)
+    except ValueError as exc:
+        raise UserError(f"--glue-offset/--glue-spacing: {exc}") from None
     calib = Calibration.load(args.calib)
     left, right = _read(args.left, "LEFT"), _read(args.right, "RIGHT")
     for name, image in (("LEFT", left), ("RIGHT", right)):
@@ -99,14 +101,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _read(path: Path, name: str) -> np.ndarray:
-    import cv2
+    from cellctl.images import read_image  # OpenCV: not at the top, so --help stays light
 
-    if not path.is_file():
-        raise UserError(f"{name} image {path} does not exist")
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise UserError(f"{name} image {path} cannot be read as an image (PNG, BMP, JPEG, TIFF...)")
-    return image
+    try:
+        return read_image(path, what=f"{name} image")
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 def _write_ply(path: Path, reconstruction) -> None:  # noqa: ANN001 - Reconstruction, imported lazily

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 
 from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint
@@ -64,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--timeout {args.timeout} must be positive")
     if args.recipe is not None and not 0 <= args.recipe <= 0xFFFF:
         raise ValueError(f"--recipe {args.recipe} must be 0..65535")
+    # pymodbus logs a failed connect itself; the one line below says it, with the remedy.
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     simulator = PlcSimulator(
         endpoint,
         unit_id=args.unit,

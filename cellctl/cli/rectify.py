@@ -62,9 +62,12 @@ def run(args: argparse.Namespace) -> int:
 def _read(path: Path) -> np.ndarray:
     import cv2
 
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise UserError(f"cannot read image {path}: check the path and that it is a PNG/JPEG/BMP/TIFF file")
+    from cellctl.images import read_image
+
+    try:
+        image = read_image(path, cv2.IMREAD_UNCHANGED)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     if image.ndim == 3 and image.shape[2] == 4:
         image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
     return image

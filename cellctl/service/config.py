@@ -22,9 +22,16 @@ from pathlib import Path
 from typing import Any
 
 from cellctl.cameras.config import CameraConfig, SimulatedCameraConfig
-from cellctl.vision.defaults import DEPTH_RANGE_MM, GLUE_OFFSET_MM, GLUE_SPACING_MM
+from cellctl.vision.defaults import (
+    DEPTH_RANGE_MM,
+    GLUE_OFFSET_MM,
+    GLUE_OFFSET_RANGE_MM,
+    GLUE_SPACING_MM,
+    GLUE_SPACING_RANGE_MM,
+)
 from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
 from firmware_io.registers import WordOrder
+from firmware_io.tcp import ConnectionLimits
 
 BACKENDS = ("simulated", "replay", "v4l2")
 PIXEL_FORMATS = ("MJPEG", "YUYV")
@@ -87,6 +94,14 @@ class _Table:
             raise self.fail(key, f"{value:g} is impossible: must be {bounds}")
         return value
 
+    def integer(self, key: str, default: Any = ..., *, low: int | None = None, high: int | None = None) -> int:
+        """A whole number: 5020.7 is refused, not truncated to 5020."""
+        value = self.get(key, int, default)
+        if (low is not None and value < low) or (high is not None and value > high):
+            bounds = f"in {low}..{high}" if low is not None and high is not None else f">= {low}"
+            raise self.fail(key, f"{value} is impossible: must be {bounds}")
+        return int(value)
+
     def choice(self, key: str, choices: tuple[str, ...], default: Any = ...) -> str:
         value = self.get(key, str, default)
         if value not in choices:
@@ -142,6 +157,15 @@ class PlcConfig:
     heartbeat_period_s: float = 0.25
     liveness_timeout_s: float = 5.0
     map_version: int = 1  # docs/modbus.md; 2 adds recipes, normals, frame; 1 for PLCs programmed for it
+    # A cycle not published within this is answered CYCLE_TIMEOUT (below the PLC's documented 5 s timeout).
+    cycle_timeout_s: float = 4.0
+    max_connections: int = 8
+    idle_timeout_s: float = 60.0
+    allowed_clients: tuple[str, ...] = ()
+
+    def limits(self) -> ConnectionLimits:
+        """Who may connect to the Modbus TCP server, how many at once, how long idle."""
+        return ConnectionLimits(self.max_connections, self.idle_timeout_s, self.allowed_clients)
 
     def endpoint(self) -> Endpoint:
         """Where PlcLink serves."""
@@ -287,7 +311,7 @@ def _cameras(t: _Table) -> CameraConfig:
         gain=t.number("gain", None, low=0),
         sync_tolerance_ms=t.number("sync_tolerance_ms", 8.0, above=0, high=1000),
         timeout_ms=t.number("timeout_ms", 1000.0, above=0, high=60000),
-        max_regrabs=int(t.number("max_regrabs", 4, low=0, high=100)),
+        max_regrabs=t.integer("max_regrabs", 4, low=0, high=100),
         simulated=simulated,
     )
     t.finish()
@@ -339,8 +363,12 @@ def _measure(t: _Table) -> MeasureConfig:
         raise t.fail("depth_range_mm", f"{depth!r} is impossible: need 0 < near < far")
     config = MeasureConfig(
         depth_range_mm=(float(depth[0]), float(depth[1])),
-        glue_offset_mm=t.number("glue_offset_mm", GLUE_OFFSET_MM, low=0, high=50),
-        glue_spacing_mm=t.number("glue_spacing_mm", GLUE_SPACING_MM, above=0, high=50),
+        glue_offset_mm=t.number(
+            "glue_offset_mm", GLUE_OFFSET_MM, low=GLUE_OFFSET_RANGE_MM[0], high=GLUE_OFFSET_RANGE_MM[1]
+        ),
+        glue_spacing_mm=t.number(
+            "glue_spacing_mm", GLUE_SPACING_MM, low=GLUE_SPACING_RANGE_MM[0], high=GLUE_SPACING_RANGE_MM[1]
+        ),
     )
     t.finish()
     return config
@@ -348,20 +376,27 @@ def _measure(t: _Table) -> MeasureConfig:
 
 def _plc(t: _Table) -> PlcConfig:
     transport = t.choice("transport", ("tcp", "rtu"), "tcp")
+    allowed = t.get("allowed_clients", list, [])
+    if not all(isinstance(entry, str) for entry in allowed):
+        raise t.fail("allowed_clients", f'expected a list of addresses such as ["192.168.10.5"], got {allowed!r}')
     config = PlcConfig(
         transport=transport,
         host=t.get("host", str, "127.0.0.1"),
-        port=int(t.number("port", DEFAULT_TCP_PORT, low=0, high=65535)),
+        port=t.integer("port", DEFAULT_TCP_PORT, low=0, high=65535),
         serial_port=t.get("serial_port", str, None),
-        baudrate=int(t.number("baudrate", 19200, above=0)),
+        baudrate=t.integer("baudrate", 19200, low=300, high=4_000_000),
         parity=t.choice("parity", ("N", "E", "O"), "E"),
-        stopbits=int(t.number("stopbits", 1, low=1, high=2)),
-        bytesize=int(t.number("bytesize", 8, low=7, high=8)),
-        unit_id=int(t.number("unit_id", 1, low=0, high=255)),
+        stopbits=t.integer("stopbits", 1, low=1, high=2),
+        bytesize=t.integer("bytesize", 8, low=7, high=8),
+        unit_id=t.integer("unit_id", 1, low=0, high=255),
         word_order=WordOrder(t.choice("word_order", tuple(w.value for w in WordOrder), "high_first")),
         heartbeat_period_s=t.number("heartbeat_period_s", 0.25, above=0, high=0.49),
         liveness_timeout_s=t.number("liveness_timeout_s", 5.0, above=0.5, high=600),
         map_version=int(t.number("map_version", 1, low=1, high=2)),
+        cycle_timeout_s=t.number("cycle_timeout_s", 4.0, above=0.5, high=600),
+        max_connections=t.integer("max_connections", 8, low=1, high=256),
+        idle_timeout_s=t.number("idle_timeout_s", 60.0, above=0, high=86400),
+        allowed_clients=tuple(allowed),
     )
     t.finish()
     if transport == "rtu" and not config.serial_port:
@@ -370,13 +405,17 @@ def _plc(t: _Table) -> PlcConfig:
         check_unit_id(config.unit_id, config.endpoint())
     except ValueError as exc:
         raise t.fail("unit_id", str(exc)) from None
+    try:
+        config.limits()
+    except ValueError as exc:
+        raise t.fail("allowed_clients", str(exc)) from None
     return config
 
 
 def _journal(t: _Table) -> JournalConfig:
     state_dir = t.path("state_dir")
     assert state_dir is not None
-    config = JournalConfig(state_dir=state_dir, keep_artifacts=int(t.number("keep_artifacts", 500, low=0)))
+    config = JournalConfig(state_dir=state_dir, keep_artifacts=t.integer("keep_artifacts", 500, low=0, high=1_000_000))
     t.finish()
     if state_dir.exists() and not state_dir.is_dir():
         raise t.fail("state_dir", f"{state_dir} exists and is not a directory")
@@ -393,7 +432,7 @@ def _station(t: _Table) -> StationConfig:
     config = StationConfig(
         enabled=t.get("enabled", bool, True),
         bind=t.get("bind", str, "127.0.0.1"),
-        port=int(t.number("port", 8080, low=0, high=65535)),
+        port=t.integer("port", 8080, low=0, high=65535),
         token=token,
         board=board,
     )

@@ -13,6 +13,14 @@ from cellctl.cameras.base import StereoFrame
 from cellctl.errors import FailureKind, MeasurementInputError
 from cellctl.vision.measurement import SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor
+from cellctl.vision.stereo_order import cameras_swapped
+
+#: What swapped cameras look like to the measurement: the matcher finds (almost) nothing on the table.
+_SWAP_SYMPTOMS = (FailureKind.TOO_FEW_POINTS, FailureKind.NO_TABLE, FailureKind.SURFACE_NOT_MEASURED)
+SWAPPED = (
+    "left and right cameras are swapped (the table's disparity is negative): exchange the cameras' cables "
+    "or the [cameras] left/right devices in the config"
+)
 
 
 @dataclass(frozen=True)
@@ -54,5 +62,9 @@ def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings
     timings = dict(measurement.timings)
     if not measurement.valid:
         failure = measurement.failure or FailureKind.MEASUREMENT_INVALID
+        if failure in _SWAP_SYMPTOMS and cameras_swapped(
+            reconstructor.calib, frame.left, frame.right, reconstructor.min_disparity
+        ):
+            return Refused(FailureKind.CALIBRATION_MISMATCH, SWAPPED, timings)
         return Refused(failure, measurement.reason or "not measured", timings)
     return Measured(reconstruction, measurement, timings)

@@ -36,6 +36,7 @@ import threading
 import time
 
 from cellctl.cameras import CameraError, FrameSource, StereoFrame, open_frame_source
+from cellctl.cameras.identity import identity_problem
 from cellctl.errors import FailureKind
 from cellctl.service.artifacts import ArtifactWriter
 from cellctl.service.codes import FAILURE_CODES
@@ -45,8 +46,9 @@ from cellctl.service.events import CellEvents, CellState, CycleDone
 from cellctl.service.glue_output import GlueOutput
 from cellctl.service.journal import CycleRecord, Journal
 from cellctl.service.outcome import OutcomeListener, journal_record, outcome_of
+from cellctl.service.quiet_log import RepeatQuietLog
 from cellctl.service.recipes import Recipe, RecipeBook
-from cellctl.service.sdnotify import SystemdNotifier
+from cellctl.service.sdnotify import SystemdNotifier, check_watchdog
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.measurement import SoleMeasurement
 from cellctl.vision.reconstruction import SoleReconstructor
@@ -63,6 +65,8 @@ TICK_S = 0.25
 STOP_LINGER_S = 0.5
 #: Cameras that failed are probed this often between cycles so READY comes back without a trigger.
 CAMERA_PROBE_PERIOD_S = 1.0
+#: The same camera failure is logged again (at warning level) at most this often.
+CAMERA_LOG_REPEAT_S = 60.0
 
 
 class CycleFailed(Exception):
@@ -104,6 +108,8 @@ class Daemon:
             heartbeat_period_s=plc.heartbeat_period_s,
             liveness_timeout_s=plc.liveness_timeout_s,
             map_version=plc.map_version,
+            cycle_timeout_s=plc.cycle_timeout_s,
+            limits=plc.limits(),
         )
         self.recipes = RecipeBook.load(config.recipes.directory, config.measure)
         self.glue_output = GlueOutput.from_config(config)
@@ -123,6 +129,8 @@ class Daemon:
         self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
         self._cameras_ok = False
+        self._identity_problem: str | None = None
+        self._camera_log = RepeatQuietLog(log, CAMERA_LOG_REPEAT_S)
         self._last_probe = 0.0
         self._journal: Journal | None = None
         self._artifacts = None if self.calib is None else ArtifactWriter(self.calib, config.journal.keep_artifacts)
@@ -147,8 +155,19 @@ class Daemon:
 
     def run(self) -> None:
         """Serve until request_stop(); raises if the journal or the Modbus port cannot be opened."""
+        # A stuck cycle is answered CYCLE_TIMEOUT, the heartbeat stops liveness_timeout_s later: both must
+        # come before systemd's watchdog (pinged between cycles only) restarts the service.
+        plc = self.config.plc
+        check_watchdog(
+            plc.cycle_timeout_s + plc.liveness_timeout_s,
+            f"{self.config.source}: [plc] cycle_timeout_s + liveness_timeout_s",
+        )
         self._journal = Journal.open(self.config.journal.state_dir)
         try:
+            # A restart must not make the PLC's cyclic rewrite of its last cycle number a new cycle.
+            self.link.restore_last_cycle(self._journal.last_cycle())
+            if orphans := self._journal.prune_orphans():
+                log.info("removed %d artifact folders no journal row refers to (left by a crash)", orphans)
             # Cameras first: preparing them may take long (the simulator renders its scenes), and the
             # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
             self._probe_cameras(force=True)
@@ -240,7 +259,7 @@ class Daemon:
                     FailureKind.RECIPE_UNKNOWN, f"recipe {trigger.recipe} selected by the PLC is not loaded"
                 )
             self.active_recipe = recipe
-            frame = self._grab(timings)
+            frame = self._grab(timings, not_before=trigger.received_at)
             result = self._measure(frame, timings, recipe)
             code, reason = ErrorCode.NONE, None
         except CycleFailed as failure:
@@ -249,6 +268,9 @@ class Daemon:
             log.exception("cycle %d: unexpected failure", trigger.cycle)
             code, reason = ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}"
         cycle_time_ms = (time.monotonic() - trigger.received_at) * 1000.0
+        late = f"not published within cycle_timeout_s = {self.config.plc.cycle_timeout_s:g} s (took {cycle_time_ms:.0f} ms)"
+        if self.link.timed_out(trigger.cycle):  # the link answered CYCLE_TIMEOUT: the late result is not used
+            code, reason, result = ErrorCode.CYCLE_TIMEOUT, late, None
         measurement = None if result is None else result.measurement
         failed = _inspect(recipe, measurement) if code is ErrorCode.NONE else None
         record = journal_record(
@@ -265,7 +287,17 @@ class Daemon:
         )
         assert self._journal is not None
         self._journal.record(record)  # durable before the PLC hears of it
-        self._publish(trigger.cycle, code, cycle_time_ms, measurement, recipe, failed)
+        if (
+            not self._publish(trigger.cycle, code, cycle_time_ms, measurement, recipe, failed)
+            and code is not ErrorCode.CYCLE_TIMEOUT
+        ):
+            # It timed out between the check above and publishing: the journal says what the PLC was told.
+            assert record.id is not None
+            self._journal.amend_error(record.id, int(ErrorCode.CYCLE_TIMEOUT), late)
+            code, reason, result = ErrorCode.CYCLE_TIMEOUT, late, None
+            record = journal_record(
+                trigger.cycle, triggered_at, code, reason, cycle_time_ms, timings, None, frame, trigger.recipe, None
+            )
         self._report_health()
         self._tell_listeners(record, recipe)
         self.cycles_done += 1
@@ -330,11 +362,11 @@ class Daemon:
         if self._artifacts.dropped:
             log.info("artifacts of %d cycles skipped for lack of idle time", self._artifacts.dropped)
 
-    def _grab(self, timings: dict[str, float]) -> StereoFrame:
+    def _grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
         start = time.perf_counter()
         try:
             with self.camera_lock:
-                frame = self.source.grab_pair()
+                frame = self.source.grab_pair(not_before=not_before)  # frames exposed after the trigger only
         except CameraError as exc:
             self._cameras_ok = False
             self._last_probe = time.monotonic()
@@ -347,6 +379,8 @@ class Daemon:
     def _measure(self, frame: StereoFrame, timings: dict[str, float], recipe: Recipe) -> Measured:
         if self.calib is None:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self._calibration_problem}")
+        if problem := identity_problem(self.calib.cameras, frame.info):
+            raise CycleFailed.of(FailureKind.CALIBRATION_MISMATCH, problem)
         reconstructor = self._reconstructor
         if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
             # The matcher's disparity range follows from the depth range.
@@ -370,14 +404,14 @@ class Daemon:
         measurement: SoleMeasurement | None,
         recipe: Recipe | None,
         failed: FeatureBit | None,
-    ) -> None:
-        """Answer the PLC; `failed`: the features out of tolerance (None when nothing was checked)."""
+    ) -> bool:
+        """Answer the PLC (False if the link had answered CYCLE_TIMEOUT already); `failed`: the features out of
+        tolerance (None when nothing was checked)."""
         if code is not ErrorCode.NONE or measurement is None or recipe is None:
-            self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
-            return
+            return self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
         assert measurement.glue_path is not None
         out = self.glue_output.prepare(measurement.glue_path.points, measurement.glue_path.normals)
-        self.link.publish_result(
+        return self.link.publish_result(
             cycle,
             heel_height_mm=float(measurement.heel_height_mm),
             toe_height_mm=float(measurement.toe_height_mm),
@@ -424,12 +458,17 @@ class Daemon:
         try:
             with self.camera_lock:
                 self.source.open()
-                self.source.grab_pair()
+                frame = self.source.grab_pair()
         except CameraError as exc:
-            log.warning("cameras not ready: %s", exc)
+            self._camera_log.warning(str(exc), "cameras not ready: %s", exc)
             return
         self._cameras_ok = True
+        self._camera_log.reset()
         log.info("cameras ok")
+        # At start and after a reconnect: are these the calibrated cameras (a replug may have swapped them)?
+        self._identity_problem = identity_problem(self.calib.cameras if self.calib else None, frame.info)
+        if self._identity_problem:
+            log.error("calibration does not match the cameras: %s", self._identity_problem)
         if not force:
             self._report_health()  # READY at once; the warm-up below only if the start could not do it
             self._publish_state()
@@ -437,7 +476,8 @@ class Daemon:
                 self._warm_up()
 
     def _report_health(self) -> None:
-        self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=self.calib is not None)
+        calibration_ok = self.calib is not None and self._identity_problem is None
+        self.link.set_status(cameras_ok=self._cameras_ok, calibration_ok=calibration_ok)
 
     def _publish_state(self, phase: str | None = None) -> None:
         if phase is None:

@@ -112,20 +112,28 @@ class Journal:
     def open(cls, state_dir: str | Path, *, readonly: bool = False) -> Journal:
         state = Path(state_dir)
         path = state / "journal.sqlite3"
-        if readonly:
-            if not path.is_file():
-                raise FileNotFoundError(f"no journal at {path}: has `cellctl run` run with this state directory?")
-            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
-        else:
+        if path.exists() and not path.is_file():
+            raise ValueError(f"journal {path} is not a file (a directory?): move it away")
+        if readonly and not path.is_file():
+            raise FileNotFoundError(f"no journal at {path}: has `cellctl run` run with this state directory?")
+        if not readonly:
             try:
                 state.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise ValueError(f"cannot create the state directory {state}: {exc.strerror}") from None
-            db = sqlite3.connect(path)
-            db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
-            db.executescript(SCHEMA)
-            _add_columns(db)
+        try:
+            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True) if readonly else sqlite3.connect(path)
+            if readonly:
+                db.execute("SELECT 1 FROM cycles LIMIT 1")
+            else:
+                db.execute("PRAGMA journal_mode=WAL")
+                db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
+                db.executescript(SCHEMA)
+                _add_columns(db)
+        except sqlite3.Error as exc:
+            raise ValueError(
+                f"journal {path} cannot be used ({exc}): is it a cellctl journal? move it away to start a new one"
+            ) from None
         db.row_factory = sqlite3.Row
         return cls(db, state)
 
@@ -145,10 +153,29 @@ class Journal:
         record.id = int(cursor.lastrowid)
         return record.id
 
+    def last_cycle(self) -> int:
+        """The PLC cycle number journaled last (0 for an empty journal): it was answered before a restart."""
+        row = self._db.execute("SELECT cycle FROM cycles ORDER BY id DESC LIMIT 1").fetchone()
+        return 0 if row is None else int(row["cycle"])
+
+    def amend_error(self, row_id: int, error_code: int, reason: str) -> None:
+        """Turn a journaled cycle into an error after the fact (the link answered it with a timeout)."""
+        with self._db:
+            self._db.execute(
+                "UPDATE cycles SET status = 'error', error_code = ?, reason = ?, length_mm = NULL, "
+                "heel_height_mm = NULL, toe_height_mm = NULL, glue_path = '[]' WHERE id = ?",
+                (error_code, reason, row_id),
+            )
+
     def artifact_dir(self, row_id: int) -> Path:
         return self.state_dir / "cycles" / f"{row_id:08d}"
 
     def attach_artifacts(self, row_id: int, ply_path: Path | None, overlay_path: Path | None) -> None:
+        """Record a cycle's artifact files (cellctl.service.artifacts renames their folder into place first).
+
+        A crash between that rename and this commit leaves a folder no row refers to; prune_orphans()
+        removes it (and staging leftovers) at the next start.
+        """
         with self._db:
             self._db.execute(
                 "UPDATE cycles SET ply_path = ?, overlay_path = ? WHERE id = ?",
@@ -158,6 +185,29 @@ class Journal:
                     row_id,
                 ),
             )
+
+    def prune_orphans(self) -> int:
+        """Delete artifact folders no row refers to (a crash between writing and recording); returns how many."""
+        root = self.state_dir / "cycles"
+        staged = self.state_dir / "partial"  # cellctl.service.artifacts writes here before the rename
+        leftovers = list(staged.iterdir()) if staged.is_dir() else []
+        for folder in leftovers:
+            shutil.rmtree(folder, ignore_errors=True)
+        if not root.is_dir():
+            return len(leftovers)
+        referenced = {
+            str(Path(path).parent)
+            for row in self._db.execute("SELECT ply_path, overlay_path FROM cycles").fetchall()
+            for path in (row["ply_path"], row["overlay_path"])
+            if path is not None
+        }
+        orphans = [folder for folder in root.iterdir() if str(folder) not in referenced]
+        for folder in orphans:
+            if folder.is_dir():
+                shutil.rmtree(folder, ignore_errors=True)
+            else:
+                folder.unlink(missing_ok=True)
+        return len(orphans) + len(leftovers)
 
     def prune_artifacts(self, keep: int) -> int:
         """Delete the artifacts of all but the newest `keep` cycles that have any; returns how many went."""

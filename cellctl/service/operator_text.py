@@ -82,6 +82,12 @@ OPERATOR_TEXT: dict[ErrorCode, tuple[str, str]] = {
         "The cycle was abandoned because the service is stopping.",
         "Re-trigger once the heartbeat runs again.",
     ),
+    ErrorCode.CYCLE_TIMEOUT: (
+        "The cycle took longer than the configured `cycle_timeout_s` (default 4 s) and was abandoned; the "
+        "controller answers this itself, even if it is stuck inside the cycle.",
+        "Re-trigger; if it repeats, the controller PC is overloaded or a camera hangs: save the service log and "
+        "call support.",
+    ),
     ErrorCode.INTERNAL_ERROR: (
         "Unexpected fault in the controller software.",
         "Re-trigger; if it repeats, save the service log (`journalctl -u cellctl`) and call support.",

@@ -41,3 +41,19 @@ class SystemdNotifier:
         if self._socket is not None:
             self._socket.close()
             self._socket = None
+
+
+def watchdog_period_s() -> float | None:
+    """systemd's watchdog period (WatchdogSec=, passed as $WATCHDOG_USEC), or None without a watchdog."""
+    usec = os.environ.get("WATCHDOG_USEC", "")
+    return int(usec) / 1e6 if usec.isdigit() else None
+
+
+def check_watchdog(needed_s: float, what: str) -> None:
+    """ValueError if `what` (needed_s seconds without a watchdog ping) would outlast systemd's watchdog."""
+    watchdog_s = watchdog_period_s()
+    if watchdog_s is not None and needed_s >= watchdog_s:
+        raise ValueError(
+            f"{what} = {needed_s:g} s must be below the systemd watchdog ({watchdog_s:g} s, WatchdogSec= in the "
+            "unit): lower them or raise WatchdogSec"
+        )

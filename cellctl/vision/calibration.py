@@ -23,6 +23,9 @@ import numpy as np
 REQUIRED_KEYS: tuple[str, ...] = ("image_width", "image_height", "K1", "D1", "K2", "D2", "R", "T")
 # Keys derived by cv2.stereoRectify; read back only as a complete set so they always belong together.
 DERIVED_KEYS: tuple[str, ...] = ("R1", "R2", "P1", "P2", "Q")
+# Plausibility: above this focal length (px) a camera matrix is a typing mistake, below this baseline (mm) so is T.
+MAX_FOCAL_PX = 1e6
+MIN_BASELINE_MM = 1.0
 # Numbers of distortion coefficients OpenCV's camera model accepts.
 _DISTORTION_SIZES = (4, 5, 8, 12, 14)
 
@@ -44,6 +47,8 @@ class Calibration:
     P2: np.ndarray
     Q: np.ndarray
     rms: float | None = None  # RMS reprojection error of the calibration, px
+    # (left, right) identities of the calibrated cameras: /dev/v4l/by-id names or USB serials; None = unknown
+    cameras: tuple[str, str] | None = None
     _maps: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, init=False, repr=False)
     _maps_lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
@@ -52,12 +57,12 @@ class Calibration:
         if width <= 0 or height <= 0:
             raise ValueError(f"image size must be positive, got {width}x{height} px")
         self.image_size = (width, height)
-        self.K1 = _matrix(self.K1, (3, 3), "K1")
-        self.K2 = _matrix(self.K2, (3, 3), "K2")
+        self.K1 = _intrinsics(self.K1, "K1")
+        self.K2 = _intrinsics(self.K2, "K2")
         self.D1 = _distortion(self.D1, "D1")
         self.D2 = _distortion(self.D2, "D2")
         self.R = _rotation(self.R, "R")
-        self.T = _matrix(self.T, (3, 1), "T")
+        self.T = _translation(self.T)
         self.R1 = _matrix(self.R1, (3, 3), "R1")
         self.R2 = _matrix(self.R2, (3, 3), "R2")
         self.P1 = _matrix(self.P1, (3, 4), "P1")
@@ -92,9 +97,9 @@ class Calibration:
     ) -> Calibration:
         """Build a calibration from the stereo extrinsics, deriving the rectification."""
         size = (int(image_size[0]), int(image_size[1]))
-        K1, K2 = _matrix(K1, (3, 3), "K1"), _matrix(K2, (3, 3), "K2")
+        K1, K2 = _intrinsics(K1, "K1"), _intrinsics(K2, "K2")
         D1, D2 = _distortion(D1, "D1"), _distortion(D2, "D2")
-        R, T = _rotation(R, "R"), _matrix(T, (3, 1), "T")
+        R, T = _rotation(R, "R"), _translation(T)
         # alpha=0 zooms so rectified images hold only valid pixels: no black wedges for the matcher.
         R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(
             K1, D1, K2, D2, size, R, T, flags=cv2.CALIB_ZERO_DISPARITY, alpha=0.0
@@ -193,6 +198,28 @@ def _matrix(value: np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:
     arr = arr.reshape(shape).copy()
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+def _intrinsics(value: np.ndarray, name: str) -> np.ndarray:
+    """A camera matrix with positive, finite focal lengths below 1e6 px (0 or 1e30 are typing mistakes)."""
+    arr = _matrix(value, (3, 3), name)
+    fx, fy = arr[0, 0], arr[1, 1]
+    if not (0 < fx < MAX_FOCAL_PX and 0 < fy < MAX_FOCAL_PX) or arr[2, 2] != 1.0:
+        raise ValueError(
+            f"{name} is not a camera matrix: focal lengths {fx:g}, {fy:g} px must be in 0..{MAX_FOCAL_PX:g} and "
+            f"{name}[2][2] must be 1 (got {arr[2, 2]:g}): re-calibrate or correct the file"
+        )
+    return arr
+
+
+def _translation(value: np.ndarray) -> np.ndarray:
+    arr = _matrix(value, (3, 1), "T")
+    if np.linalg.norm(arr) < MIN_BASELINE_MM:
+        raise ValueError(
+            f"T = {arr.ravel().tolist()} mm puts both cameras at the same place (baseline "
+            f"{np.linalg.norm(arr):g} mm): re-calibrate or correct the file"
+        )
     return arr
 
 

@@ -8,6 +8,7 @@ the geometry and checks it).
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -48,6 +49,9 @@ def write_calibration(calib: Calibration, path: str | os.PathLike[str]) -> None:
             storage.write(key, getattr(calib, key))
         if calib.rms is not None:
             storage.write("rms", calib.rms)
+        if calib.cameras is not None:
+            storage.write("left_camera", calib.cameras[0])
+            storage.write("right_camera", calib.cameras[1])
     finally:
         storage.release()
 
@@ -62,10 +66,11 @@ def _from_storage(storage: cv2.FileStorage, path: Path) -> Calibration:
     base = {key: _read_matrix(storage, key, path) for key in ("K1", "D1", "K2", "D2", "R", "T")}
     rms_node = storage.getNode("rms")
     rms = rms_node.real() if not rms_node.empty() and rms_node.isReal() else None
+    cameras = _read_cameras(storage, path)
     present = [key for key in DERIVED_KEYS if not storage.getNode(key).empty()]
     try:
         if not present:
-            return Calibration.from_extrinsics(size, rms=rms, **base)
+            return replace(Calibration.from_extrinsics(size, rms=rms, **base), cameras=cameras)
         if len(present) != len(DERIVED_KEYS):
             absent = [key for key in DERIVED_KEYS if key not in present]
             raise ValueError(
@@ -73,11 +78,44 @@ def _from_storage(storage: cv2.FileStorage, path: Path) -> Calibration:
                 "remove all of R1, R2, P1, P2, Q to have them derived, or provide all of them"
             )
         derived = {key: _read_matrix(storage, key, path) for key in DERIVED_KEYS}
-        return Calibration(size, rms=rms, **base, **derived)
+        stored = Calibration(size, rms=rms, cameras=cameras, **base, **derived)
+        fresh = Calibration.from_extrinsics(size, base["K1"], base["D1"], base["K2"], base["D2"], base["R"], base["T"])
+        _check_derived(stored, fresh)
+        return stored
     except ValueError as exc:
         if str(path) in str(exc):
             raise
         raise ValueError(f"calibration file {path}: {exc}") from None
+
+
+def _check_derived(stored: Calibration, fresh: Calibration) -> None:
+    """Stored R1, R2, P1, P2, Q must follow from K, D, R, T (the zoom of P1/P2, stereoRectify's alpha, may differ)."""
+    problems = [key for key in ("R1", "R2") if not np.allclose(getattr(stored, key), getattr(fresh, key), atol=1e-4)]
+    tx = stored.P2[0, 3] / stored.P2[0, 0]
+    if not np.isclose(-tx, stored.baseline_mm, rtol=1e-3):
+        problems.append(f"P2 (baseline {-tx:g} mm, T says {stored.baseline_mm:g} mm)")
+    cx, cy, f = stored.P1[0, 2], stored.P1[1, 2], stored.P1[0, 0]
+    q = np.array([[1, 0, 0, -cx], [0, 1, 0, -cy], [0, 0, 0, f], [0, 0, -1 / tx, (cx - stored.P2[0, 2]) / tx]])
+    if not np.allclose(stored.Q, q, rtol=1e-4, atol=1e-6):
+        problems.append("Q (does not match P1 and P2)")
+    if problems:
+        raise ValueError(
+            f"stored {', '.join(problems)} contradict K1, D1, K2, D2, R, T: remove R1, R2, P1, P2 and Q to have "
+            "them derived, or re-calibrate"
+        )
+
+
+def _read_cameras(storage: cv2.FileStorage, path: Path) -> tuple[str, str] | None:
+    """The calibrated cameras' identities (left_camera, right_camera), both or neither."""
+    nodes = [storage.getNode(key) for key in ("left_camera", "right_camera")]
+    if all(node.empty() for node in nodes):
+        return None
+    if not all(node.isString() and node.string() for node in nodes):
+        raise ValueError(
+            f"calibration file {path}: left_camera and right_camera must both be camera names "
+            "(/dev/v4l/by-id/... names or USB serials), or both be absent"
+        )
+    return nodes[0].string(), nodes[1].string()
 
 
 def _read_int(storage: cv2.FileStorage, key: str, path: Path) -> int:
@@ -88,7 +126,12 @@ def _read_int(storage: cv2.FileStorage, key: str, path: Path) -> int:
 
 
 def _read_matrix(storage: cv2.FileStorage, key: str, path: Path) -> np.ndarray:
-    matrix = storage.getNode(key).mat()
+    try:
+        matrix = storage.getNode(key).mat()
+    except cv2.error:  # rows x cols disagree with the number of data values
+        raise ValueError(
+            f"calibration file {path}: {key} has rows/cols that do not match its data: correct or re-calibrate"
+        ) from None
     if matrix is None or matrix.size == 0:
         raise ValueError(f"calibration file {path}: {key} is not a matrix (expected an !!opencv-matrix)")
     return np.asarray(matrix)

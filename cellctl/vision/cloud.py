@@ -82,9 +82,12 @@ def cloud_from_disparity(
     xs, ys = xs + x0, ys + y0
     # Only the measured pixels through Q ([X Y Z W] = Q [x y d 1], cv2.reprojectImageTo3D's formula), as
     # a perspective transform of (x, y, d): no H x W x 3 map to build and gather from.
-    pixel_disparity = np.column_stack([xs, ys, disparity]).reshape(-1, 1, 3)
+    pixel_disparity = np.column_stack([xs, ys, disparity]).reshape(-1, 1, 3).astype(np.float64)
+    # perspectiveTransform returns None for no points (an all-black or uniform pair: lens cap, lights off);
+    # such a pair is a cloud of nothing, refused downstream as a scene error.
+    points = cv2.perspectiveTransform(pixel_disparity, calib.Q) if len(xs) else np.zeros((0, 3))
     return StereoCloud(
-        points=cv2.perspectiveTransform(pixel_disparity, calib.Q).reshape(-1, 3),
+        points=points.reshape(-1, 3),
         colors=colours,
         pixels=np.column_stack([xs, ys]).astype(np.float64),
         disparity=disparity,

@@ -10,6 +10,9 @@ DEPTH_RANGE_MM: tuple[float, float] = (450.0, 650.0)
 #: Glue path: how far inside the sole's edge (mm) and the spacing of its points along the path (mm).
 GLUE_OFFSET_MM = 2.0
 GLUE_SPACING_MM = 2.0
+#: Their bounds: no dispenser places glue finer than 0.1 mm (1e-6 mm once grew the path to 18 GB).
+GLUE_OFFSET_RANGE_MM: tuple[float, float] = (0.0, 50.0)
+GLUE_SPACING_RANGE_MM: tuple[float, float] = (0.1, 50.0)
 #: Results outside these ranges are no sole on this cell: refused, never published.
 PLAUSIBLE_LENGTH_MM: tuple[float, float] = (100.0, 400.0)
 PLAUSIBLE_HEIGHT_MM: tuple[float, float] = (0.5, 150.0)

@@ -22,7 +22,14 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import CheckFailure, check_glue_path, check_outline_depth, check_outline_right
-from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM, PLAUSIBLE_HEIGHT_MM, PLAUSIBLE_LENGTH_MM
+from cellctl.vision.defaults import (
+    GLUE_OFFSET_MM,
+    GLUE_OFFSET_RANGE_MM,
+    GLUE_SPACING_MM,
+    GLUE_SPACING_RANGE_MM,
+    PLAUSIBLE_HEIGHT_MM,
+    PLAUSIBLE_LENGTH_MM,
+)
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
@@ -108,14 +115,23 @@ def _round(value: float | None) -> float | None:
     return None if value is None else round(float(value), 3)
 
 
+def check_glue_settings(glue_offset_mm: float, glue_spacing_mm: float) -> None:
+    """ValueError unless the glue path's offset and spacing are possible (a tiny spacing would exhaust memory)."""
+    (offset_low, offset_high), (spacing_low, spacing_high) = GLUE_OFFSET_RANGE_MM, GLUE_SPACING_RANGE_MM
+    if not (offset_low <= glue_offset_mm <= offset_high and spacing_low <= glue_spacing_mm <= spacing_high):
+        raise ValueError(
+            f"glue offset must be in {offset_low:g}..{offset_high:g} mm and spacing in {spacing_low:g}..{spacing_high:g}"
+            f" mm, got {glue_offset_mm:g} and {glue_spacing_mm:g}"
+        )
+
+
 def measure_sole(
     reconstruction: Reconstruction,
     glue_offset_mm: float = GLUE_OFFSET_MM,
     glue_spacing_mm: float = GLUE_SPACING_MM,
 ) -> SoleMeasurement:
     """Length, heel and toe height and glue path of a reconstructed sole."""
-    if glue_offset_mm < 0 or glue_spacing_mm <= 0:
-        raise ValueError(f"glue offset must be >= 0 and spacing > 0 mm, got {glue_offset_mm:g} and {glue_spacing_mm:g}")
+    check_glue_settings(glue_offset_mm, glue_spacing_mm)
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
     # What every result carries, valid or not; grows as the measurement learns more about the sole.

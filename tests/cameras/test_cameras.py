@@ -204,3 +204,29 @@ def test_v4l2_frame_timeout_and_wrong_size(tmp_path: Path) -> None:
 
     with pytest.raises(CameraMissing, match="delivers 640x640, not the configured 1280x1024"):
         V4l2Camera(str(device), size=(1280, 1024), open_capture=Small).grab()
+
+
+def test_v4l2_drops_buffers_exposed_before_the_trigger(tmp_path: Path) -> None:
+    trigger = 100.0  # time.monotonic() of the PLC's trigger write
+    devices = [tmp_path / "cam-left", tmp_path / "cam-right"]
+    for device in devices:
+        device.touch()
+
+    class Streaming(FakeCapture):  # free-running since before the trigger: its queued buffers are old
+        def __init__(self, device: str, api: int) -> None:
+            super().__init__(device, api, start=trigger - 0.1)
+
+    def source(capture: type[FakeCapture]) -> V4l2Cameras:
+        cams = [V4l2Camera(str(d), size=None, open_capture=capture) for d in devices]
+        return V4l2Cameras(cams[0], cams[1], sync_tolerance_s=0.005, max_regrabs=3)
+
+    assert source(Streaming).grab_pair().t_left < trigger  # without the check: the previous sole
+    frame = source(Streaming).grab_pair(not_before=trigger)
+    assert frame.t_left >= trigger and frame.t_right >= trigger and frame.skew_s <= 0.005
+
+    class Frozen(Streaming):  # timestamps never pass the trigger (wrong clock, or a stalled stream)
+        def grab(self) -> bool:
+            return True
+
+    with pytest.raises(FrameTimeout, match="left camera delivered only frames from before the trigger"):
+        source(Frozen).grab_pair(not_before=trigger)

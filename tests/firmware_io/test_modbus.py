@@ -254,9 +254,14 @@ def test_malformed_frames_get_an_exception_and_do_not_disturb_the_server(
     port = link.endpoint.port
     with simulator(link) as plc:
         plc.run_cycle(timeout_s=3.0)
-        for pdu in [struct.pack(">BHH", 3, 0, 0), struct.pack(">BHH", 3, 0, 200), bytes([0x63, 0, 0]), bytes([6, 0])]:
+        for pdu, code in [
+            (struct.pack(">BHH", 3, 0, 0), ExcCodes.ILLEGAL_VALUE),  # count 0
+            (struct.pack(">BHH", 3, 0, 200), ExcCodes.ILLEGAL_VALUE),  # count above 125
+            (bytes([0x63, 0, 0]), ExcCodes.ILLEGAL_FUNCTION),
+            (bytes([6, 0]), ExcCodes.ILLEGAL_VALUE),  # truncated PDU
+        ]:
             answer = raw_request(port, mbap(pdu))
-            assert answer[7] & 0x80 and answer[8] == ExcCodes.ILLEGAL_FUNCTION, (pdu.hex(), answer.hex())
+            assert answer[7] == pdu[0] | 0x80 and answer[8] == code, (pdu.hex(), answer.hex())
         assert raw_request(port, b"\x00\x01\x00") == b""  # truncated header: nothing to answer
         with socket.create_connection((LOCALHOST, port), timeout=1.0) as dropped:
             dropped.sendall(mbap(struct.pack(">BHH", 3, 0, 19))[:9])  # half a request, then gone

@@ -80,7 +80,7 @@ class StationService:
         original = source.grab_pair
         frame = original()
 
-        def empty_table() -> StereoFrame:
+        def empty_table(not_before: float | None = None) -> StereoFrame:
             source.grab_pair = original  # type: ignore[method-assign]
             rng = np.random.default_rng(0)
             grey = np.full_like(frame.left, 90)

@@ -42,12 +42,15 @@ HEALTHY = StatusBit.READY | StatusBit.CAMERAS_OK | StatusBit.CALIBRATION_OK
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
 
-def write_config(directory: Path, seeds: list[int], state_dir: Path, calib: Path | None = None) -> CellConfig:
+def write_config(
+    directory: Path, seeds: list[int], state_dir: Path, calib: Path | None = None, cycle_timeout_s: float = 60.0
+) -> CellConfig:
+    # cycle_timeout_s: generous by default, as a cycle on the shared loaded test machine may take several s.
     calib = write_half_size_rig(directory) if calib is None else calib
     path = directory / "cell.toml"
     path.write_text(
         f'[cameras]\nbackend = "simulated"\n[cameras.simulated]\nseeds = {seeds}\n'
-        f'[calibration]\npath = "{calib}"\n[plc]\nport = 0\n'
+        f'[calibration]\npath = "{calib}"\n[plc]\nport = 0\ncycle_timeout_s = {cycle_timeout_s}\n'
         f'[journal]\nstate_dir = "{state_dir}"\nkeep_artifacts = 3\n'
     )
     return CellConfig.load(path)
@@ -106,7 +109,7 @@ def test_ten_cycles_match_the_journal_and_the_simulated_truth(tmp_path: Path) ->
     service = Service(write_config(tmp_path, [1, 2], tmp_path / "state", DEPLOY / "sim-calib.yaml"))
     try:
         with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as plc:
-            readings = [plc.run_cycle(timeout_s=15.0) for _ in range(10)]
+            readings = [plc.run_cycle(timeout_s=60.0) for _ in range(10)]  # 3 s per cycle idle, 10+ s at load 20
             plc.watch_heartbeat(0.6)  # still beating after the cycles (the watchdog raises if not)
     finally:
         service.stop()
@@ -230,7 +233,11 @@ def test_stop_finishes_the_running_cycle_and_restart_loses_no_result(tmp_path: P
 
     second = Service(config)  # same state directory, as after a systemd restart
     with PlcSimulator(second.endpoint) as plc:
-        assert plc.read_header().result_cycle == 0  # registers start at 0 after a restart
+        header = plc.read_header()
+        assert header.result_cycle == 0  # no result is held after a restart...
+        assert header.trigger == running  # ...but the last answered cycle is known (from the journal)
+        plc.trigger(running)  # a PLC rewriting its output block cyclically: starts nothing
+        assert not plc.read_header().status & StatusBit.BUSY
         after = plc.run_cycle(cycle=running + 1, timeout_s=10.0)
         second.daemon.request_stop()  # a trigger after the stop request is answered, not measured
         aborted = plc.run_cycle(timeout_s=2.0)
@@ -280,6 +287,8 @@ class FailingReconstructor:
 
     def __init__(self, kind: FailureKind, real: SoleReconstructor) -> None:
         self.kind, self.real = kind, real
+        # What measure_frame's swapped-camera check reads (a real pair here: it must not call it swapped).
+        self.calib, self.min_disparity = real.calib, real.min_disparity
         self.reason = f"simulated failure: {kind.value}"
 
     def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
@@ -319,6 +328,39 @@ def test_each_failure_kind_reaches_the_plc_as_its_error_code(
     assert record is not None and record.error_code == EXPECTED_CODES[kind]
     expected_text = "calibration is for" if kind is FailureKind.CALIBRATION_MISMATCH else failing.reason
     assert expected_text in record.reason  # the words go to the journal with the code
+
+
+class StuckReconstructor:
+    """A reconstruction that hangs until released, as a camera driver or an overloaded PC might."""
+
+    def __init__(self, real: SoleReconstructor) -> None:
+        self.real, self.release = real, threading.Event()
+
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+        assert self.release.wait(30)
+        return self.real.reconstruct(left, right)
+
+
+def test_a_slow_cycle_keeps_the_heartbeat_and_an_overrun_is_answered_cycle_timeout(tmp_path: Path) -> None:
+    service = Service(write_config(tmp_path, [1], tmp_path / "state", cycle_timeout_s=2.0))
+    stuck = StuckReconstructor(service.daemon._reconstructor)  # type: ignore[arg-type]
+    service.daemon._reconstructor = stuck  # type: ignore[assignment]
+    try:
+        with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as plc:
+            cycle = plc.next_cycle_number()
+            plc.trigger(cycle)
+            reading = plc.wait_result(cycle, timeout_s=10.0)  # polls feed the 1.5 s heartbeat watchdog
+            assert reading.error_code == ErrorCode.CYCLE_TIMEOUT and reading.status & StatusBit.ERROR
+            stuck.release.set()
+            deadline = time.monotonic() + 30
+            while (record := Journal.open(tmp_path / "state", readonly=True).find(cycle)) is None:
+                assert time.monotonic() < deadline
+                plc.watch_heartbeat(0.2)
+            assert record.error_code == ErrorCode.CYCLE_TIMEOUT and "cycle_timeout_s" in record.reason
+            assert plc.read_header().error_code == ErrorCode.CYCLE_TIMEOUT  # the late result was not published
+    finally:
+        stuck.release.set()
+        service.stop()
 
 
 def test_run_refuses_a_bad_config_with_one_clear_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -75,6 +75,32 @@ def test_artifacts_beyond_the_retention_limit_are_deleted(tmp_path: Path) -> Non
     assert journal.prune_artifacts(keep=2) == 0
 
 
+def test_artifact_folders_no_row_refers_to_are_pruned_at_start(tmp_path: Path) -> None:
+    journal = Journal.open(tmp_path)
+    kept = journal.record(ok(1))
+    journal.artifact_dir(kept).mkdir(parents=True)
+    (journal.artifact_dir(kept) / "sole.ply").write_text("ply")
+    journal.attach_artifacts(kept, journal.artifact_dir(kept) / "sole.ply", None)
+    # kill -9 while writing (a staging folder left), and between a rename and its commit (unreferenced folder):
+    (tmp_path / "partial" / "00000002").mkdir(parents=True)
+    journal.artifact_dir(99).mkdir(parents=True)
+    journal.close()
+    again = Journal.open(tmp_path)
+    assert again.prune_orphans() == 2
+    assert [p.name for p in (tmp_path / "cycles").iterdir()] == [journal.artifact_dir(kept).name]
+    assert not any((tmp_path / "partial").iterdir())
+    assert (journal.artifact_dir(kept) / "sole.ply").is_file()
+
+
+def test_last_cycle_survives_a_restart(tmp_path: Path) -> None:
+    assert Journal.open(tmp_path).last_cycle() == 0
+    journal = Journal.open(tmp_path)
+    for cycle in (7, 8):
+        journal.record(ok(cycle))
+    journal.close()
+    assert Journal.open(tmp_path).last_cycle() == 8
+
+
 def test_results_command_text_json_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     journal = Journal.open(tmp_path)
     for record in (ok(1), failed(2), ok(3)):

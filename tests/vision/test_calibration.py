@@ -145,3 +145,54 @@ def test_deployed_simulated_rig_file_is_the_default_rig(rig: Calibration) -> Non
     deployed = Calibration.load(Path(__file__).resolve().parents[2] / "deploy" / "sim-calib.yaml")
     for key in ("K1", "D1", "K2", "D2", "R", "T", "P1", "P2", "Q"):
         np.testing.assert_allclose(getattr(deployed, key), getattr(rig, key), atol=1e-12, err_msg=key)
+
+
+def _with(rig: Calibration, path: Path, **changes: np.ndarray) -> Path:
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    storage.write("image_width", rig.image_size[0])
+    storage.write("image_height", rig.image_size[1])
+    for key in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q"):
+        storage.write(key, changes.get(key, getattr(rig, key)))
+    storage.release()
+    return path
+
+
+def test_stored_rectification_contradicting_the_extrinsics_is_refused(rig: Calibration, tmp_path: Path) -> None:
+    assert Calibration.load(_with(rig, tmp_path / "same.yaml")).baseline_mm == pytest.approx(rig.baseline_mm)
+    other = default_rig()
+    turned = cv2.Rodrigues(np.array([0.0, 0.05, 0.0]))[0] @ rig.R1
+    wide_q = rig.Q.copy()
+    wide_q[3, 2] *= 2  # half the baseline: every depth twice as far
+    for changes, named in [({"R1": turned}, "R1"), ({"Q": wide_q}, "Q"), ({"T": other.T * 1.5}, "P2")]:
+        with pytest.raises(ValueError, match=rf"stored .*{named}.* contradict K1, D1, K2, D2, R, T: remove"):
+            Calibration.load(_with(rig, tmp_path / "bad.yaml", **changes))
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("T", np.zeros((3, 1)), "same place"),
+        ("K1", np.zeros((3, 3)), "not a camera matrix"),
+        ("K2", np.diag([1e30, 1e30, 1.0]), "not a camera matrix"),
+    ],
+)
+def test_impossible_intrinsics_and_baseline_are_refused(
+    rig: Calibration, tmp_path: Path, key: str, value: np.ndarray, message: str
+) -> None:
+    path = tmp_path / "impossible.yaml"
+    _write_keys(path, rig, tuple(k for k in REQUIRED_KEYS if k != key))
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_APPEND)
+    storage.write(key, value)
+    storage.release()
+    with pytest.raises(ValueError, match=message):
+        Calibration.load(path)
+
+
+def test_camera_identities_round_trip(rig: Calibration, tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    path = tmp_path / "ids.yaml"
+    replace(rig, cameras=("usb-A_SN1-video-index0", "usb-A_SN2-video-index0")).save(path)
+    assert Calibration.load(path).cameras == ("usb-A_SN1-video-index0", "usb-A_SN2-video-index0")
+    rig.save(path)
+    assert Calibration.load(path).cameras is None
