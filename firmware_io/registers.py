@@ -185,7 +185,10 @@ class ErrorCode(enum.IntEnum):
 
 
 _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
-    ErrorCode.NONE: ("No error.", "Nothing."),
+    ErrorCode.NONE: (
+        "No error.",
+        "Nothing.",
+    ),
     ErrorCode.CAMERA_MISSING: (
         "A camera is not connected or cannot be opened.",
         "Check the USB cables and camera power; the controller reconnects by itself.",
@@ -195,8 +198,8 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
         "Check the USB cable and hub; if it repeats, replace the cable or camera.",
     ),
     ErrorCode.CAMERAS_OUT_OF_SYNC: (
-        "The two frames of the pair were taken too far apart, even after re-grabbing.",
-        "Check USB bandwidth (one camera per controller port); re-trigger the cycle.",
+        "The two frames were taken too far apart, even after re-grabbing.",
+        "Check USB bandwidth (one camera per controller port); re-trigger.",
     ),
     ErrorCode.CALIBRATION_MISSING: (
         "No stereo calibration is loaded.",
@@ -228,8 +231,7 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ),
     ErrorCode.ENDS_TOO_CLOSE_TO_CALL: (
         "Toe and heel cannot be told apart: both ends of the sole's outline are about equally wide.",
-        "Check that one whole sole lies flat on the table with nothing next to it; if it repeats for this sole "
-        "model, it cannot be oriented automatically: call the line engineer.",
+        "Check that one whole sole lies flat on the table with nothing next to it; if it repeats for this sole model, it cannot be oriented automatically: call the line engineer.",
     ),
     ErrorCode.NO_TABLE: (
         "The table was not found below the sole (view blocked, or the table is not at the configured distance).",
@@ -237,7 +239,7 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ),
     ErrorCode.TABLE_MOVED: (
         "The table no longer lies where it was taught: the table, fixture or cameras moved.",
-        "Check the fixture and camera mount, clear the table and teach it again (cellctl teach).",
+        "Check the fixture and camera mount, clear the table and teach it again (`cellctl teach`).",
     ),
     ErrorCode.OUTLINE_INCONSISTENT: (
         "The sole's outline disagrees with its depth edge or between the two cameras, so its length is not trusted.",
@@ -249,21 +251,19 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ),
     ErrorCode.RECIPE_UNKNOWN: (
         "The recipe number in register 7 names no recipe loaded on this cell (map version 2).",
-        "Write the number of an installed recipe before triggering (0 = the cell's default settings), "
-        "or install the recipe file and restart the service.",
+        "Write the number of an installed recipe before triggering (0 = the cell's default settings), or install the recipe file and restart the service.",
     ),
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",
         "Re-trigger once the heartbeat runs again.",
     ),
     ErrorCode.CYCLE_TIMEOUT: (
-        "The cycle took longer than the configured cycle_timeout_s and was abandoned.",
-        "Re-trigger; if it repeats, the controller PC is overloaded or a camera hangs: save the service log and "
-        "call support.",
+        "The cycle took longer than the configured `cycle_timeout_s` (default 4 s) and was abandoned; the controller answers this itself, even if it is stuck inside the cycle.",
+        "Re-trigger; if it repeats, the controller PC is overloaded or a camera hangs: save the service log and call support.",
     ),
     ErrorCode.INTERNAL_ERROR: (
         "Unexpected fault in the controller software.",
-        "Re-trigger; if it repeats, save the service log (journalctl) and call support.",
+        "Re-trigger; if it repeats, save the service log (`journalctl -u cellctl`) and call support.",
     ),
 }
 
