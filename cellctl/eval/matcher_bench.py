@@ -18,14 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cellctl.eval.methods import (
-    SGBM_BLOCK_SIZE,
-    SGBM_DISP12_MAX_DIFF,
-    SGBM_PREFILTER_CAP,
-    SGBM_SPECKLE_RANGE,
-    SGBM_SPECKLE_WINDOW,
-    SGBM_UNIQUENESS_RATIO,
-)
+from cellctl.eval.methods import sgbm_create
 from cellctl.eval.middlebury import resolve_data_dir
 from cellctl.stereo import StereoMatcher
 
@@ -87,20 +80,7 @@ def synthetic_case(
 
 
 def _sgbm(mode: int, num_disparities: int) -> cv2.StereoSGBM:
-    area = 3 * SGBM_BLOCK_SIZE**2  # colour input, as OpenCV users feed it
-    return cv2.StereoSGBM_create(
-        0,
-        num_disparities,
-        SGBM_BLOCK_SIZE,
-        P1=8 * area,
-        P2=32 * area,
-        disp12MaxDiff=SGBM_DISP12_MAX_DIFF,
-        preFilterCap=SGBM_PREFILTER_CAP,
-        uniquenessRatio=SGBM_UNIQUENESS_RATIO,
-        speckleWindowSize=SGBM_SPECKLE_WINDOW,
-        speckleRange=SGBM_SPECKLE_RANGE,
-        mode=mode,
-    )
+    return sgbm_create(mode, 0, num_disparities, channels=3)  # colour input, as OpenCV users feed it
 
 
 def methods(case: Case, ours: StereoMatcher) -> dict[str, Callable[[], object]]:

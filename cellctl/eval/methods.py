@@ -71,25 +71,30 @@ def sad_block_matching(left: np.ndarray, right: np.ndarray, min_disparity: int, 
     return _opencv_disparity(_stereo_bm, _grey(left), _grey(right), min_disparity, num_disparities)
 
 
+def sgbm_create(mode: int, min_disparity: int, num_disparities: int, channels: int) -> Any:
+    """OpenCV StereoSGBM with the settings every comparison here uses (docs/benchmarks.md, section 1)."""
+    area = channels * SGBM_BLOCK_SIZE**2
+    return cv2.StereoSGBM_create(
+        minDisparity=min_disparity,
+        numDisparities=num_disparities,
+        blockSize=SGBM_BLOCK_SIZE,
+        P1=8 * area,
+        P2=32 * area,
+        disp12MaxDiff=SGBM_DISP12_MAX_DIFF,
+        preFilterCap=SGBM_PREFILTER_CAP,
+        uniquenessRatio=SGBM_UNIQUENESS_RATIO,
+        speckleWindowSize=SGBM_SPECKLE_WINDOW,
+        speckleRange=SGBM_SPECKLE_RANGE,
+        mode=mode,
+    )
+
+
 def opencv_sgbm(mode: int) -> DisparityMethod:
     """OpenCV StereoSGBM in the given mode (MODE_HH4, MODE_SGBM_3WAY, ...) with its post-processing."""
 
     @_cached
     def create(min_d: int, num_d: int, channels: int) -> Any:
-        area = channels * SGBM_BLOCK_SIZE**2
-        return cv2.StereoSGBM_create(
-            minDisparity=min_d,
-            numDisparities=num_d,
-            blockSize=SGBM_BLOCK_SIZE,
-            P1=8 * area,
-            P2=32 * area,
-            disp12MaxDiff=SGBM_DISP12_MAX_DIFF,
-            preFilterCap=SGBM_PREFILTER_CAP,
-            uniquenessRatio=SGBM_UNIQUENESS_RATIO,
-            speckleWindowSize=SGBM_SPECKLE_WINDOW,
-            speckleRange=SGBM_SPECKLE_RANGE,
-            mode=mode,
-        )
+        return sgbm_create(mode, min_d, num_d, channels)
 
     def compute(left: np.ndarray, right: np.ndarray, min_disparity: int, num_disparities: int) -> np.ndarray:
         channels = 1 if left.ndim == 2 else left.shape[2]
