@@ -38,15 +38,12 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
             float squared = ox * ox + oy * oy + oz * oz;
             near[j] = isnan(squared) ? INFINITY : sqrtf(squared); /* sqrtf of NaN takes libm's slow path */
         }
+        /* Branch-free: the data decide every comparison, so branches would be mispredicted half the time. */
         float sum = 0.0f, largest = -INFINITY, second = -INFINITY;
         for (int j = 0; j < CK_BLOCK; ++j) {
             sum += near[j];
-            if (near[j] >= largest) {
-                second = largest;
-                largest = near[j];
-            } else if (near[j] > second) {
-                second = near[j];
-            }
+            second = fmaxf(second, fminf(largest, near[j]));
+            largest = fmaxf(largest, near[j]);
         }
         float others = INFINITY;
         for (int j = CK_BLOCK; j < CK_NEAR; ++j)
