@@ -8,6 +8,13 @@
 #define CK_BLOCK 20
 #define CK_REACH 3 /* largest |dx|, |dy| of the offsets */
 
+/* Minimum and maximum as single instructions: C's fmin/fmax are library calls without -ffast-math (their
+ * NaN rules). Inputs here are never NaN (missing neighbours are infinite). */
+static inline float min_f(float a, float b) { return a < b ? a : b; }
+static inline float max_f(float a, float b) { return a > b ? a : b; }
+static inline double min_d(double a, double b) { return a < b ? a : b; }
+static inline double max_d(double a, double b) { return a > b ? a : b; }
+
 int ck_neighbour_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
                        const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact) {
     if (!grid || !at || !spacing || !offsets || !mean || !exact)
@@ -42,13 +49,13 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
         float sum = 0.0f, largest = -INFINITY, second = -INFINITY;
         for (int j = 0; j < CK_BLOCK; ++j) {
             sum += near[j];
-            second = fmaxf(second, fminf(largest, near[j]));
-            largest = fmaxf(largest, near[j]);
+            second = max_f(second, min_f(largest, near[j]));
+            largest = max_f(largest, near[j]);
         }
         float others = INFINITY;
         for (int j = CK_BLOCK; j < CK_NEAR; ++j)
-            others = fminf(others, near[j]);
-        if (isfinite(largest) && (double)second <= fmin((double)others, 3.5 * spacing[i])) {
+            others = min_f(others, near[j]);
+        if (isfinite(largest) && (double)second <= min_d((double)others, 3.5 * spacing[i])) {
             mean[i] = (sum - largest) / 20.0f;
             exact[i] = 1;
             continue;
@@ -64,7 +71,7 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
         const double reach = 3.6 * spacing[i];
         double total = 0.0;
         for (int j = 0; j < 19; ++j)
-            total += fmin((double)near[j], reach);
+            total += min_d((double)near[j], reach);
         mean[i] = (float)(total / 20.0);
         exact[i] = (uint8_t)((double)near[18] <= 0.95 * reach);
     }
@@ -150,7 +157,7 @@ int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, c
             r_energy += dev * dev;
         }
         /* the right patch scaled to the left one's contrast (gain, vignetting, highlights) */
-        const double gain = sqrt(l_energy[k] / fmax(r_energy, 1e-9));
+        const double gain = sqrt(l_energy[k] / max_d(r_energy, 1e-9));
         double abs_sum = 0.0;
         for (int64_t i = lo; i < hi; ++i)
             abs_sum += fabs(l_dev[i] - gain * ((double)right[2 * i] - r_mean));
@@ -160,7 +167,7 @@ int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, c
         for (int64_t i = lo; i < hi; ++i) {
             const double error = l_dev[i] - gain * ((double)right[2 * i] - r_mean);
             const double grad = (double)right[2 * i + 1] * gain;
-            const double weight = fmin(1.0, 2.0 * scale / fmax(fabs(error), 1e-9));
+            const double weight = min_d(1.0, 2.0 * scale / max_d(fabs(error), 1e-9));
             const double wg = weight * grad, ww = wg * grad, we = -wg * error;
             const double x = dx[i], y = dy[i];
             m[0] += ww;
