@@ -60,20 +60,30 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
             exact[i] = 1;
             continue;
         }
-        /* Else the 19 nearest of the 36 (sorted), each at most 3.6 spacings (where the next pixels lie). */
-        for (int j = 1; j < CK_NEAR; ++j) {
-            float v = near[j];
+        /* Else the 19 nearest of the 36, each at most 3.6 spacings (where the next pixels lie): the
+         * measured ones sorted (at an edge or hole most are missing, i.e. infinite), then the missing. */
+        float finite[CK_NEAR];
+        int measured = 0;
+        for (int j = 0; j < CK_NEAR; ++j) {
+            finite[measured] = near[j];
+            measured += near[j] < INFINITY;
+        }
+        for (int j = 1; j < measured; ++j) {
+            float v = finite[j];
             int k = j - 1;
-            for (; k >= 0 && near[k] > v; --k)
-                near[k + 1] = near[k];
-            near[k + 1] = v;
+            for (; k >= 0 && finite[k] > v; --k)
+                finite[k + 1] = finite[k];
+            finite[k + 1] = v;
         }
         const double reach = 3.6 * spacing[i];
+        const int used = measured < 19 ? measured : 19;
         double total = 0.0;
-        for (int j = 0; j < 19; ++j)
-            total += min_d((double)near[j], reach);
+        for (int j = 0; j < used; ++j)
+            total += min_d((double)finite[j], reach);
+        for (int j = used; j < 19; ++j)
+            total += reach;
         mean[i] = (float)(total / 20.0);
-        exact[i] = (uint8_t)((double)near[18] <= 0.95 * reach);
+        exact[i] = (uint8_t)(measured >= 19 && (double)finite[18] <= 0.95 * reach);
     }
     return CK_OK;
 }
