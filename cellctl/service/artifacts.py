@@ -209,11 +209,9 @@ class ArtifactWriter:
             write_cloud_ply(ply, points, cloud_normals(points), colours, frame="table")
 
         def write_glue() -> None:
-            path = job.measurement.glue_path
-            if path is not None:
-                folder = ply.parent
-                write_glue_csv(folder / f"cycle-{job.cycle}-glue.csv", path.points, path.normals)
-                write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
+            path, folder = job.measurement.glue_path, ply.parent
+            write_glue_csv(folder / f"cycle-{job.cycle}-glue.csv", path.points, path.normals)
+            write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
 
         def draw() -> None:
             picture.append(draw_on_left(job.frame.left, self.calib, job.measurement))

@@ -409,13 +409,12 @@ class Daemon:
         tolerance (None when nothing was checked)."""
         if code is not ErrorCode.NONE or measurement is None or recipe is None:
             return self.link.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
-        assert measurement.glue_path is not None
         out = self.glue_output.prepare(measurement.glue_path.points, measurement.glue_path.normals)
         return self.link.publish_result(
             cycle,
-            heel_height_mm=float(measurement.heel_height_mm),
-            toe_height_mm=float(measurement.toe_height_mm),
-            length_mm=float(measurement.length_mm),
+            heel_height_mm=measurement.heel_height_mm,
+            toe_height_mm=measurement.toe_height_mm,
+            length_mm=measurement.length_mm,
             cycle_time_ms=cycle_time_ms,
             glue_points=out.points,
             path=PathInfo(out.normals, out.frame, out.nozzle_offset_mm, recipe.glue_offset_mm),

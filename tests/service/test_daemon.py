@@ -27,7 +27,7 @@ from cellctl.service.journal import Journal
 from cellctl.service.sdnotify import SystemdNotifier
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene
-from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor
+from cellctl.vision.reconstruction import ReconstructionRefused, ReconstructionResult, SoleReconstructor
 from firmware_io.endpoints import TcpEndpoint
 from firmware_io.plc_sim import ModbusRequestError, PlcSimulator, TriggerRefused
 from firmware_io.registers import ErrorCode, Register, StatusBit
@@ -291,23 +291,10 @@ class FailingReconstructor:
         self.calib, self.min_disparity = real.calib, real.min_disparity
         self.reason = f"simulated failure: {kind.value}"
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
         if self.kind is FailureKind.CALIBRATION_MISMATCH:
             return self.real.reconstruct(left[::2, ::2], right[::2, ::2])
-        return Reconstruction(
-            sole_points=np.zeros((0, 3)),
-            sole_colors=np.zeros((0, 3)),
-            sole_pixels=np.zeros((0, 2)),
-            footprint=None,
-            camera_to_table=None,
-            table_plane=None,
-            colour_filter=False,
-            colour_separation=0.0,
-            measured_points=0,
-            measured_fraction=0.0,
-            reason=self.reason,
-            failure=self.kind,
-        )
+        return ReconstructionRefused(failure=self.kind, reason=self.reason, measured_points=0, measured_fraction=0.0)
 
 
 def test_every_failure_kind_has_its_plc_code() -> None:
@@ -336,7 +323,7 @@ class StuckReconstructor:
     def __init__(self, real: SoleReconstructor) -> None:
         self.real, self.release = real, threading.Event()
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
         assert self.release.wait(30)
         return self.real.reconstruct(left, right)
 
