@@ -19,6 +19,7 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from types import EllipsisType
 from typing import Any
 
 from cellctl.cameras.config import CameraConfig, SimulatedCameraConfig
@@ -29,12 +30,25 @@ from cellctl.vision.defaults import (
     GLUE_SPACING_MM,
     GLUE_SPACING_RANGE_MM,
 )
-from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
+from firmware_io.endpoints import (
+    DEFAULT_TCP_PORT,
+    ByteSize,
+    Endpoint,
+    Parity,
+    SerialEndpoint,
+    StopBits,
+    TcpEndpoint,
+    check_unit_id,
+)
 from firmware_io.registers import WordOrder
 from firmware_io.tcp import ConnectionLimits
 
 BACKENDS = ("simulated", "replay", "v4l2")
 PIXEL_FORMATS = ("MJPEG", "YUYV")
+# The serial settings SerialEndpoint accepts; read through these tables so the types follow the checks.
+_PARITIES: dict[str, Parity] = {"N": "N", "E": "E", "O": "O"}
+_STOP_BITS: dict[int, StopBits] = {1: 1, 2: 2}
+_BYTE_SIZES: dict[int, ByteSize] = {7: 7, 8: 8}
 SOLE_COLOURS = ("white", "black")  # cellctl.sim.render.SOLE_MATERIALS (not imported: it pulls in Open3D)
 
 
@@ -69,16 +83,28 @@ class _Table:
     def number(
         self,
         key: str,
-        default: Any = ...,
+        default: float | EllipsisType = ...,  # ...: a required key (as in `get`)
         *,
         low: float | None = None,
         high: float | None = None,
         above: float | None = None,
     ) -> float:
+        return self._bounded(key, float(self.get(key, (int, float), default)), low, high, above)
+
+    def optional_number(
+        self,
+        key: str,
+        default: float | None = None,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        above: float | None = None,
+    ) -> float | None:
+        """A number that may be absent (None unless `default`)."""
         value = self.get(key, (int, float), default)
-        if value is None:
-            return value
-        value = float(value)
+        return None if value is None else self._bounded(key, float(value), low, high, above)
+
+    def _bounded(self, key: str, value: float, low: float | None, high: float | None, above: float | None) -> float:
         if (
             (low is not None and value < low)
             or (high is not None and value > high)
@@ -149,9 +175,9 @@ class PlcConfig:
     port: int = DEFAULT_TCP_PORT
     serial_port: str | None = None
     baudrate: int = 19200
-    parity: str = "E"
-    stopbits: int = 1
-    bytesize: int = 8
+    parity: Parity = "E"
+    stopbits: StopBits = 1
+    bytesize: ByteSize = 8
     unit_id: int = 1
     word_order: WordOrder = WordOrder.HIGH_FIRST
     heartbeat_period_s: float = 0.25
@@ -171,7 +197,7 @@ class PlcConfig:
         """Where PlcLink serves."""
         if self.transport == "rtu":
             assert self.serial_port is not None
-            return SerialEndpoint(self.serial_port, self.baudrate, self.parity, self.stopbits, self.bytesize)  # type: ignore[arg-type]
+            return SerialEndpoint(self.serial_port, self.baudrate, self.parity, self.stopbits, self.bytesize)
         return TcpEndpoint(self.host, self.port)
 
 
@@ -307,8 +333,8 @@ def _cameras(t: _Table) -> CameraConfig:
         replay_dir=replay_dir,
         size=size,
         pixel_format=t.choice("pixel_format", PIXEL_FORMATS, "MJPEG"),
-        exposure=t.number("exposure", None, low=0),
-        gain=t.number("gain", None, low=0),
+        exposure=t.optional_number("exposure", low=0),
+        gain=t.optional_number("gain", low=0),
         sync_tolerance_ms=t.number("sync_tolerance_ms", 8.0, above=0, high=1000),
         timeout_ms=t.number("timeout_ms", 1000.0, above=0, high=60000),
         max_regrabs=t.integer("max_regrabs", 4, low=0, high=100),
@@ -385,9 +411,9 @@ def _plc(t: _Table) -> PlcConfig:
         port=t.integer("port", DEFAULT_TCP_PORT, low=0, high=65535),
         serial_port=t.get("serial_port", str, None),
         baudrate=t.integer("baudrate", 19200, low=300, high=4_000_000),
-        parity=t.choice("parity", ("N", "E", "O"), "E"),
-        stopbits=t.integer("stopbits", 1, low=1, high=2),
-        bytesize=t.integer("bytesize", 8, low=7, high=8),
+        parity=_PARITIES[t.choice("parity", tuple(_PARITIES), "E")],
+        stopbits=_STOP_BITS[t.integer("stopbits", 1, low=1, high=2)],
+        bytesize=_BYTE_SIZES[t.integer("bytesize", 8, low=7, high=8)],
         unit_id=t.integer("unit_id", 1, low=0, high=255),
         word_order=WordOrder(t.choice("word_order", tuple(w.value for w in WordOrder), "high_first")),
         heartbeat_period_s=t.number("heartbeat_period_s", 0.25, above=0, high=0.49),

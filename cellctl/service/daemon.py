@@ -98,7 +98,7 @@ class Daemon:
             raise ValueError(
                 f"simulated cameras render through the calibration, which cannot be used: {self._calibration_problem}"
             )
-        self.source = source if source is not None else open_frame_source(config.cameras, self.calib)  # type: ignore[arg-type]
+        self.source = source if source is not None else open_frame_source(config.cameras, self.calib)
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         plc = config.plc
         self.link = PlcLink(

@@ -150,7 +150,9 @@ class Journal:
         marks = ", ".join(f":{name}" for name in values)
         with self._db:
             cursor = self._db.execute(f"INSERT INTO cycles ({names}) VALUES ({marks})", values)
-        record.id = int(cursor.lastrowid)
+        if cursor.lastrowid is None:  # sqlite3 sets it after every INSERT; None would be a driver fault
+            raise sqlite3.DatabaseError("the journal's INSERT returned no row id")
+        record.id = cursor.lastrowid
         return record.id
 
     def last_cycle(self) -> int:

@@ -155,9 +155,9 @@ def _tolerance(root: _Table, key: str) -> Tolerance | None:
         return None
     t = root.table(key)
     nominal = t.number("nominal", above=0)
-    symmetric = t.number("tolerance", None, above=0)
-    minus = t.number("minus", symmetric, above=0)
-    plus = t.number("plus", symmetric, above=0)
+    symmetric = t.optional_number("tolerance", above=0)
+    minus = t.optional_number("minus", symmetric, above=0)
+    plus = t.optional_number("plus", symmetric, above=0)
     t.finish()
     if minus is None or plus is None:
         raise t.fail("tolerance", "required: `tolerance = 1.0` (±) or both `minus` and `plus` (mm)")
