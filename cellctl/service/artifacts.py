@@ -225,3 +225,13 @@ class ArtifactWriter:
 
 def _paths(job: ArtifactJob, folder: Path) -> tuple[Path, Path]:
     return folder / f"cycle-{job.cycle}.ply", folder / f"cycle-{job.cycle}-overlay.png"
+
+
+def finish_artifacts(writer: ArtifactWriter, journal: Journal, timeout_s: float = 10.0) -> None:
+    """At stop: write what is pending (flush), record it in the journal, end the writer's thread."""
+    if not writer.flush(timeout_s):
+        log.warning("stopping with artifacts not written")
+    writer.attach_finished(journal)
+    writer.close()
+    if writer.dropped:
+        log.info("artifacts of %d cycles skipped for lack of idle time", writer.dropped)

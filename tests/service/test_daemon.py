@@ -305,8 +305,8 @@ def test_every_failure_kind_has_its_plc_code() -> None:
 def test_each_failure_kind_reaches_the_plc_as_its_error_code(
     service: Service, plc: PlcSimulator, monkeypatch: pytest.MonkeyPatch, kind: FailureKind
 ) -> None:
-    failing = FailingReconstructor(kind, service.daemon._reconstructor)
-    monkeypatch.setattr(service.daemon, "_reconstructor", failing)
+    failing = FailingReconstructor(kind, service.daemon.measurer.reconstructor)
+    monkeypatch.setattr(service.daemon.measurer, "reconstructor", failing)
     reading = plc.run_cycle()
     assert reading.error_code == EXPECTED_CODES[kind], ErrorCode(reading.error_code).name
     assert reading.status & StatusBit.ERROR and not reading.status & StatusBit.RESULT_VALID
@@ -330,8 +330,8 @@ class StuckReconstructor:
 
 def test_a_slow_cycle_keeps_the_heartbeat_and_an_overrun_is_answered_cycle_timeout(tmp_path: Path) -> None:
     service = Service(write_config(tmp_path, [1], tmp_path / "state", cycle_timeout_s=2.0))
-    stuck = StuckReconstructor(service.daemon._reconstructor)  # type: ignore[arg-type]
-    service.daemon._reconstructor = stuck  # type: ignore[assignment]
+    stuck = StuckReconstructor(service.daemon.measurer.reconstructor)  # type: ignore[arg-type]
+    service.daemon.measurer.reconstructor = stuck  # type: ignore[assignment]
     try:
         with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as plc:
             cycle = plc.next_cycle_number()
