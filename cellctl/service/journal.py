@@ -50,7 +50,8 @@ ADDED_COLUMNS = {
     "failed_features": "TEXT NOT NULL DEFAULT '[]'",
 }
 
-COLUMNS = (
+#: What a cycle's summary shows wherever it is listed (the journal's first columns, the CSV exports).
+SUMMARY_FIELDS = (
     "id",
     "cycle",
     "triggered_at",
@@ -61,6 +62,10 @@ COLUMNS = (
     "heel_height_mm",
     "toe_height_mm",
     "cycle_time_ms",
+)
+
+COLUMNS = (
+    *SUMMARY_FIELDS,
     "timings",
     "glue_path",
     "source",
