@@ -35,6 +35,7 @@ import logging
 import math
 import threading
 import time
+from typing import TYPE_CHECKING
 
 from cellctl.cameras import FrameSource, open_frame_source
 from cellctl.service.artifacts import ArtifactWriter, finish_artifacts
@@ -52,6 +53,9 @@ from cellctl.service.reporting import CycleReporter, log_cycle
 from cellctl.service.sdnotify import SystemdNotifier, check_watchdog
 from firmware_io.handshake import Trigger
 from firmware_io.server import PlcLink
+
+if TYPE_CHECKING:
+    from cellctl.service.opcua import OpcUaServer
 
 __all__ = ["CycleFailed", "Daemon"]
 
@@ -88,7 +92,7 @@ class Daemon:
         self.reporter = CycleReporter(config, self.link, self.glue_output)
         self.listeners: list[OutcomeListener] = self.reporter.listeners  # called after the PLC has its answer
         self.active_recipe: Recipe | None = self.recipes.get(0)
-        self.opcua = None  # the OPC UA server while running, if [opcua] enabled
+        self.opcua: OpcUaServer | None = None  # the OPC UA server while running, if [opcua] enabled
         self._stop = threading.Event()
         self._stop_at = math.inf  # time.monotonic() of the stop request
         self._started = threading.Event()
@@ -162,18 +166,12 @@ class Daemon:
             self.status.stopping()
             self.link.stop()
 
-    def _start_opcua(self):  # noqa: ANN202 - OpcUaServer | None; asyncua is imported only when enabled
+    def _start_opcua(self) -> OpcUaServer | None:
         if not self.config.opcua.enabled:
             return None
-        from cellctl.service.opcua import OpcUaServer
+        from cellctl.service.opcua import serve_cell  # asyncua is imported only when enabled
 
-        def active() -> tuple[int, str]:
-            recipe = self.active_recipe
-            return (0, "") if recipe is None else (recipe.number, recipe.name)
-
-        recipes = [(r.number, r.name) for r in self.recipes]
-        server = OpcUaServer(self.config.opcua, status=lambda: self.link.status, recipes=recipes, active_recipe=active)
-        server.start()
+        server = serve_cell(self.config.opcua, self.link, self.recipes, lambda: self.active_recipe)
         self.listeners.append(server.publish)
         self.opcua = server
         return server
