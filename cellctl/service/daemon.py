@@ -204,7 +204,7 @@ class Daemon:
     def _warm_up(self) -> None:
         """Skipped while the cameras fail (the first cycle then pays)."""
         if self.cameras.ok:
-            self.measurer.warm_up(self.source)
+            self.measurer.warm_up(self.source, self.recipes)
 
     def _set_idle(self, journal: Journal, idle: bool) -> None:
         """Artifacts are written only while waiting for a trigger; their journal rows from this thread."""

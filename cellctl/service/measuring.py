@@ -1,15 +1,18 @@
 """The cell's reconstructors: the configured depth range's, and at most one more for a recipe's own range.
 
 Each matcher keeps its cost volume (~0.5 GB at 1280x1024), so a line switching among several depth ranges
-re-allocates rather than piling them up. The warm-up does one cycle's work before READY (the table plane
-learnt when none is taught, rectification maps built, the matchers' buffers allocated), so the first trigger
-costs what every other one does.
+re-allocates rather than piling them up. A recipe's reconstructor starts from the table plane the cell's
+own one learnt (or the taught table), so it searches only the sole's region from its first cycle instead of
+finding the table again. The warm-up does one cycle's work before READY (the table plane learnt when none is
+taught, rectification maps built, the matchers' buffers allocated) for the cell's range and each recipe's,
+so the first trigger of any recipe costs what every other one does.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Iterable
 
 from cellctl.cameras import CameraError, FrameSource, StereoFrame
 from cellctl.cameras.identity import identity_problem
@@ -44,8 +47,9 @@ class CellMeasurer:
         self._recipe_reconstructor: SoleReconstructor | None = None
         self.warmed_up = False
 
-    def warm_up(self, source: FrameSource) -> None:
-        """One cycle's work on a grabbed pair (not locked: nothing else grabs before READY)."""
+    def warm_up(self, source: FrameSource, recipes: Iterable[Recipe] = ()) -> None:
+        """One cycle's work on a grabbed pair (not locked: nothing else grabs before READY), with the cell's
+        reconstructor and then with each other depth range the recipes ask for."""
         if self.reconstructor is None:
             return
         start = time.monotonic()
@@ -63,6 +67,11 @@ class CellMeasurer:
         )
         outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
         log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
+        for depth_range in sorted({r.depth_range_mm for r in recipes} - {measure.depth_range_mm}):
+            start = time.monotonic()
+            reconstructor = self._reconstructor_for(depth_range)
+            measure_frame(frame, reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm))
+            log.info("warmed up depth range %g..%g mm in %.1f s", *depth_range, time.monotonic() - start)
         self.warmed_up = True
 
     def answer(
@@ -92,18 +101,26 @@ class CellMeasurer:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISMATCH, problem)
         reconstructor = self.reconstructor
         if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
-            # The matcher's disparity range follows from the depth range.
-            reconstructor = self._recipe_reconstructor
-            if reconstructor is None or reconstructor.depth_range_mm != recipe.depth_range_mm:
-                self._recipe_reconstructor = None  # release the old buffers before allocating new ones
-                taught = None if self.reconstructor is None else self.reconstructor.taught
-                reconstructor = SoleReconstructor(self.calib, recipe.depth_range_mm, taught=taught)
-                self._recipe_reconstructor = reconstructor
+            reconstructor = self._reconstructor_for(recipe.depth_range_mm)
         result = measure_frame(frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm))
         timings.update(result.timings)
         if isinstance(result, Refused):
             raise CycleFailed.of(result.failure, result.reason)
         return result
+
+    def _reconstructor_for(self, depth_range_mm: tuple[float, float]) -> SoleReconstructor:
+        """The reconstructor of a recipe's own depth range (the matcher's disparity range follows from it),
+        holding the cell's table plane or taught table."""
+        assert self.calib is not None  # measure() and warm_up() refuse first without a calibration
+        held = self._recipe_reconstructor
+        if held is not None and held.depth_range_mm == depth_range_mm:
+            return held
+        self._recipe_reconstructor = None  # release the old buffers before allocating new ones
+        own = self.reconstructor
+        taught = None if own is None else own.taught
+        plane = None if own is None or taught is not None else own.table_plane
+        self._recipe_reconstructor = SoleReconstructor(self.calib, depth_range_mm, table_plane=plane, taught=taught)
+        return self._recipe_reconstructor
 
 
 def load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None]:
