@@ -6,10 +6,16 @@
 
 #define CC_WM_COLOURS (3 * 255 + 1)                                  /* summed channel differences */
 #define CC_WM_SPACES (2 * CC_MAX_WM_RADIUS * CC_MAX_WM_RADIUS + 1)   /* squared distances */
+#define CC_WM_SIDE (2 * CC_MAX_WM_RADIUS + 1)                        /* largest window side */
+#define CC_WM_ROW (CC_WM_SIDE + 9)   /* a row of space_win: 8 lanes may be read past the window */
+#define CC_WM_CHUNKS (CC_WM_SIDE * ((CC_WM_SIDE + 7) / 8))          /* 8-lane chunks of a window */
 typedef struct cc_wm_tables {
     uint16_t colour[CC_WM_COLOURS];
     uint16_t space[CC_WM_SPACES];
     uint16_t gather_pad[2];   /* the vector kernel reads 32 bits at each 16-bit entry */
+    /* space[dx^2 + dy^2] at [dy + R][dx + R] (R = CC_MAX_WM_RADIUS), 0 past dx = R: the vector
+     * kernel loads a chunk's space weights instead of gathering them */
+    uint32_t space_win[CC_WM_SIDE][CC_WM_ROW];
 } cc_wm_tables;
 typedef struct cc_wm_image {  /* the guide: 1 or 3 interleaved 8-bit channels */
     const uint8_t *data;
@@ -20,9 +26,11 @@ typedef struct cc_wm_image {  /* the guide: 1 or 3 interleaved 8-bit channels */
 } cc_wm_image;
 /* Pack row y of the guide into out[0..width) (grey counts as three equal channels). */
 void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out);
-typedef struct cc_wm_hist {   /* per thread, one entry per disparity level, kept zero between pixels */
-    int64_t *value;
+typedef struct cc_wm_hist {   /* per thread */
+    int64_t *value;           /* one entry per disparity level, kept zero between pixels (scalar kernel) */
     uint32_t *weight;
+    uint32_t *win_weight;     /* the vector kernel's votes of one window: CC_WM_CHUNKS * 8 each */
+    uint32_t *win_level;
 } cc_wm_hist;
 void cc_wm_tables_init(cc_wm_tables *t, float sigma_colour, float sigma_space);
 size_t cc_wm_hist_bytes(int levels);
