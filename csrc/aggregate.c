@@ -29,7 +29,9 @@ void cc_p2_table(const cc_params *p, uint16_t table[256])
  * min L(p-r) + P2) - min L(p-r); a path starts with L = C.  Writes L to out and
  * acc_out = (acc_in or 0) + L; returns min L.  prev and out have guard lanes
  * holding CC_PATH_INF at index -1 and from D on. */
-static uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+/* noinline (also the vector twin): the dispatcher below is then a test and a
+ * jump, not a full register save on every call. */
+__attribute__((noinline)) static uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
                                  uint16_t prev_min, int p2, uint16_t *out,
                                  const uint16_t *acc_in, uint16_t *acc_out)
 {
@@ -59,7 +61,7 @@ static uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, const u
 #if CC_HAVE_X86
 #define AVX2 __attribute__((target("avx2")))
 
-AVX2 static uint16_t path_step_avx2(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+AVX2 __attribute__((noinline)) static uint16_t path_step_avx2(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
                                     uint16_t prev_min, int p2, uint16_t *out,
                                     const uint16_t *acc_in, uint16_t *acc_out)
 {

@@ -61,14 +61,6 @@ cc_wm_hist cc_wm_hist_at(void *base, int levels)
 /* floor(a / b) for b > 0. */
 static inline int64_t floor_div64(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
-int cc_wm_level(int v, int dmin, int levels)
-{
-    if (v == CC_INVALID)
-        return CC_WM_NO_LEVEL;
-    int b = cc_whole_px(v) - dmin;
-    return b < 0 ? 0 : (b >= levels ? levels - 1 : b);
-}
-
 static inline int absdiff(int a, int b) { return a > b ? a - b : b - a; }
 
 /* Votes of one window row into the histogram; returns their total weight.
@@ -187,6 +179,60 @@ AVX2 static uint64_t weight_up_to(const uint32_t *wb, const uint32_t *lb, int n,
     return hsum32(s);
 }
 
+/* The rounded weighted mean of the stored votes on level b.  A vote's weight
+ * times its value fits in int32 (2^16 * 2^15); the sums are kept in int64
+ * lanes.  The map is read 8 values at a time except where that would read
+ * past its end (the last row's last chunk); lanes past x1 have weight 0. */
+AVX2 static int16_t level_mean(const cc_wm_image *g, const int16_t *map, const uint32_t *wb, const uint32_t *lb,
+                               int b, int x0, int x1, int y0, int y1)
+{
+    const int w = g->width;
+    const size_t end = (size_t)w * g->height;
+    const __m256i vb = _mm256_set1_epi32(b);
+    __m256i ws = _mm256_setzero_si256(), even = ws, odd = ws;
+    int n = 0;
+    for (int yy = y0; yy <= y1; yy++) {
+        const size_t r = (size_t)yy * w;
+        for (int xx = x0; xx <= x1; xx += 8, n++) {
+            __m256i on = _mm256_cmpeq_epi32(_mm256_loadu_si256((const __m256i *)(lb + 8 * n)), vb);
+            __m256i wt = _mm256_and_si256(on, _mm256_loadu_si256((const __m256i *)(wb + 8 * n)));
+            __m256i mv;
+            if (r + xx + 8 <= end) {
+                mv = _mm256_cvtepi16_epi32(_mm_loadu_si128((const __m128i *)(map + r + xx)));
+            } else {
+                int32_t v[8] = {0};
+                for (int k = 0; k <= x1 - xx && k < 8; k++)
+                    v[k] = map[r + xx + k];
+                mv = _mm256_loadu_si256((const __m256i *)v);
+            }
+            ws = _mm256_add_epi32(ws, wt);
+            even = _mm256_add_epi64(even, _mm256_mul_epi32(wt, mv));
+            odd = _mm256_add_epi64(odd, _mm256_mul_epi32(_mm256_srli_epi64(wt, 32), _mm256_srli_epi64(mv, 32)));
+        }
+    }
+    int64_t lanes[4], vs = 0;
+    _mm256_storeu_si256((__m256i *)lanes, _mm256_add_epi64(even, odd));
+    for (int k = 0; k < 4; k++)
+        vs += lanes[k];
+    const int64_t wsum = (int64_t)hsum32(ws);
+    return (int16_t)floor_div64(2 * vs + wsum, 2 * wsum);
+}
+
+/* Smallest and largest level of the stored votes of weight > 0 (a vote of weight 0 has no level). */
+AVX2 static void level_bounds(const uint32_t *wb, const uint32_t *lb, int n, int *lo, int *hi)
+{
+    const __m256i zero = _mm256_setzero_si256();
+    __m256i vmin = _mm256_set1_epi32(-1), vmax = zero;
+    for (int i = 0; i < n; i++) {
+        __m256i lv = _mm256_loadu_si256((const __m256i *)(lb + 8 * i));
+        __m256i none = _mm256_cmpeq_epi32(_mm256_loadu_si256((const __m256i *)(wb + 8 * i)), zero);
+        vmin = _mm256_min_epu32(vmin, _mm256_or_si256(lv, none));
+        vmax = _mm256_max_epu32(vmax, _mm256_andnot_si256(none, lv));
+    }
+    *lo = (int)hext32(vmin, 0);
+    *hi = (int)hext32(vmax, 1);
+}
+
 /* The weighted median at (x, y), as the scalar code defines it, in one pass
  * that computes every vote's weight once and keeps them (with their levels)
  * in the thread's window buffers.  Most pixels stop there: their own level
@@ -203,7 +249,6 @@ AVX2 static int16_t wm_pixel_avx2(const cc_wm_tables *t, const cc_wm_image *g, c
     const __m256i centre = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
     const __m256i vc = _mm256_set1_epi32(c), zero = _mm256_setzero_si256();
     __m256i tot = zero, below = zero, at = zero, lv;
-    __m256i vmin = _mm256_set1_epi32(-1), vmax = zero;
     uint32_t *wb = h->win_weight, *lb = h->win_level;
     int n = 0;
     for (int yy = y0; yy <= y1; yy++) {
@@ -216,16 +261,14 @@ AVX2 static int16_t wm_pixel_avx2(const cc_wm_tables *t, const cc_wm_image *g, c
             tot = _mm256_add_epi32(tot, wt);
             below = _mm256_add_epi32(below, _mm256_and_si256(wt, _mm256_cmpgt_epi32(vc, lv)));
             at = _mm256_add_epi32(at, _mm256_and_si256(wt, _mm256_cmpeq_epi32(lv, vc)));
-            __m256i none = _mm256_cmpeq_epi32(wt, zero); /* a vote of weight 0 has no level */
-            vmin = _mm256_min_epu32(vmin, _mm256_or_si256(lv, none));
-            vmax = _mm256_max_epu32(vmax, _mm256_andnot_si256(none, lv));
         }
     }
     const uint64_t total = hsum32(tot), lo_w = hsum32(below), at_w = hsum32(at);
     if (2 * lo_w < total && 2 * (lo_w + at_w) >= total)
         return map[(size_t)y * w + x];
     /* the first level whose cumulative weight reaches half the total: below c or above it */
-    int lo = (int)hext32(vmin, 0), hi = (int)hext32(vmax, 1);
+    int lo, hi;
+    level_bounds(wb, lb, n, &lo, &hi);
     if (2 * lo_w >= total)
         hi = c - 1;
     else
@@ -237,23 +280,7 @@ AVX2 static int16_t wm_pixel_avx2(const cc_wm_tables *t, const cc_wm_image *g, c
         else
             lo = mid + 1;
     }
-    const __m256i vb = _mm256_set1_epi32(lo);
-    int64_t ws = 0, vs = 0;
-    n = 0;
-    for (int yy = y0; yy <= y1; yy++) {
-        const int16_t *mrow = map + (size_t)yy * w;
-        for (int xx = x0; xx <= x1; xx += 8, n++) {
-            __m256i wt = _mm256_loadu_si256((const __m256i *)(wb + 8 * n));
-            __m256i on = _mm256_andnot_si256(_mm256_cmpeq_epi32(wt, zero),
-                                             _mm256_cmpeq_epi32(_mm256_loadu_si256((const __m256i *)(lb + 8 * n)), vb));
-            for (unsigned bits = (unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(on)); bits; bits &= bits - 1) {
-                int k = __builtin_ctz(bits);
-                ws += wb[8 * n + k];
-                vs += (int64_t)wb[8 * n + k] * mrow[xx + k];
-            }
-        }
-    }
-    return (int16_t)floor_div64(2 * vs + ws, 2 * ws);
+    return level_mean(g, map, wb, lb, lo, x0, x1, y0, y1);
 }
 #endif
 

@@ -37,8 +37,15 @@ size_t cc_wm_hist_bytes(int levels);
 cc_wm_hist cc_wm_hist_at(void *base, int levels);
 void cc_wm_hist_clear(cc_wm_hist *h, int levels);
 #define CC_WM_NO_LEVEL 0xFFFF
-/* Histogram level of a disparity: rounded to whole px, clamped to the range; CC_WM_NO_LEVEL if invalid. */
-int cc_wm_level(int v, int dmin, int levels);
+/* Histogram level of a disparity: rounded to whole px, clamped to the range; CC_WM_NO_LEVEL if invalid.
+ * Inline: it runs once per pixel and map. */
+static inline int cc_wm_level(int v, int dmin, int levels)
+{
+    if (v == CC_INVALID)
+        return CC_WM_NO_LEVEL;
+    int b = cc_whole_px(v) - dmin;
+    return b < 0 ? 0 : (b >= levels ? levels - 1 : b);
+}
 /* Weighted median at (x, y) of `map`, whose levels (cc_wm_level) are in `level`. */
 int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
                     const uint16_t *level, int x, int y, int radius, cc_wm_hist *h);
