@@ -18,10 +18,12 @@ static void vertical_row(const cc_setup *s, const cc_frame *f, cc_workspace *ws,
 {
     const int w = f->width, Dp = s->Dp;
     const int npaths = s->p.paths == 8 ? 3 : 1;
-    const size_t vs = ws->vstride;
-    cc_cost_segment(s, f, x0, x1, y, t->cost_row, Dp);
+    const size_t vs = ws->vstride, cs = ws->cstride;
+    uint8_t *costs = ws->costs + (size_t)y * w * cs;
+    if (downward) /* pass 1 computes the costs, the later passes read them */
+        cc_cost_segment(s, f, x0, x1, y, costs + (size_t)x0 * cs, cs);
     for (int x = x0; x < x1; x++) {
-        const uint8_t *cost = t->cost_row + (size_t)(x - x0) * Dp;
+        const uint8_t *cost = costs + (size_t)x * cs;
         uint16_t *acc = ws->volume + ((size_t)y * w + x) * Dp;
         for (int j = 0; j < npaths; j++) {
             uint16_t *rows = ws->vpath + (size_t)j * 2 * w * vs;
@@ -79,21 +81,21 @@ void cc_pass_vertical(const cc_setup *s, const cc_frame *f, cc_workspace *ws, in
 }
 
 static void horizontal_paths(const cc_setup *s, const cc_frame *f, const cc_thread_scratch *t,
-                             const uint16_t *volume_row, int y)
+                             const uint8_t *cost_row, size_t cs, const uint16_t *volume_row, int y)
 {
     const int w = f->width, Dp = s->Dp;
     uint16_t prev_min = 0;
     for (int x = 0; x < w; x++) { /* left to right: S = volume + L */
         const uint16_t *prev = x > 0 ? t->hpath[(x - 1) & 1] + CC_GUARD : NULL;
         int p2 = x > 0 ? cc_p2_for_step(s, intensity(f, x, y), intensity(f, x - 1, y)) : s->p.p2;
-        prev_min = cc_path_step(s, t->cost_row + (size_t)x * Dp, prev, prev_min, p2,
+        prev_min = cc_path_step(s, cost_row + (size_t)x * cs, prev, prev_min, p2,
                                 t->hpath[x & 1] + CC_GUARD, volume_row + (size_t)x * Dp,
                                 t->sum_row + (size_t)x * Dp);
     }
     for (int x = w - 1; x >= 0; x--) { /* right to left: S += L */
         const uint16_t *prev = x < w - 1 ? t->hpath[(x + 1) & 1] + CC_GUARD : NULL;
         int p2 = x < w - 1 ? cc_p2_for_step(s, intensity(f, x, y), intensity(f, x + 1, y)) : s->p.p2;
-        prev_min = cc_path_step(s, t->cost_row + (size_t)x * Dp, prev, prev_min, p2,
+        prev_min = cc_path_step(s, cost_row + (size_t)x * cs, prev, prev_min, p2,
                                 t->hpath[x & 1] + CC_GUARD, t->sum_row + (size_t)x * Dp,
                                 t->sum_row + (size_t)x * Dp);
     }
@@ -106,10 +108,14 @@ void cc_pass_rows(const cc_setup *s, const cc_frame *f, cc_workspace *ws, int16_
 #pragma omp parallel num_threads(ws->threads)
     {
         cc_thread_scratch t = cc_thread_scratch_at(s, ws, omp_get_thread_num());
+        /* the guard lanes of the horizontal path vectors: the frame preparation borrowed this scratch */
+        for (int i = 0; i < 2; i++)
+            for (size_t g = 0; g < ws->vstride; g++)
+                t.hpath[i][g] = CC_PATH_INF;
 #pragma omp for schedule(dynamic, 4)
         for (int y = 0; y < h; y++) {
-            cc_cost_segment(s, f, 0, w, y, t.cost_row, Dp);
-            horizontal_paths(s, f, &t, ws->volume + (size_t)y * w * Dp, y);
+            horizontal_paths(s, f, &t, ws->costs + (size_t)y * w * ws->cstride, ws->cstride,
+                             ws->volume + (size_t)y * w * Dp, y);
             cc_select_row(s, t.sum_row, Dp, w, raw_left + (size_t)y * w, raw_right + (size_t)y * w,
                           t.select_tmp);
             if (volume_out)
