@@ -126,23 +126,35 @@ void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out)
 
 /* Votes of 8 neighbours xx..xx+7 of one window row, from the packed guide: the
  * same integer weights as the scalar loops (0 where there is no level or the
- * lane is past x1); their levels go to *levels.  `srow` is the row of
- * space_win for this dy, shifted so that srow[xx - x] is dx = xx - x. */
+ * lane is past x1, i.e. where `pos` = xx + lane is not below `end` = x1 + 1);
+ * their levels go to *levels.  `srow` is the row of space_win for this dy,
+ * shifted so that srow[xx - x] is dx = xx - x.  Both weights are below 2^15
+ * in 32-bit lanes, so one 16-bit multiply-add gives their product exactly. */
 AVX2 static inline __m256i chunk_weights(const cc_wm_tables *t, __m256i centre, const uint32_t *prow,
-                                         const uint16_t *lrow, const uint32_t *srow, int xx, int x, int x1,
-                                         __m256i *levels)
+                                         const uint16_t *lrow, const uint32_t *srow, int xx, int x, __m256i pos,
+                                         __m256i end, __m256i *levels)
 {
-    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), low16 = _mm256_set1_epi32(0xFFFF);
+    const __m256i low16 = _mm256_set1_epi32(0xFFFF);
     __m256i q = _mm256_loadu_si256((const __m256i *)(prow + xx));
     __m256i lv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(lrow + xx)));
     __m256i ad = _mm256_sub_epi8(_mm256_max_epu8(q, centre), _mm256_min_epu8(q, centre));
     __m256i cd = _mm256_madd_epi16(_mm256_maddubs_epi16(ad, _mm256_set1_epi8(1)), _mm256_set1_epi16(1));
     __m256i cw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->colour, cd, 2), low16);
     __m256i sw = _mm256_loadu_si256((const __m256i *)(srow + (xx - x)));
-    __m256i keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(lv, _mm256_set1_epi32(CC_WM_NO_LEVEL)),
-                                       _mm256_cmpgt_epi32(_mm256_set1_epi32(x1 - xx + 1), lane));
+    __m256i keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(lv, low16), _mm256_cmpgt_epi32(end, pos));
     *levels = lv;
-    return _mm256_and_si256(_mm256_mullo_epi32(cw, sw), keep);
+    return _mm256_and_si256(_mm256_madd_epi16(cw, sw), keep);
+}
+
+/* The lane sums of a, b and c (each below 2^32 in total: at most 31 * 31 votes of at most 2^16). */
+AVX2 static void hsum3(__m256i a, __m256i b, __m256i c, uint64_t out[3])
+{
+    __m256i ab = _mm256_hadd_epi32(a, b), cc = _mm256_hadd_epi32(c, c);
+    __m256i s = _mm256_hadd_epi32(ab, cc); /* per half: a, b, c, c */
+    __m128i t = _mm_add_epi32(_mm256_castsi256_si128(s), _mm256_extracti128_si256(s, 1));
+    out[0] = (uint32_t)_mm_cvtsi128_si32(t);
+    out[1] = (uint32_t)_mm_extract_epi32(t, 1);
+    out[2] = (uint32_t)_mm_extract_epi32(t, 2);
 }
 
 AVX2 static uint64_t hsum32(__m256i v)
@@ -239,23 +251,25 @@ AVX2 static void level_bounds(const uint32_t *wb, const uint32_t *lb, int n, int
  * is the median.  Otherwise the median level is found by bisection on the
  * kept votes (no histogram, whose scattered read-modify-writes serialise on
  * the few levels a window holds), and one more pass over them sums the
- * values on that level.  Per-lane sums stay below 2^32: at most 31 * 4 votes
- * of at most 2^16. */
+ * values on that level. */
 AVX2 static int16_t wm_pixel_avx2(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
                                   const uint16_t *level, int x, int y, int x0, int x1, int y0, int y1,
                                   const cc_wm_hist *h)
 {
     const int w = g->width, c = level[(size_t)y * w + x];
-    const __m256i centre = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
-    const __m256i vc = _mm256_set1_epi32(c), zero = _mm256_setzero_si256();
+    const uint32_t *packed = g->packed;
+    const __m256i centre = _mm256_set1_epi32((int)packed[(size_t)y * w + x]);
+    const __m256i vc = _mm256_set1_epi32(c), zero = _mm256_setzero_si256(), end = _mm256_set1_epi32(x1 + 1);
+    const __m256i first = _mm256_add_epi32(_mm256_set1_epi32(x0), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
     __m256i tot = zero, below = zero, at = zero, lv;
     uint32_t *wb = h->win_weight, *lb = h->win_level;
     int n = 0;
     for (int yy = y0; yy <= y1; yy++) {
         const uint32_t *srow = t->space_win[yy - y + CC_MAX_WM_RADIUS] + CC_MAX_WM_RADIUS;
         const size_t r = (size_t)yy * w;
-        for (int xx = x0; xx <= x1; xx += 8, n++) {
-            __m256i wt = chunk_weights(t, centre, g->packed + r, level + r, srow, xx, x, x1, &lv);
+        __m256i pos = first;
+        for (int xx = x0; xx <= x1; xx += 8, n++, pos = _mm256_add_epi32(pos, _mm256_set1_epi32(8))) {
+            __m256i wt = chunk_weights(t, centre, packed + r, level + r, srow, xx, x, pos, end, &lv);
             _mm256_storeu_si256((__m256i *)(wb + 8 * n), wt);
             _mm256_storeu_si256((__m256i *)(lb + 8 * n), lv);
             tot = _mm256_add_epi32(tot, wt);
@@ -263,7 +277,9 @@ AVX2 static int16_t wm_pixel_avx2(const cc_wm_tables *t, const cc_wm_image *g, c
             at = _mm256_add_epi32(at, _mm256_and_si256(wt, _mm256_cmpeq_epi32(lv, vc)));
         }
     }
-    const uint64_t total = hsum32(tot), lo_w = hsum32(below), at_w = hsum32(at);
+    uint64_t sums[3];
+    hsum3(tot, below, at, sums);
+    const uint64_t total = sums[0], lo_w = sums[1], at_w = sums[2];
     if (2 * lo_w < total && 2 * (lo_w + at_w) >= total)
         return map[(size_t)y * w + x];
     /* the first level whose cumulative weight reaches half the total: below c or above it */
@@ -302,20 +318,14 @@ static int centre_is_median(const cc_wm_tables *t, const cc_wm_image *g, const u
     return 2 * below < total && 2 * (below + at) >= total;
 }
 
-int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
-                    const uint16_t *level, int x, int y, int radius, cc_wm_hist *h)
+/* noinline: the dispatcher below stays small for the vector kernel. */
+__attribute__((noinline)) static int16_t wm_pixel_scalar(const cc_wm_tables *t, const cc_wm_image *g,
+                                                         const int16_t *map, const uint16_t *level, int x, int y,
+                                                         int x0, int x1, int y0, int y1, cc_wm_hist *h)
 {
-    const int w = g->width, hgt = g->height, ch = g->channels;
+    const int w = g->width, ch = g->channels;
     const size_t o = (size_t)y * w + x;
-    if (level[o] == CC_WM_NO_LEVEL)
-        return CC_INVALID;
     const uint8_t *gc = g->data + (size_t)y * g->stride + (size_t)x * ch;
-    int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
-    int x0 = x - radius < 0 ? 0 : x - radius, x1 = x + radius >= w ? w - 1 : x + radius;
-#if CC_HAVE_X86
-    if (g->use_avx2 && g->packed)
-        return wm_pixel_avx2(t, g, map, level, x, y, x0, x1, y0, y1, h);
-#endif
     if (centre_is_median(t, g, level, gc, x, y, x0, x1, y0, y1, level[o]))
         return map[o];
     int lo = INT32_MAX, hi = -1;
@@ -345,4 +355,19 @@ int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *
     memset(h->weight + lo, 0, sizeof(uint32_t) * (size_t)(hi - lo + 1));
     memset(h->value + lo, 0, sizeof(int64_t) * (size_t)(hi - lo + 1));
     return out;
+}
+
+int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
+                    const uint16_t *level, int x, int y, int radius, cc_wm_hist *h)
+{
+    const int w = g->width, hgt = g->height;
+    if (level[(size_t)y * w + x] == CC_WM_NO_LEVEL)
+        return CC_INVALID;
+    int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
+    int x0 = x - radius < 0 ? 0 : x - radius, x1 = x + radius >= w ? w - 1 : x + radius;
+#if CC_HAVE_X86
+    if (g->use_avx2 && g->packed)
+        return wm_pixel_avx2(t, g, map, level, x, y, x0, x1, y0, y1, h);
+#endif
+    return wm_pixel_scalar(t, g, map, level, x, y, x0, x1, y0, y1, h);
 }
