@@ -357,14 +357,28 @@ __attribute__((noinline)) static int16_t wm_pixel_scalar(const cc_wm_tables *t, 
     return out;
 }
 
-int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
-                    const uint16_t *level, int x, int y, int radius, cc_wm_hist *h)
+/* Whether every pixel of the window has level c: then all the weight is on c and the centre is the
+ * median, whatever the weights. */
+static int window_on_level(const uint16_t *level, const uint16_t *run, int w, int c, int x0, int x1, int y0, int y1)
 {
-    const int w = g->width, hgt = g->height;
-    if (level[(size_t)y * w + x] == CC_WM_NO_LEVEL)
+    for (int yy = y0; yy <= y1; yy++) {
+        const size_t q = (size_t)yy * w + x0;
+        if (level[q] != c || run[q] <= x1 - x0)
+            return 0;
+    }
+    return 1;
+}
+
+int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
+                    const uint16_t *level, const uint16_t *run, int x, int y, int radius, cc_wm_hist *h)
+{
+    const int w = g->width, hgt = g->height, c = level[(size_t)y * w + x];
+    if (c == CC_WM_NO_LEVEL)
         return CC_INVALID;
     int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
     int x0 = x - radius < 0 ? 0 : x - radius, x1 = x + radius >= w ? w - 1 : x + radius;
+    if (run && window_on_level(level, run, w, c, x0, x1, y0, y1))
+        return map[(size_t)y * w + x];
 #if CC_HAVE_X86
     if (g->use_avx2 && g->packed)
         return wm_pixel_avx2(t, g, map, level, x, y, x0, x1, y0, y1, h);

@@ -46,8 +46,10 @@ static inline int cc_wm_level(int v, int dmin, int levels)
     int b = cc_whole_px(v) - dmin;
     return b < 0 ? 0 : (b >= levels ? levels - 1 : b);
 }
-/* Weighted median at (x, y) of `map`, whose levels (cc_wm_level) are in `level`. */
+/* Weighted median at (x, y) of `map`, whose levels (cc_wm_level) are in `level`.  `run` (optional)
+ * holds, per pixel, how many pixels from it to the right have its level: a window whose pixels all
+ * have the centre's level keeps the centre's value without any weight being computed. */
 int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
-                    const uint16_t *level, int x, int y, int radius, cc_wm_hist *h);
+                    const uint16_t *level, const uint16_t *run, int x, int y, int radius, cc_wm_hist *h);
 
 #endif
