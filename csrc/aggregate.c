@@ -30,9 +30,7 @@ void cc_p2_table(const cc_params *p, uint16_t table[256])
  * min L(p-r) + P2) - min L(p-r); a path starts with L = C.  Writes L to out and
  * acc_out = (acc_in or 0) + L; returns min L.  prev and out have guard lanes
  * holding CC_PATH_INF at index -1 and from D on. */
-/* noinline (also the vector twin): the dispatcher below is then a test and a
- * jump, not a full register save on every call. */
-__attribute__((noinline)) static uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+static inline uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
                                  uint16_t prev_min, int p2, uint16_t *out,
                                  const uint16_t *acc_in, uint16_t *acc_out)
 {
@@ -62,7 +60,7 @@ __attribute__((noinline)) static uint16_t path_step_scalar(const cc_setup *s, co
 #if CC_HAVE_X86
 #define AVX2 __attribute__((target("avx2")))
 
-AVX2 __attribute__((noinline)) static uint16_t path_step_avx2(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
+AVX2 static inline uint16_t path_step_avx2(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
                                     uint16_t prev_min, int p2, uint16_t *out,
                                     const uint16_t *acc_in, uint16_t *acc_out)
 {
@@ -94,13 +92,70 @@ AVX2 __attribute__((noinline)) static uint16_t path_step_avx2(const cc_setup *s,
 }
 #endif
 
-uint16_t cc_path_step(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
-                      uint16_t prev_min, int p2, uint16_t *out,
-                      const uint16_t *acc_in, uint16_t *acc_out)
+/* The row loops, written once: `avx2` is a constant in each instance below, so
+ * each gets its kernel inlined and keeps the kernel's constants in registers
+ * across the row (a call per pixel and path cost as much as a quarter of the
+ * step itself). */
+#define PATH_ROWS(suffix, attr, kernel)                                                                       \
+    attr static void vertical_##suffix(const cc_setup *s, const cc_path_rows *r, int x0, int x1, int dx)     \
+    {                                                                                                         \
+        const int Dp = s->Dp;                                                                                 \
+        for (int x = x0; x < x1; x++) {                                                                       \
+            const int px = x + dx;                                                                            \
+            const uint16_t *prev = NULL;                                                                      \
+            uint16_t prev_min = 0;                                                                            \
+            int p2 = s->p.p2;                                                                                 \
+            if (r->prev && px >= 0 && px < r->width) {                                                        \
+                prev = r->prev + (size_t)px * r->vs + CC_GUARD;                                               \
+                prev_min = r->prev_min[px];                                                                   \
+                p2 = cc_p2_for_step(s, r->grey[x], r->prev_grey[px]);                                         \
+            }                                                                                                 \
+            uint16_t *acc = r->acc_out + (size_t)x * Dp;                                                      \
+            r->out_min[x] = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2,                        \
+                                   r->out + (size_t)x * r->vs + CC_GUARD, r->acc_in ? acc : NULL, acc);       \
+        }                                                                                                     \
+    }                                                                                                         \
+    attr static void horizontal_##suffix(const cc_setup *s, const cc_path_rows *r, uint16_t *hpath[2])       \
+    {                                                                                                         \
+        const int w = r->width, Dp = s->Dp;                                                                   \
+        uint16_t prev_min = 0;                                                                                \
+        for (int x = 0; x < w; x++) { /* left to right: S = volume + L */                                    \
+            const uint16_t *prev = x > 0 ? hpath[(x - 1) & 1] + CC_GUARD : NULL;                              \
+            int p2 = x > 0 ? cc_p2_for_step(s, r->grey[x], r->grey[x - 1]) : s->p.p2;                         \
+            prev_min = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2, hpath[x & 1] + CC_GUARD,    \
+                              r->acc_in + (size_t)x * Dp, r->acc_out + (size_t)x * Dp);                       \
+        }                                                                                                     \
+        for (int x = w - 1; x >= 0; x--) { /* right to left: S += L */                                       \
+            const uint16_t *prev = x < w - 1 ? hpath[(x + 1) & 1] + CC_GUARD : NULL;                          \
+            int p2 = x < w - 1 ? cc_p2_for_step(s, r->grey[x], r->grey[x + 1]) : s->p.p2;                     \
+            prev_min = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2, hpath[x & 1] + CC_GUARD,    \
+                              r->acc_out + (size_t)x * Dp, r->acc_out + (size_t)x * Dp);                      \
+        }                                                                                                     \
+    }
+
+PATH_ROWS(scalar, , path_step_scalar)
+#if CC_HAVE_X86
+PATH_ROWS(avx2, AVX2, path_step_avx2)
+#endif
+
+void cc_path_vertical_row(const cc_setup *s, const cc_path_rows *r, int x0, int x1, int dx)
 {
 #if CC_HAVE_X86
-    if (s->use_avx2)
-        return path_step_avx2(s, cost, prev, prev_min, p2, out, acc_in, acc_out);
+    if (s->use_avx2) {
+        vertical_avx2(s, r, x0, x1, dx);
+        return;
+    }
 #endif
-    return path_step_scalar(s, cost, prev, prev_min, p2, out, acc_in, acc_out);
+    vertical_scalar(s, r, x0, x1, dx);
+}
+
+void cc_path_horizontal_row(const cc_setup *s, const cc_path_rows *r, uint16_t *hpath[2])
+{
+#if CC_HAVE_X86
+    if (s->use_avx2) {
+        horizontal_avx2(s, r, hpath);
+        return;
+    }
+#endif
+    horizontal_scalar(s, r, hpath);
 }
