@@ -67,6 +67,18 @@ def test_thread_count_and_simd_do_not_change_the_result():
             np.testing.assert_array_equal(got, base, err_msg=str(kw))
 
 
+@pytest.mark.parametrize("num_disparities", [16, 40])
+def test_buffer_layouts_do_not_change_the_result(num_disparities):
+    # 16: the smallest per-thread scratch, which the frame preparation borrows (it once overlapped the
+    # horizontal path guards); 40: cost slots padded from 48 to 64 bytes, written by adjacent stripes.
+    left, right, _ = _scene("tsukuba")
+    base = StereoMatcher(0, num_disparities, threads=1, simd="scalar").compute_fixed(left, right)
+    for kw in (dict(threads=1), dict(threads=2), dict(threads=3), dict(simd="scalar", threads=3)):
+        m = StereoMatcher(0, num_disparities, **kw)
+        np.testing.assert_array_equal(m.compute_fixed(left, right), base, err_msg=str(kw))
+        np.testing.assert_array_equal(m.compute_fixed(left, right), base, err_msg=f"{kw}, second call")
+
+
 def test_repeated_calls_and_size_changes_reuse_buffers_correctly():
     left, right, _ = _scene("tsukuba")
     m = StereoMatcher(0, 16)
