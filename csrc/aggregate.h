@@ -17,6 +17,7 @@ typedef struct cc_path_rows {
     uint16_t *out, *out_min;
     const uint16_t *acc_in;
     uint16_t *acc_out;
+    int stream;              /* vertical, acc_in NULL: write acc_out past the caches (it is not read soon) */
 } cc_path_rows;
 void cc_path_vertical_row(const cc_setup *s, const cc_path_rows *r, int x0, int x1, int dx);
 /* Horizontal: both directions along the row, through the two path vectors hpath[0..1]: acc_out =

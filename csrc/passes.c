@@ -28,7 +28,8 @@ static void vertical_row(const cc_setup *s, const cc_frame *f, cc_workspace *ws,
                           .prev = first ? NULL : rows + (size_t)(cur ^ 1) * w * vs,
                           .prev_min = mins + (size_t)(cur ^ 1) * w,
                           .out = rows + (size_t)cur * w * vs, .out_min = mins + (size_t)cur * w,
-                          .acc_in = (downward && j == 0) ? NULL : acc, .acc_out = acc};
+                          .acc_in = (downward && j == 0) ? NULL : acc, .acc_out = acc,
+                          .stream = downward && npaths == 1 && ws->stream};
         cc_path_vertical_row(s, &r, x0, x1, path_dx[j]);
     }
 }

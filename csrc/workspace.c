@@ -71,6 +71,7 @@ int cc_workspace_alloc(cc_workspace *ws, const cc_setup *s, int width, int heigh
     ws->scratch_stride = thread_scratch_bytes(s, width);
     size_t scratch = ws->scratch_stride * (size_t)ws->threads;
     ws->volume = cc_alloc(vol);
+    ws->stream = vol >= ((size_t)64 << 20);
     ws->costs = cc_alloc(costs);
     ws->vpath = cc_alloc(vpath);
     ws->vmin = cc_alloc(vmin);

@@ -10,6 +10,7 @@ typedef struct cc_workspace {
     uint8_t *costs;          /* matching cost C, [height][width][cstride] + slack: pass 1 computes it,
                                 passes 2 and 3 read it (1 byte per cell instead of two recomputations) */
     size_t cstride;          /* Dp rounded up to 32: the cost kernel writes 32 lanes at a time */
+    int stream;              /* the volume is far larger than the caches: pass 1 writes it past them */
     uint16_t *vpath;         /* vertical/diagonal paths: [paths][2 rows][width][vstride] */
     uint16_t *vmin;          /* their minima: [paths][2 rows][width] */
     size_t vstride;          /* Dp + 2 guards */
