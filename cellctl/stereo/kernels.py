@@ -44,7 +44,8 @@ def neighbour_means(
 
     grid: 3 x H x W float32 points (NaN where none); at: flat index of each point in one plane, at least 3 px
     inside the grid; spacing_mm: mm between pixels at each point; offsets: 36 x 2 (dx, dy), the 20 within
-    2.3 px first (cellctl.vision.outliers defines the rule).
+    2.3 px first (cellctl.vision.outliers defines the rule); threads: OpenMP threads (0: all), the same
+    result on any number.
     """
     if grid.ndim != 3 or grid.shape[0] != 3:
         raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
