@@ -8,8 +8,6 @@ the same plane is fitted to the cloud's points near the query.
 
 from __future__ import annotations
 
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,22 +19,6 @@ from cellctl.vision.subpixel import PatchSums, refine_patches
 MIN_CLOUD_POINTS = 12
 MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
 TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
-# From this many image fits on, half of them run on a second thread (the glue path's ~10^3, not the heights'
-# two): each patch is fitted on its own, so the split changes no bit of the result, and numpy, OpenCV and the
-# C kernels release the GIL for nearly all of a fit's time.
-PARALLEL_MIN_FITS = 64
-
-_pool: ThreadPoolExecutor | None = None
-_pool_lock = threading.Lock()
-
-
-def _second_thread() -> ThreadPoolExecutor:
-    """The one worker thread the image fits share, started at the first large query and kept."""
-    global _pool
-    with _pool_lock:
-        if _pool is None:
-            _pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="surface-fit")
-        return _pool
 
 
 @dataclass
@@ -118,42 +100,26 @@ class SoleSurface:
         self, xy: np.ndarray, z: np.ndarray, normals: np.ndarray, refined: np.ndarray, radius_mm: float
     ) -> None:
         rec = self.rec
-        calib, to_table = rec.calibration, rec.camera_to_table
-        if calib is None or rec.rectified is None or to_table is None or rec.sole_mask is None:
+        calib, rectified, to_table, mask = rec.calibration, rec.rectified, rec.camera_to_table, rec.sole_mask
+        if calib is None or rectified is None or to_table is None or mask is None:
             return  # not a stereo reconstruction: the cloud answers every query
+        left, right = rectified
         table_to_camera = np.linalg.inv(to_table)
         known = np.flatnonzero(np.isfinite(z))
         guess = np.column_stack([xy[known], z[known]]) @ table_to_camera[:3, :3].T + table_to_camera[:3, 3]
-        # One patch radius for all queries (from all of them), so that splitting them below changes nothing.
-        radius_px = radius_mm * calib.focal_px / float(np.median(guess[:, 2]))
-        parts = np.array_split(np.arange(len(known)), 2 if len(known) >= PARALLEL_MIN_FITS else 1)
-        worker = [_second_thread().submit(self._fit_part, xy[known[p]], guess[p], radius_px) for p in parts[1:]]
-        results = [self._fit_part(xy[known[parts[0]]], guess[parts[0]], radius_px)] + [w.result() for w in worker]
-        for part, (patch_z, patch_normals, ok) in zip(parts, results, strict=True):
-            # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the
-            # cloud's plane takes over there.
-            mine = known[part]
-            done = ok & np.isfinite(patch_z) & (np.abs(patch_z - z[mine]) < MAX_REFINE_SHIFT_MM)
-            z[mine[done]], normals[mine[done]], refined[mine[done]] = patch_z[done], patch_normals[done], True
-
-    def _fit_part(
-        self, xy: np.ndarray, guess: np.ndarray, radius_px: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Image fits of the patches at table points xy (guess: their cloud points in the camera frame): the
-        height, normal and success of each; every patch on its own, so any split of the queries gives the same."""
-        rec = self.rec
-        calib, rectified, to_table, mask = rec.calibration, rec.rectified, rec.camera_to_table, rec.sole_mask
-        assert calib is not None and rectified is not None and to_table is not None and mask is not None
-        left, right = rectified
         focal = calib.focal_px
         centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
         start = focal * calib.baseline_mm / guess[:, 2]
+        radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
         fit = refine_patches(left, right, mask, centres, radius_px, start)
         homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
         camera = homogeneous[:, :3] / homogeneous[:, 3:4]
         table = camera @ to_table[:3, :3].T + to_table[:3, 3]
-        patch_z, patch_normals = _planes_at(table, fit.ids, xy)
-        return patch_z, patch_normals, fit.ok
+        patch_z, patch_normals = _planes_at(table, fit.ids, xy[known])
+        # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the cloud's
+        # plane takes over there.
+        done = fit.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known]) < MAX_REFINE_SHIFT_MM)
+        z[known[done]], normals[known[done]], refined[known[done]] = patch_z[done], patch_normals[done], True
 
 
 def _planes_at(points: np.ndarray, ids: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
