@@ -30,7 +30,7 @@ from cellctl.vision.defaults import (
     PLAUSIBLE_HEIGHT_MM,
     PLAUSIBLE_LENGTH_MM,
 )
-from cellctl.vision.footprint import Footprint
+from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
@@ -195,7 +195,8 @@ def measure_sole(
         return _invalid(
             FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide", **base
         )
-    glue_line = _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM)
+    # Smoothing takes the raster's staircase out but pulls sharp corners in: back onto the offset line.
+    glue_line = snap_to_inset(footprint, _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
     path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
