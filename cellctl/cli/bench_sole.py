@@ -143,7 +143,7 @@ def _render_only(scenes: list[SoleScene], cache: RenderCache, taught: bool) -> i
     from cellctl.eval.sole_bench import TEACH_SHOTS
 
     for scene in scenes:
-        shots = range(0, TEACH_SHOTS + 1 if taught else 1)  # 0: the scene, 1...: empty-table exposures
-        rendered = sum(cache.prefill(scene, shot) for shot in shots)
+        shots = list(range(0, TEACH_SHOTS + 1 if taught else 1))  # 0: the scene, 1...: empty-table exposures
+        rendered = cache.prefill(scene, shots)
         print(f"  sole {scene.seed} {scene.color}: {rendered} of {len(shots)} renders new", file=sys.stderr)
     return 0

@@ -73,9 +73,8 @@ TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellc
 
 def empty_table_pair(scene: SoleScene, cache: RenderCache | None = None) -> tuple[np.ndarray, np.ndarray]:
     """TEACH_SHOTS exposures of the scene's empty table, averaged per camera (what `cellctl teach` gets)."""
-    shots = [
-        cache.render_empty(scene, shot) if cache else scene.render_empty(shot) for shot in range(1, TEACH_SHOTS + 1)
-    ]
+    numbers = list(range(1, TEACH_SHOTS + 1))
+    shots = cache.render_empties(scene, numbers) if cache else scene.render_empties(numbers)
     return average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
 
 

@@ -73,40 +73,58 @@ class RenderCache:
 
     def render_empty(self, scene: SoleScene, shot: int) -> RenderedPair:
         """An exposure of the empty table (`SoleScene.render_empty`)."""
-        if shot < 1:
-            raise ValueError(f"empty-table exposures are numbered from 1, got {shot}")
-        return self._get(scene, shot)
+        return self.render_empties(scene, [shot])[0]
 
-    def prefill(self, scene: SoleScene, shot: int) -> bool:
-        """Render one entry into the cache unless it is there or another process is rendering it (a lock file).
+    def render_empties(self, scene: SoleScene, shots: list[int]) -> list[RenderedPair]:
+        """Exposures of the empty table (`SoleScene.render_empties`): the missing ones rendered in one go."""
+        if min(shots) < 1:
+            raise ValueError(f"empty-table exposures are numbered from 1, got {min(shots)}")
+        pairs = {shot: _load(self._path(scene, shot)) for shot in shots}
+        missing = [shot for shot, pair in pairs.items() if pair is None]
+        self.hits += len(shots) - len(missing)
+        self.misses += len(missing)
+        if missing:
+            for shot, pair in zip(missing, scene.render_empties(missing), strict=True):
+                _store(self._path(scene, shot), pair)
+                pairs[shot] = pair
+        return [p for p in (pairs[shot] for shot in shots) if p is not None]
 
-        Several processes prefilling the same list of scenes share the work. Returns whether it rendered.
+    def prefill(self, scene: SoleScene, shots: list[int]) -> int:
+        """Render the missing `shots` (0: the scene, 1...: empty-table exposures) of a scene into the cache,
+        unless another process is rendering this scene (a lock file). Returns how many it rendered.
+
+        Several processes prefilling the same list of scenes so share the work.
         """
-        path = self._path(scene, shot)
-        if path.exists():
-            return False
-        lock = path.with_suffix(".lock")
+        missing = [shot for shot in shots if not self._path(scene, shot).exists()]
+        if not missing:
+            return 0
+        lock = self._path(scene, SCENE_SHOT).with_suffix(".lock")
         try:
             os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
         except FileExistsError:
-            return False
+            return 0
         try:
-            self._get(scene, shot)
+            if SCENE_SHOT in missing:
+                self._get(scene, SCENE_SHOT)
+            empties = [shot for shot in missing if shot != SCENE_SHOT]
+            if empties:
+                self.render_empties(scene, empties)
         finally:
             lock.unlink(missing_ok=True)
-        return True
+        return len(missing)
 
     def _path(self, scene: SoleScene, shot: int) -> Path:
         return self.directory / f"{scene_key(scene, shot)}.npz"
 
     def _get(self, scene: SoleScene, shot: int) -> RenderedPair:
+        """The scene with its sole (shot 0), loaded or rendered and stored."""
         path = self._path(scene, shot)
         pair = _load(path)
         if pair is not None:
             self.hits += 1
             return pair
         self.misses += 1
-        pair = scene.render() if shot == SCENE_SHOT else scene.render_empty(shot)
+        pair = scene.render()
         _store(path, pair)
         return pair
 

@@ -37,7 +37,7 @@ class CountingRenders:
 def renders(monkeypatch: pytest.MonkeyPatch) -> CountingRenders:
     fake = CountingRenders()
     monkeypatch.setattr(SoleScene, "render", lambda self: fake(self))
-    monkeypatch.setattr(SoleScene, "render_empty", lambda self, shot=1: fake(self, shot))
+    monkeypatch.setattr(SoleScene, "render_empties", lambda self, shots: [fake(self, shot) for shot in shots])
     return fake
 
 
@@ -57,6 +57,7 @@ def test_a_hit_returns_exactly_the_render_and_renders_nothing(tmp_path: Path, re
     assert renders.calls == 2 and cache.hits == 1 and cache.misses == 2
     with pytest.raises(ValueError, match="numbered from 1"):
         cache.render_empty(scene(), 0)
+    assert len(cache.render_empties(scene(), [1, 2, 3])) == 3 and renders.calls == 4
 
 
 def test_any_change_of_scene_exposure_or_renderer_misses(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -94,11 +95,21 @@ def test_a_damaged_entry_is_rendered_again(tmp_path: Path, renders: CountingRend
 
 def test_prefilling_processes_share_the_work(tmp_path: Path, renders: CountingRenders) -> None:
     cache = RenderCache(tmp_path)
-    path = tmp_path / f"{scene_key(scene(), 0)}.lock"
-    path.touch()  # another process is rendering it
-    assert not cache.prefill(scene(), 0) and renders.calls == 0
-    assert cache.prefill(scene(), 1) and not cache.prefill(scene(), 1) and renders.calls == 1
-    assert not (tmp_path / f"{scene_key(scene(), 1)}.lock").exists()
+    lock = tmp_path / f"{scene_key(scene(), 0)}.lock"
+    lock.touch()  # another process is rendering this scene
+    assert cache.prefill(scene(), [0, 1, 2]) == 0 and renders.calls == 0
+    lock.unlink()
+    assert cache.prefill(scene(), [0, 1, 2]) == 3 and renders.calls == 3
+    assert cache.prefill(scene(), [0, 1, 2]) == 0 and cache.prefill(scene(), [0, 1, 2, 3]) == 1
+    assert not lock.exists() and renders.calls == 4
+
+
+def test_several_exposures_rendered_together_equal_each_rendered_alone() -> None:
+    together = scene(7, "grey", ("shadows",)).render_empties([1, 3])
+    alone = scene(7, "grey", ("shadows",)).render_empty(3)
+    np.testing.assert_array_equal(together[1].left, alone.left)
+    np.testing.assert_array_equal(together[1].right, alone.right)
+    assert np.abs(together[0].left.astype(int) - alone.left.astype(int)).max() > 0  # other noise
 
 
 def test_cli_render_only_fills_the_cache_and_needs_a_directory(
