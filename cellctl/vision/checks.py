@@ -30,6 +30,11 @@ MIN_OUTLINE_AGREEMENT = 0.9  # of the testable outline points
 MIN_TESTABLE = 0.5  # of the outline points: fewer with evidence and the outline cannot be confirmed
 RIGHT_INSIDE_MM = 1.5
 RIGHT_OUTSIDE_MM = 3.0
+# Past the top edge of a wall facing away from the camera, at the edge's height: unchanged if the outline is
+# on the edge. The projection's error from the edge height (~2 mm at a ~10 degree view) is ~0.4 mm.
+RIGHT_EDGE_OUT_MM = 0.75
+HIDDEN_STEP_MM = 1.0  # the ray to the camera is followed in these steps of height...
+HIDDEN_MAX_MM = 60.0  # ...up to the tallest sole
 GLUE_HEIGHT_MARGIN_MM = 1.5  # glue heights beyond the sole's own height range by more than this: not on it
 GLUE_MAX_SLOPE = 0.6  # height change per mm along the path between neighbouring points
 # Smoothed path against its own raw samples (after lone outliers are repaired): a patch's height noise on a
@@ -39,6 +44,14 @@ GLUE_MAX_DEVIATION_MM = 2.5
 # on plain black soles), so the check catches gross faults only; the path normal itself is far better.
 GLUE_MAX_NORMAL_DEG = 30.0
 MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a sole's top surface
+# The surface across the edge: sampled EDGE_OUTER_MM inside the outline and fitted as a line over
+# EDGE_INNER_MM. Next to a sharp top edge the surface runs on as it does further in (the median departure round
+# a sole with a sharp edge: 0.0-0.2 mm, the height noise); a top edge rounded with a few mm of radius falls
+# away before the outline (0.7-0.9 mm where depth ends), and there the edge lies further out than the depth
+# reaches while the glue path sits on the curve (heights and normals from a flat-top fit are wrong).
+EDGE_OUTER_MM = 0.75
+EDGE_INNER_MM = (3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+EDGE_MAX_DROP_MM = 0.4
 
 
 @dataclass(frozen=True)
@@ -94,22 +107,31 @@ def check_outline_right(
     changed_right: np.ndarray,
     table_to_right_pixel: Callable[[np.ndarray], np.ndarray],
     right_centre: np.ndarray,
-    footprint: Footprint,
+    surface_height: Callable[[np.ndarray], np.ndarray],
+    table_level: Footprint | None = None,
 ) -> CheckFailure | None:
     """The outline placed in the right image: changed just inside (at the sole's height), table just outside.
 
     `table_to_right_pixel(points N x 3) -> N x 2` projects table points into the rectified right image;
-    `right_centre` is the right camera's centre in the table frame. Points outside whose view from the right
-    camera passes over the sole (hidden behind it) are not tested.
+    `right_centre` is the right camera's centre in the table frame; `surface_height(xy N x 2) -> N` the
+    measured sole height there (NaN off the sole). Outside each outline point:
+
+    - where the right camera sees the table there (its ray passes over no part of the sole higher than
+      the ray), the table RIGHT_OUTSIDE_MM out must be unchanged. `table_level`: cells whose measured points
+      lie at the table's height; a changed pixel there is a shadow or a stain on the table, not sole (a sole
+      reaching there would have been measured at its own height), so it does not count against the outline;
+    - where the sole hides that table (the wall facing away from the camera), the point RIGHT_EDGE_OUT_MM
+      out at the edge's height must be unchanged: the camera looks past the top edge there onto the table
+      beyond. If the sole really reaches further out (a rounded or unmeasured edge cut off by the outline),
+      that ray hits the sole.
     """
     project = table_to_right_pixel
     height, width = changed_right.shape
-    inside = np.column_stack([outline - RIGHT_INSIDE_MM * outward, np.maximum(edge_height, 0.0)])
+    edge = np.maximum(edge_height, 0.0)
+    inside = np.column_stack([outline - RIGHT_INSIDE_MM * outward, edge])
     outside = np.column_stack([outline + RIGHT_OUTSIDE_MM * outward, np.zeros(len(outline))])
-    # Hidden: the ray from the table point to the camera is above the footprint at the edge's height.
-    lift = np.clip(edge_height / right_centre[2], 0.0, 1.0)[:, None]
-    over = outside[:, :2] + lift * (right_centre[:2] - outside[:, :2])
-    visible = ~footprint.contains(over)
+    beyond_edge = np.column_stack([outline + RIGHT_EDGE_OUT_MM * outward, edge])
+    visible = ~_hidden(outside, right_centre, surface_height)
 
     def sample(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         px = np.round(project(points)).astype(np.int64)
@@ -120,15 +142,66 @@ def check_outline_right(
 
     in_changed, in_ok = sample(inside)
     out_changed, out_ok = sample(outside)
+    far_changed, far_ok = sample(beyond_edge)
+    if table_level is not None:
+        out_changed &= ~table_level.contains(outside[:, :2])
+    out_changed = np.where(visible, out_changed, far_changed)
+    out_ok = np.where(visible, out_ok, far_ok)
     inside_agree = float(np.mean(in_changed[in_ok])) if np.any(in_ok) else 0.0
-    tested = out_ok & visible
-    outside_agree = float(np.mean(~out_changed[tested])) if np.count_nonzero(tested) > 0.2 * len(outline) else 1.0
+    outside_agree = float(np.mean(~out_changed[out_ok])) if np.count_nonzero(out_ok) > 0.2 * len(outline) else 1.0
     if inside_agree < MIN_OUTLINE_AGREEMENT or outside_agree < MIN_OUTLINE_AGREEMENT:
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"the outline found in the left image does not fit the right image: {100 * inside_agree:.0f} % "
             f"of the points {RIGHT_INSIDE_MM:g} mm inside show the sole and {100 * outside_agree:.0f} % of those "
-            f"{RIGHT_OUTSIDE_MM:g} mm outside the table (need {100 * MIN_OUTLINE_AGREEMENT:.0f} %)",
+            f"outside the table (need {100 * MIN_OUTLINE_AGREEMENT:.0f} %)",
+        )
+    return None
+
+
+def _hidden(
+    table_points: np.ndarray, camera: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """Whether the ray from each table point (N x 3, z = 0) to the camera passes below the sole's surface."""
+    hidden = np.zeros(len(table_points), bool)
+    for z in np.arange(HIDDEN_STEP_MM, HIDDEN_MAX_MM, HIDDEN_STEP_MM):
+        fraction = z / camera[2]
+        xy = table_points[:, :2] + fraction * (camera[:2] - table_points[:, :2])
+        hidden |= surface_height(xy) >= z  # NaN (no sole there) compares False
+    return hidden
+
+
+def check_edge_profile(
+    outline: np.ndarray, outward: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> CheckFailure | None:
+    """The surface across the edge: does the top run on flat to the outline, or fall away before it?
+
+    `surface_height(xy N x 2) -> N` is the measured height (NaN where none). Per outline point the height
+    EDGE_OUTER_MM inside is compared with the line through the heights further in; the median over the
+    outline (a rounded edge runs round the sole, a single bad patch does not move the median) must not fall
+    more than EDGE_MAX_DROP_MM below it.
+    """
+    inner = np.array(EDGE_INNER_MM)
+    heights = np.column_stack([surface_height(outline - d * outward) for d in inner])
+    outer = surface_height(outline - EDGE_OUTER_MM * outward)
+    weight = np.isfinite(heights).astype(np.float64)
+    z = np.nan_to_num(heights)
+    # Per-row least-squares line z = a + b d over the finite samples (sums of products).
+    s0, s1, s2 = weight.sum(1), (weight * inner).sum(1), (weight * inner**2).sum(1)
+    t0, t1 = (weight * z).sum(1), (weight * z * inner).sum(1)
+    det = s0 * s2 - s1 * s1
+    usable = (s0 >= 4) & np.isfinite(outer) & (np.abs(det) > 1e-9)
+    if np.count_nonzero(usable) < MIN_TESTABLE * len(outline):
+        return None  # too little surface measured near the edge: the other checks and the glue path speak
+    b = (s0 * t1 - s1 * t0)[usable] / det[usable]
+    a = (t0[usable] - b * s1[usable]) / s0[usable]
+    drop = float(np.median(a + b * EDGE_OUTER_MM - outer[usable]))
+    if drop > EDGE_MAX_DROP_MM:
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the sole's top falls {drop:.1f} mm (median round the outline) over the last few mm before its "
+            "outline: its top edge is rounded or bevelled, so the edge lies beyond where its depth was measured "
+            "and the glue path near it is on a curve, not a flat top",
         )
     return None
 

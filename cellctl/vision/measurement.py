@@ -14,6 +14,7 @@ program acts on, e.g. the service's PLC error code): the robot must never get a 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,7 +22,13 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.vision.checks import CheckFailure, check_glue_path, check_outline_depth, check_outline_right
+from cellctl.vision.checks import (
+    CheckFailure,
+    check_edge_profile,
+    check_glue_path,
+    check_outline_depth,
+    check_outline_right,
+)
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
@@ -227,6 +234,10 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> Che
         )
         if problem is not None:
             return problem
+    heights = _height_map(reconstruction)
+    problem = check_edge_profile(ring, outward, heights)
+    if problem is not None:
+        return problem
     changed_right, calib = reconstruction.changed_right, reconstruction.calibration
     if changed_right is None or calib is None or reconstruction.camera_to_table is None:
         return None
@@ -243,9 +254,37 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> Che
     edge_height = SoleSurface(reconstruction).coarse_heights(ring - 3.0 * outward, 3.0)
     edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
     assert reconstruction.footprint is not None
-    return check_outline_right(
-        ring, outward, edge_height, changed_right, right_pixel, centre[:3], reconstruction.footprint
-    )
+    table_level = None
+    if reconstruction.raised is not None and reconstruction.measured_cells is not None:
+        table_level = Footprint(
+            reconstruction.measured_cells.mask & (1 - reconstruction.raised.mask),
+            reconstruction.raised.origin,
+            reconstruction.raised.cell_mm,
+        )
+    return check_outline_right(ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level)
+
+
+HEIGHT_MAP_CELL_MM = 1.0
+
+
+def _height_map(reconstruction: Reconstruction) -> Callable[[np.ndarray], np.ndarray]:
+    """Sole height at table points (NaN off the sole): the median of the sole's points per 1 mm cell."""
+    points = reconstruction.sole_points
+    raster = Footprint.empty_like(points[:, :2], HEIGHT_MAP_CELL_MM)
+    row, col, _ = raster.cells(points[:, :2])
+    flat = row * raster.mask.shape[1] + col
+    order = np.lexsort((points[:, 2], flat))
+    flat, z = flat[order], points[order, 2]
+    starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
+    counts = np.diff(np.r_[starts, len(flat)])
+    grid = np.full(raster.mask.size, np.nan)
+    grid[flat[starts]] = z[starts + counts // 2]  # the median of each cell's sorted heights
+
+    def height(xy: np.ndarray) -> np.ndarray:
+        r, c, inside = raster.cells(xy)
+        return np.where(inside, grid[r * raster.mask.shape[1] + c], np.nan)
+
+    return height
 
 
 def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
