@@ -66,11 +66,14 @@ def check_outline_depth(
     raised: Footprint,
     measured: Footprint,
     footprint: Footprint | None = None,
+    hidden: np.ndarray | None = None,
 ) -> CheckFailure | None:
     """The outline (N x 2, table mm) against the depth step (cells where most points rise above the table).
 
     With the `footprint` the outline bounds, points whose test positions fall on the wrong side of it (past
     a pointed tip, across a narrow waist) are not tested: there the offset along the normal means nothing.
+    `hidden`: outline points whose outside test position the camera cannot see (behind a tall sole's wall
+    facing away): no depth is expected there, so they neither count for nor against the outline.
     """
     inside = outline - OUTLINE_INSIDE_MM * outward
     outside = outline + OUTLINE_OUTSIDE_MM * outward
@@ -81,11 +84,12 @@ def check_outline_depth(
     in_ok = raised.contains(inside)
     out_ok = ~raised.contains(outside)
     testable = in_known & out_known
-    if np.count_nonzero(testable) < MIN_TESTABLE * len(outline):
+    seen = len(outline) if hidden is None else int(np.count_nonzero(~hidden))
+    if np.count_nonzero(testable) < MIN_TESTABLE * seen or seen < MIN_TESTABLE * len(outline) / 2:
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"outline not confirmed by depth: only {np.count_nonzero(testable)} of {len(outline)} outline points "
-            "have measured depth on both sides",
+            f"({seen} in view) have measured depth on both sides",
         )
     agree = float(np.mean((in_ok & out_ok)[testable]))
     if agree < MIN_OUTLINE_AGREEMENT:
@@ -157,6 +161,13 @@ def check_outline_right(
             f"outside the table (need {100 * MIN_OUTLINE_AGREEMENT:.0f} %)",
         )
     return None
+
+
+def hidden_from(
+    table_points: np.ndarray, camera: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """Whether the camera (table frame) cannot see each table point (N x 2 or N x 3 at z = 0) past the sole."""
+    return _hidden(np.column_stack([table_points[:, :2], np.zeros(len(table_points))]), camera, surface_height)
 
 
 def _hidden(

@@ -23,11 +23,13 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import (
+    OUTLINE_OUTSIDE_MM,
     CheckFailure,
     check_edge_profile,
     check_glue_path,
     check_outline_depth,
     check_outline_right,
+    hidden_from,
 )
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
@@ -38,6 +40,7 @@ from cellctl.vision.defaults import (
     PLAUSIBLE_LENGTH_MM,
 )
 from cellctl.vision.footprint import Footprint, snap_to_inset
+from cellctl.vision.local_fit import local_planes
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
@@ -48,8 +51,8 @@ MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fractio
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
-GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: Gaussian over arc length
-GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
+GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
+GLUE_SMOOTHING_MM = 6.0  # heights along the path: width of the local plane fit, averages the patches' noise
 # Gaussian along the outline: removes the raster's staircase (0.25 mm cells) and pixel noise; wider would cut
 # the tip of a pointed toe (a 2 mm sigma takes ~1 mm off a 35 degree wedge).
 OUTLINE_SMOOTHING_MM = 0.75
@@ -228,13 +231,17 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> Che
     """The outline's self-checks: against the depth step, and against the right image when a table is taught."""
     ring = _resample_closed(outline, 1.0)
     outward = _outward_normals(ring)
+    heights = _height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
+        hidden = None
+        if reconstruction.camera_to_table is not None:
+            left_centre = reconstruction.camera_to_table[:3, 3]
+            hidden = hidden_from(ring + OUTLINE_OUTSIDE_MM * outward, left_centre, heights)
         problem = check_outline_depth(
-            ring, outward, reconstruction.raised, reconstruction.measured_cells, reconstruction.footprint
+            ring, outward, reconstruction.raised, reconstruction.measured_cells, reconstruction.footprint, hidden
         )
         if problem is not None:
             return problem
-    heights = _height_map(reconstruction)
     problem = check_edge_profile(ring, outward, heights)
     if problem is not None:
         return problem
@@ -332,8 +339,8 @@ def glue_path(
     Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
     offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
     Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
-    from the slope along the path and the slope between the rings (a patch's own tilt is too noisy on a
-    weakly textured sole: ~10 degrees).
+    from a plane fitted to both around each point (a patch's own tilt is too noisy on a weakly textured
+    sole: ~10 degrees).
     """
     resampled = _resample_closed(outline, 0.25)
     inward = -_outward_normals(resampled)
@@ -350,20 +357,22 @@ def glue_path(
             f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
             f"({missing.size} of {len(path_xy)} path points)"
         )
-    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth along
-    # the path, so a Gaussian along the arc takes the rest (its bias, z'' sigma^2 / 2, is ~0.01 mm here).
+    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth, so a
+    # plane fitted to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
+    # for a sloping surface also where the path turns round a pointed end).
     sigma = GLUE_SMOOTHING_MM / spacing_mm
     raw = _without_single_outliers(samples.z[: len(path_xy)])
-    z = _smooth_along(raw, sigma)
+    z, _ = local_planes(path_xy, path_xy, raw, GLUE_SMOOTHING_MM)
     inner = _without_single_outliers(samples.z[len(path_xy) :])
-    inner = np.where(np.isfinite(inner), inner, raw)  # no inner sample: flat across
-    # The normal turns slowly along a sole's edge but its slopes are differences of noisy heights: they are
-    # smoothed over a longer stretch than the heights themselves.
-    wide = GLUE_NORMAL_SMOOTHING_MM / spacing_mm
-    across = _smooth_along(inner - raw, wide)
+    # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
+    # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).
+    _, gradient = local_planes(
+        path_xy, np.vstack([path_xy, inner_xy]), np.concatenate([raw, inner]), GLUE_NORMAL_SMOOTHING_MM
+    )
+    normals = np.column_stack([-gradient, np.ones(len(path_xy))])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     patch_normals = _smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    normals = _path_normals(path_xy, _smooth_along(raw, wide), path_inward, across)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
 
 
@@ -379,17 +388,6 @@ def _without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -
     bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
     lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
     return np.where(lone, median, z)
-
-
-def _path_normals(path_xy: np.ndarray, z: np.ndarray, inward: np.ndarray, across_rise: np.ndarray) -> np.ndarray:
-    """Unit surface normals from the slope along a closed path and the rise over GLUE_NORMAL_BASE_MM inward."""
-    step = np.roll(path_xy, -1, axis=0) - np.roll(path_xy, 1, axis=0)
-    run = np.maximum(np.linalg.norm(step, axis=1), 1e-9)
-    tangent = step / run[:, None]
-    along = (np.roll(z, -1) - np.roll(z, 1)) / run
-    gradient = along[:, None] * tangent + (across_rise / GLUE_NORMAL_BASE_MM)[:, None] * inward
-    normals = np.column_stack([-gradient, np.ones(len(z))])
-    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
 def _smooth_along(values: np.ndarray, sigma_samples: float) -> np.ndarray:

@@ -86,3 +86,20 @@ def test_outline_on_the_depth_step_passes_one_inside_it_is_refused() -> None:
     problem = check_outline_depth(inner, inner_out, raised, measured)
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert "still raised" in problem.reason
+
+
+def test_table_hidden_behind_a_tall_sole_does_not_count_against_its_outline() -> None:
+    raised = _disc_footprint(60.0)
+    outline, outward = _ring(57.0)
+    # The camera sees no table beyond the half of the edge facing away from it: no depth there.
+    measured = Footprint(_disc_footprint(75.0).mask.copy(), raised.origin, raised.cell_mm)
+    centres = measured.centres()
+    far = centres[(centres[:, 0] < 0) & (np.hypot(*centres.T) > 60.0)]
+    row, col, _ = measured.cells(far)
+    measured.mask[row, col] = 0
+    assert check_outline_depth(outline, outward, raised, measured) is not None  # "not confirmed by depth"
+    hidden = outline[:, 0] < 0
+    assert check_outline_depth(outline, outward, raised, measured, hidden=hidden) is None
+    # Hidden or not, an outline inside the edge still disagrees where the table is seen.
+    inner, inner_out = _ring(49.0)
+    assert check_outline_depth(inner, inner_out, raised, measured, hidden=inner[:, 0] < 0) is not None
