@@ -49,6 +49,12 @@ MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a
 # a sole with a sharp edge: 0.0-0.2 mm, the height noise); a top edge rounded with a few mm of radius falls
 # away before the outline (0.7-0.9 mm where depth ends), and there the edge lies further out than the depth
 # reaches while the glue path sits on the curve (heights and normals from a flat-top fit are wrong).
+# A glue point is measured if the cloud has points within GLUE_COVER_RADIUS_MM of it. A patch fit (4 mm) bridges
+# small holes, but a path that runs over unmeasured surface for more than a few per cent of its points (0-2 %
+# on soles with sharp edges, 10-50 % over a steep bevelled wall the stereo cannot see) gets its heights from
+# elsewhere: the surface there is unknown.
+GLUE_COVER_RADIUS_MM = 1.0
+MAX_GLUE_UNCOVERED = 0.05
 EDGE_OUTER_MM = 0.75
 EDGE_INNER_MM = (3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
 EDGE_MAX_DROP_MM = 0.4
@@ -213,6 +219,19 @@ def check_edge_profile(
             f"the sole's top falls {drop:.1f} mm (median round the outline) over the last few mm before its "
             "outline: its top edge is rounded or bevelled, so the edge lies beyond where its depth was measured "
             "and the glue path near it is on a curve, not a flat top",
+        )
+    return None
+
+
+def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:
+    """Glue points with measured surface under them (bool per point, see GLUE_COVER_RADIUS_MM)."""
+    uncovered = 1.0 - float(np.mean(covered))
+    if uncovered > MAX_GLUE_UNCOVERED:
+        return CheckFailure(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"{100 * uncovered:.0f} % of the glue path runs where no surface was measured within "
+            f"{GLUE_COVER_RADIUS_MM:g} mm (a steep or rounded edge the cameras do not see; need at most "
+            f"{100 * MAX_GLUE_UNCOVERED:.0f} %): its heights there would not be measurements",
         )
     return None
 

@@ -23,9 +23,11 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import (
+    GLUE_COVER_RADIUS_MM,
     OUTLINE_OUTSIDE_MM,
     CheckFailure,
     check_edge_profile,
+    check_glue_coverage,
     check_glue_path,
     check_outline_depth,
     check_outline_right,
@@ -211,6 +213,9 @@ def measure_sole(
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
+    problem = check_glue_coverage(np.isfinite(surface.coarse_heights(path.points[:, :2], GLUE_COVER_RADIUS_MM)))
+    if problem is not None:
+        return _invalid(problem.kind, problem.reason, **base)
     sole_z = np.quantile(points[:, 2], [0.01, 0.99])
     raw_z = path.points[:, 2] if path.raw_z is None else path.raw_z
     patch_normals = path.normals if path.surface_normals is None else path.surface_normals

@@ -103,3 +103,15 @@ def test_table_hidden_behind_a_tall_sole_does_not_count_against_its_outline() ->
     # Hidden or not, an outline inside the edge still disagrees where the table is seen.
     inner, inner_out = _ring(49.0)
     assert check_outline_depth(inner, inner_out, raised, measured, hidden=inner[:, 0] < 0) is not None
+
+
+def test_a_glue_path_over_unmeasured_surface_is_refused() -> None:
+    from cellctl.vision.checks import MAX_GLUE_UNCOVERED, check_glue_coverage
+
+    covered = np.ones(300, bool)
+    covered[::50] = False  # isolated holes a patch bridges
+    assert check_glue_coverage(covered) is None
+    covered[100 : 100 + int(0.1 * 300)] = False  # a tenth of the path over a wall the cameras do not see
+    problem = check_glue_coverage(covered)
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert 1.0 - covered.mean() > MAX_GLUE_UNCOVERED
