@@ -28,6 +28,9 @@ OUTLINE_INSIDE_MM = 2.0  # the sole must rise above the table this far inside it
 OUTLINE_OUTSIDE_MM = 7.0  # ...and not this far outside (stereo edge fattening reaches ~5 mm)
 MIN_OUTLINE_AGREEMENT = 0.9  # of the testable outline points
 MIN_TESTABLE = 0.5  # of the outline points: fewer with evidence and the outline cannot be confirmed
+# Locally: in any stretch of this many outline points (1 mm apart), at most this share may disagree.
+LOCAL_WINDOW_MM = 12
+MAX_LOCAL_DISAGREEMENT = 0.6
 RIGHT_INSIDE_MM = 1.5
 RIGHT_OUTSIDE_MM = 3.0
 # Past the top edge of a wall facing away from the camera, at the edge's height: unchanged if the outline is
@@ -49,10 +52,11 @@ MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a
 # a sole with a sharp edge: 0.0-0.2 mm, the height noise); a top edge rounded with a few mm of radius falls
 # away before the outline (0.7-0.9 mm where depth ends), and there the edge lies further out than the depth
 # reaches while the glue path sits on the curve (heights and normals from a flat-top fit are wrong).
-# A glue point is measured if the cloud has points within GLUE_COVER_RADIUS_MM of it. A patch fit (4 mm) bridges
-# small holes, but a path that runs over unmeasured surface for more than a few per cent of its points (0-2 %
-# on soles with sharp edges, 10-50 % over a steep bevelled wall the stereo cannot see) gets its heights from
-# elsewhere: the surface there is unknown.
+# A glue point is measured if the cloud has MIN_CLOUD_POINTS (12, ~4 per mm^2) within GLUE_COVER_RADIUS_MM of
+# it. A patch fit (4 mm) bridges small holes, but a path that runs over unmeasured or thinly measured surface
+# for more than a few per cent of its points (0-2 % on soles with sharp edges seen at 0.39 mm per pixel;
+# 10-50 % over a steep bevelled wall the stereo cannot see, or through a wide-angle rig's coarser pixels)
+# gets its heights from elsewhere: 1-8 mm off on simulated soles.
 GLUE_COVER_RADIUS_MM = 1.0
 MAX_GLUE_UNCOVERED = 0.05
 EDGE_OUTER_MM = 0.75
@@ -107,6 +111,26 @@ def check_outline_depth(
             f"({100 * high_outside:.0f} % still raised {OUTLINE_OUTSIDE_MM:g} mm outside, {100 * low_inside:.0f} % "
             f"not raised {OUTLINE_INSIDE_MM:g} mm inside): the edge found is not the sole's edge",
         )
+    return _local_disagreement(testable & ~(in_ok & out_ok), testable, "the depth step")
+
+
+def _local_disagreement(bad: np.ndarray, tested: np.ndarray, evidence: str) -> CheckFailure | None:
+    """A stretch of the outline (points 1 mm apart, closed) where most tested points disagree with the evidence.
+
+    The share over the whole outline lets a notch through: a 16 mm deep cut into the sole is a few per cent
+    of the outline. Scattered single disagreements are noise; most of a LOCAL_WINDOW_MM stretch is a defect.
+    """
+    window = np.ones(LOCAL_WINDOW_MM)
+    count = np.convolve(np.concatenate([tested, tested[: LOCAL_WINDOW_MM - 1]]).astype(float), window, "valid")
+    wrong = np.convolve(np.concatenate([bad, bad[: LOCAL_WINDOW_MM - 1]]).astype(float), window, "valid")
+    share = wrong / np.maximum(count, 1.0)
+    worst = int(np.argmax(np.where(count >= LOCAL_WINDOW_MM / 2, share, 0.0)))
+    if count[worst] >= LOCAL_WINDOW_MM / 2 and share[worst] > MAX_LOCAL_DISAGREEMENT:
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the outline disagrees with {evidence} along a {LOCAL_WINDOW_MM} mm stretch ({100 * share[worst]:.0f} % "
+            f"of its points, from outline point {worst}): a notch or a bulge that is not the sole's edge",
+        )
     return None
 
 
@@ -133,7 +157,8 @@ def check_outline_right(
     - where the sole hides that table (the wall facing away from the camera), the point RIGHT_EDGE_OUT_MM
       out at the edge's height must be unchanged: the camera looks past the top edge there onto the table
       beyond. If the sole really reaches further out (a rounded or unmeasured edge cut off by the outline),
-      that ray hits the sole.
+      that ray hits the sole. Where the left camera measured the table's height right there, the sole does
+      not reach it, whatever the right pixel shows (a shadow on the table beyond).
     """
     project = table_to_right_pixel
     height, width = changed_right.shape
@@ -155,6 +180,7 @@ def check_outline_right(
     far_changed, far_ok = sample(beyond_edge)
     if table_level is not None:
         out_changed &= ~table_level.contains(outside[:, :2])
+        far_changed &= ~table_level.contains(beyond_edge[:, :2])
     out_changed = np.where(visible, out_changed, far_changed)
     out_ok = np.where(visible, out_ok, far_ok)
     inside_agree = float(np.mean(in_changed[in_ok])) if np.any(in_ok) else 0.0
@@ -166,7 +192,8 @@ def check_outline_right(
             f"of the points {RIGHT_INSIDE_MM:g} mm inside show the sole and {100 * outside_agree:.0f} % of those "
             f"outside the table (need {100 * MIN_OUTLINE_AGREEMENT:.0f} %)",
         )
-    return None
+    tested = in_ok & out_ok
+    return _local_disagreement(tested & (~in_changed | out_changed), tested, "the right image")
 
 
 def hidden_from(

@@ -213,7 +213,9 @@ def measure_sole(
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
-    problem = check_glue_coverage(np.isfinite(surface.coarse_heights(path.points[:, :2], GLUE_COVER_RADIUS_MM)))
+    problem = check_glue_coverage(
+        np.isfinite(surface.coarse_heights(path.points[:, :2], _cover_radius(reconstruction)))
+    )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     sole_z = np.quantile(points[:, 2], [0.01, 0.99])

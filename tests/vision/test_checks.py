@@ -115,3 +115,16 @@ def test_a_glue_path_over_unmeasured_surface_is_refused() -> None:
     problem = check_glue_coverage(covered)
     assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
     assert 1.0 - covered.mean() > MAX_GLUE_UNCOVERED
+
+
+def test_a_notch_cut_into_the_outline_is_refused_though_most_of_the_outline_agrees() -> None:
+    raised = _disc_footprint(60.0)
+    measured = _disc_footprint(75.0)
+    outline, outward = _ring(57.0, 360)  # ~1 mm apart
+    assert check_outline_depth(outline, outward, raised, measured) is None
+    # 14 mm of the outline run 16 mm inside the sole (a part of it lost): 4 % of the outline.
+    notched = outline.copy()
+    notched[100:114] -= 16.0 * outward[100:114]
+    problem = check_outline_depth(notched, outward, raised, measured)
+    assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
+    assert "stretch" in problem.reason

@@ -66,7 +66,8 @@ def silhouette(fillet_mm: float = 0.0, shadow: bool = False) -> np.ndarray:
     return changed
 
 
-def table_level_outside(radius: float) -> Footprint:
+def table_level_outside(radius: float = RADIUS) -> Footprint:
+    """Where the left camera measures the table's own height: off the (true) sole."""
     cells = np.mgrid[0:800, 0:800]
     xy = (np.stack([cells[1], cells[0]], -1) + 0.5) * 0.25 - 100.0
     return Footprint((np.linalg.norm(xy, axis=-1) > radius + 0.5).astype(np.uint8), (-100.0, -100.0), 0.25)
@@ -76,7 +77,7 @@ def right_check(outline_radius: float, changed: np.ndarray, heights: Callable[[n
     outline, outward = ring(outline_radius)
     edge = np.full(len(outline), HEIGHT)
     return check_outline_right(
-        outline, outward, edge, changed, project, CAMERA, heights, table_level_outside(outline_radius)
+        outline, outward, edge, changed, project, CAMERA, heights, table_level_outside()
     )
 
 
