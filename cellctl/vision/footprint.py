@@ -100,6 +100,21 @@ class Footprint:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _disc(open_mm / self.cell_mm))
         return Footprint(mask, self.origin, self.cell_mm)
 
+    def filled(self, polygon: np.ndarray) -> Footprint:
+        """A raster on this one's cells marking the cells whose centres lie inside `polygon` (N x 2, table mm)."""
+        shift = 8  # sub-cell vertex positions: 1/256 of a cell
+        cells = (np.asarray(polygon, np.float64) - np.array(self.origin)) / self.cell_mm - 0.5
+        mask = np.zeros_like(self.mask)
+        cv2.fillPoly(mask, [np.round(cells * (1 << shift)).astype(np.int32)], 1, cv2.LINE_8, shift)
+        # fillPoly also marks cells the edge merely touches: test the centres of the boundary cells exactly.
+        rows, cols = np.nonzero(mask & ~cv2.erode(mask, np.ones((3, 3), np.uint8)))
+        contour = cells.astype(np.float32).reshape(-1, 1, 2)
+        outside = [
+            cv2.pointPolygonTest(contour, (float(c), float(r)), False) < 0 for r, c in zip(rows, cols, strict=True)
+        ]
+        mask[rows[outside], cols[outside]] = 0
+        return Footprint(mask, self.origin, self.cell_mm)
+
     def eroded(self, distance_mm: float) -> Footprint:
         """Cells at least `distance_mm` inside the region's edge."""
         inside = cv2.distanceTransform(self.mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * self.cell_mm

@@ -202,20 +202,21 @@ def measure_sole(
     # The line glue_offset_mm inside the edge, from the footprint's distance transform: exact at pointed
     # and cusped ends too, where moving the outline along its normals would cross itself. Cell centres lie
     # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
-    inset = footprint.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
+    # The offset is taken from the outline reported (smoothed against the edge's pixel noise), rasterised
+    # again on the footprint's cells: the glue path keeps its distance from that outline.
+    edge = footprint.filled(outline)
+    inset = edge.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
     if len(inset) < 3:
         return _invalid(
             FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide", **base
         )
     # Smoothing takes the raster's staircase out but pulls sharp corners in: back onto the offset line.
-    glue_line = snap_to_inset(footprint, _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
+    glue_line = snap_to_inset(edge, _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
     path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
-    problem = check_glue_coverage(
-        np.isfinite(surface.coarse_heights(path.points[:, :2], _cover_radius(reconstruction)))
-    )
+    problem = check_glue_coverage(np.isfinite(surface.coarse_heights(path.points[:, :2], GLUE_COVER_RADIUS_MM)))
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     sole_z = np.quantile(points[:, 2], [0.01, 0.99])

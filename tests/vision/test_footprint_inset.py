@@ -53,3 +53,12 @@ def test_points_on_the_medial_axis_are_left_alone() -> None:
     footprint = raster(np.array([[-20.0, -10.0], [20.0, -10.0], [20.0, 10.0], [-20.0, 10.0]]))
     ridge = np.array([[0.0, 0.0], [5.0, 0.0]])  # 10 mm inside, on the ridge of the distance field
     np.testing.assert_allclose(snap_to_inset(footprint, ridge, 2.0), ridge, atol=1e-9)
+
+
+def test_a_polygon_filled_on_the_cells_marks_exactly_the_cells_whose_centres_it_holds() -> None:
+    polygon = wedge_polygon()
+    exact = raster(polygon)
+    filled = Footprint(np.zeros_like(exact.mask), exact.origin, CELL).filled(polygon + 0.01)
+    np.testing.assert_array_equal(filled.mask, exact.mask)
+    shifted = Footprint(np.zeros_like(exact.mask), exact.origin, CELL).filled(polygon + np.array([CELL, 0.0]))
+    assert np.count_nonzero(shifted.mask != exact.mask) > 100
