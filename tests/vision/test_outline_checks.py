@@ -76,9 +76,7 @@ def table_level_outside(radius: float = RADIUS) -> Footprint:
 def right_check(outline_radius: float, changed: np.ndarray, heights: Callable[[np.ndarray], np.ndarray]) -> object:
     outline, outward = ring(outline_radius)
     edge = np.full(len(outline), HEIGHT)
-    return check_outline_right(
-        outline, outward, edge, changed, project, CAMERA, heights, table_level_outside()
-    )
+    return check_outline_right(outline, outward, edge, changed, project, CAMERA, heights, table_level_outside())
 
 
 def test_the_right_outline_fits_the_right_image_also_with_a_shadow_on_the_table() -> None:
