@@ -5,6 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+Parity = Literal["N", "E", "O"]
+StopBits = Literal[1, 2]
+ByteSize = Literal[7, 8]
+
 #: Default TCP port: 5020 rather than the registered 502, which needs root on Linux.
 DEFAULT_TCP_PORT = 5020
 
@@ -32,9 +36,9 @@ class SerialEndpoint:
 
     port: str
     baudrate: int = 19200
-    parity: Literal["N", "E", "O"] = "E"
-    stopbits: Literal[1, 2] = 1
-    bytesize: Literal[7, 8] = 8
+    parity: Parity = "E"
+    stopbits: StopBits = 1
+    bytesize: ByteSize = 8
 
     def __post_init__(self) -> None:
         if not self.port:

@@ -28,7 +28,6 @@ goes on undisturbed.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Sequence
@@ -37,19 +36,10 @@ from dataclasses import dataclass
 from numpy.typing import ArrayLike
 
 from firmware_io.pdu import ExceptionCode
-from firmware_io.registers import (
-    MAX_GLUE_POINTS,
-    ErrorCode,
-    FeatureBit,
-    GlueFrame,
-    MapLayout,
-    Register,
-    RegisterMap,
-    StatusBit,
-)
+from firmware_io.registers import ErrorCode, MapLayout, Register, RegisterMap, StatusBit
+from firmware_io.result_image import EncodedResult, Inspection, PathInfo, ResultImage
 
-_NAN = math.nan
-_MEASUREMENT_REGISTERS = Register.GLUE_POINT_COUNT - Register.HEEL_HEIGHT_MM  # 10..17: four float32
+__all__ = ["Inspection", "PathInfo", "PlcHandshake", "Trigger"]
 
 
 @dataclass(frozen=True)
@@ -61,33 +51,19 @@ class Trigger:
     recipe: int = 0  #: RECIPE_SELECT when the trigger was accepted (map v2; always 0 in version 1)
 
 
-@dataclass(frozen=True)
-class PathInfo:
-    """What map version 2 publishes about the glue path besides its points."""
-
-    normals: ArrayLike  #: N x 3 unit normals, one per glue point, in the same frame as the points
-    frame: GlueFrame = GlueFrame.TABLE
-    nozzle_offset_mm: float = 0.0  #: how far the points were moved along their normals
-    glue_offset_mm: float = _NAN  #: inset of the path from the sole's edge
-
-
-@dataclass(frozen=True)
-class Inspection:
-    """The result cycle's tolerance check (map v2); features in `failed` are outside their tolerance."""
-
-    failed: FeatureBit = FeatureBit(0)
-
-
 class PlcHandshake:
-    """Register image plus handshake state, shared by the Modbus server thread and the controller."""
+    """Register image plus handshake state, shared by the Modbus server thread and the controller.
+
+    Over 150 lines (~225, most of it the public methods' documentation): one state machine under one lock,
+    which the PLC's requests and the controller's calls both change; what the result registers hold is
+    firmware_io.result_image.
+    """
 
     def __init__(self, register_map: RegisterMap, layout: MapLayout | None = None) -> None:
-        self._map = register_map
         self.layout = MapLayout.of(1) if layout is None else layout
         self._changed = threading.Condition()  # its lock guards everything below
-        self._image = [0] * self.layout.size
-        self._image[Register.MAP_VERSION] = self.layout.version
-        self._flags = StatusBit(0)  # RESULT_VALID, ERROR, CAMERAS_OK, CALIBRATION_OK; the rest is derived
+        self._result = ResultImage(register_map, self.layout)
+        self._image = self._result.registers
         self._running: int | None = None
         self._running_recipe = 0
         self._running_since: float | None = None
@@ -96,7 +72,6 @@ class PlcHandshake:
         self._pending: Trigger | None = None
         self._closed = False
         self._controller_seen_at = time.monotonic()
-        self._clear_result()
         self._update_status()
 
     # ---- PLC side: called by the Modbus server for each request -------------------------------
@@ -155,8 +130,7 @@ class PlcHandshake:
             if age_s <= cycle_timeout_s:
                 return None
             expired = self._timed_out = self._running
-            measurement = self._map.encode_floats([_NAN, _NAN, _NAN, age_s * 1000.0])
-            self._finish(expired, measurement, [], ErrorCode.CYCLE_TIMEOUT)
+            self._finish(expired, self._result.encode_error(ErrorCode.CYCLE_TIMEOUT, age_s * 1000.0))
             return expired
 
     def beat(self, liveness_timeout_s: float | None) -> bool:
@@ -252,20 +226,10 @@ class PlcHandshake:
             "length_mm": length_mm,
             "cycle_time_ms": cycle_time_ms,
         }
-        for name, value in values.items():
-            if not math.isfinite(float(value)):
-                raise ValueError(f"{name} is {value}: publish_error(cycle, ErrorCode.MEASUREMENT_INVALID) instead")
         # Encode before taking the lock: a refused value leaves the map untouched.
-        measurement = self._map.encode_floats(list(values.values()), what="measurement")
-        if not self.layout.has_normals:
-            points, extra = self._map.encode_points(glue_points), {}
-        else:
-            if path is None:
-                raise ValueError("register map version 2 publishes normals: pass path=PathInfo(normals, ...)")
-            points = self._map.encode_path(glue_points, path.normals)
-            extra = self._path_registers(path, inspection)
+        result = self._result.encode_result(values, glue_points, path, inspection)
         with self._changed:
-            return self._finish(cycle, measurement, points, ErrorCode.NONE, extra, inspection)
+            return self._finish(cycle, result)
 
     def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> bool:
         """Tell the PLC that `cycle` ended with `code`; measurements read NaN and no glue points.
@@ -275,9 +239,9 @@ class PlcHandshake:
         code = ErrorCode(code)
         if code is ErrorCode.NONE:
             raise ValueError("publish_error needs an error code other than ErrorCode.NONE")
-        measurement = self._map.encode_floats([_NAN, _NAN, _NAN, cycle_time_ms], what="measurement")
+        result = self._result.encode_error(code, cycle_time_ms)
         with self._changed:
-            return self._finish(cycle, measurement, [], code)
+            return self._finish(cycle, result)
 
     def close(self) -> None:
         """Wake any wait_trigger() so the controller can stop."""
@@ -291,21 +255,13 @@ class PlcHandshake:
         self._image[Register.TRIGGER] = cycle
         self._running = self._last_accepted = cycle
         self._running_since = time.monotonic()
-        self._clear_result()
+        self._result.clear()
         self._update_status()
         self._running_recipe = self._image[Register.RECIPE_SELECT] if self.layout.version >= 2 else 0
         self._pending = Trigger(cycle, time.monotonic(), self._running_recipe)
         self._changed.notify_all()
 
-    def _finish(
-        self,
-        cycle: int,
-        measurement: list[int],
-        points: list[int],
-        code: ErrorCode,
-        extra: dict[int, list[int]] | None = None,
-        inspection: Inspection | None = None,
-    ) -> bool:
+    def _finish(self, cycle: int, result: EncodedResult) -> bool:
         self._controller_seen_at = time.monotonic()
         if cycle == self._timed_out and cycle != self._running:
             return False  # the link answered it with CYCLE_TIMEOUT already; the late result is dropped
@@ -314,58 +270,14 @@ class PlcHandshake:
                 f"cannot publish cycle {cycle}: the running cycle is {self._running} "
                 "(publish exactly once per trigger, with the trigger's cycle number)"
             )
-        image = self._image
-        image[Register.HEEL_HEIGHT_MM : Register.GLUE_POINT_COUNT] = measurement
-        image[Register.GLUE_POINT_COUNT] = len(points) // self.layout.registers_per_point
-        image[Register.GLUE_POINTS : Register.GLUE_POINTS + len(points)] = points
-        for address, registers in (extra or {}).items():
-            image[address : address + len(registers)] = registers
-        image[Register.ERROR_CODE] = code
-        if self.layout.version >= 2:
-            image[Register.RESULT_RECIPE] = self._running_recipe
-        # Last: the cycle number and the flags that tell the PLC the result is complete.
-        image[Register.RESULT_CYCLE] = cycle
-        self._set_flag(StatusBit.RESULT_VALID, code is ErrorCode.NONE)
-        self._set_flag(StatusBit.ERROR, code is not ErrorCode.NONE)
-        checked = code is ErrorCode.NONE and inspection is not None
-        self._set_flag(StatusBit.IN_TOLERANCE, checked and inspection is not None and not inspection.failed)
-        self._set_flag(StatusBit.OUT_OF_TOLERANCE, checked and inspection is not None and bool(inspection.failed))
+        self._result.write(cycle, result, self._running_recipe)
         self._running = None
         self._running_since = None
         self._update_status()
         return True
 
-    def _clear_result(self) -> None:
-        image = self._image
-        image[Register.RESULT_CYCLE] = 0
-        image[Register.ERROR_CODE] = ErrorCode.NONE
-        self._flags &= ~(StatusBit.RESULT_VALID | StatusBit.ERROR | StatusBit.IN_TOLERANCE | StatusBit.OUT_OF_TOLERANCE)
-        nan4 = self._map.encode_floats([_NAN] * 4)
-        assert len(nan4) == _MEASUREMENT_REGISTERS
-        image[Register.HEEL_HEIGHT_MM : Register.GLUE_POINT_COUNT] = nan4
-        image[Register.GLUE_POINT_COUNT] = 0
-        image[Register.GLUE_POINTS :] = [0] * (self.layout.registers_per_point * MAX_GLUE_POINTS)
-        if self.layout.version >= 2:
-            image[Register.RESULT_RECIPE] = image[Register.FEATURE_FAILS] = image[Register.GLUE_FRAME] = 0
-            image[Register.NOZZLE_OFFSET_MM : Register.GLUE_OFFSET_MM + 2] = self._map.encode_floats([_NAN] * 2)
-
-    def _path_registers(self, path: PathInfo, inspection: Inspection | None) -> dict[int, list[int]]:
-        """Map v2's registers besides the points: frame, nozzle and glue offsets (20-23), feature bits."""
-        offsets = self._map.encode_floats([path.nozzle_offset_mm, path.glue_offset_mm], what="offset")
-        return {
-            Register.GLUE_FRAME: [int(GlueFrame(path.frame))],
-            Register.NOZZLE_OFFSET_MM: offsets,
-            Register.FEATURE_FAILS: [0 if inspection is None else int(inspection.failed)],
-        }
-
     def _set_flag(self, bit: StatusBit, on: bool) -> None:
-        self._flags = (self._flags | bit) if on else (self._flags & ~bit)
+        self._result.set_flag(bit, on)
 
     def _update_status(self) -> None:
-        status = self._flags & self.layout.status_bits
-        healthy = StatusBit.CAMERAS_OK | StatusBit.CALIBRATION_OK
-        if self._running is not None:
-            status |= StatusBit.BUSY
-        elif status & healthy == healthy:
-            status |= StatusBit.READY
-        self._image[Register.STATUS] = int(status)
+        self._result.update_status(busy=self._running is not None)

@@ -18,28 +18,20 @@ pymodbus remains the client of the PLC simulator, a master this server did not w
 
 from __future__ import annotations
 
-import asyncio
-import logging
-import threading
-
-import serial
 from numpy.typing import ArrayLike
 
-from firmware_io.endpoints import Endpoint, LinkStartError, SerialEndpoint, TcpEndpoint, check_unit_id
+from firmware_io.endpoints import Endpoint, TcpEndpoint, check_unit_id
 from firmware_io.handshake import Inspection, PathInfo, PlcHandshake, Trigger
-from firmware_io.pdu import ExceptionCode, exception_reply, execute
 from firmware_io.registers import ErrorCode, MapLayout, RegisterMap, StatusBit, WordOrder
-from firmware_io.rtu import SerialLine, serve_serial_line
-from firmware_io.tcp import ConnectionLimits, TcpFrontEnd
-
-log = logging.getLogger(__name__)
+from firmware_io.server_thread import ModbusServerThread
+from firmware_io.tcp import ConnectionLimits
 
 
 class PlcLink:
     """The controller's side of the PLC handshake, served over Modbus TCP or RTU.
 
-    The field side's one facade (lifetime, the controller API, the server thread); the work is in
-    handshake, pdu, tcp and rtu, and most of its length is the public methods' documentation.
+    The field side's one facade (lifetime and the controller API); the work is in handshake, the server
+    thread (firmware_io.server_thread), pdu, tcp and rtu.
 
     Typical controller loop::
 
@@ -86,56 +78,29 @@ class PlcLink:
             raise ValueError(f"liveness timeout {liveness_timeout_s} s must be longer than the heartbeat period")
         if cycle_timeout_s is not None and cycle_timeout_s <= 0:
             raise ValueError(f"cycle timeout {cycle_timeout_s} s must be positive")
-        self._endpoint = endpoint
-        self._unit_id = check_unit_id(unit_id, endpoint)
         self._heartbeat_period_s = heartbeat_period_s
         self._liveness_timeout_s = liveness_timeout_s
-        self._cycle_timeout_s = cycle_timeout_s
-        self._limits = limits
         self._layout = MapLayout.of(map_version)
         self._handshake = PlcHandshake(RegisterMap(word_order), self._layout)
-        self._thread: threading.Thread | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._stop_requested: asyncio.Event | None = None
-        self._started = threading.Event()
-        self._start_error: BaseException | None = None
-        self._bound: Endpoint = endpoint
-        self._tcp: TcpFrontEnd | None = None
-        self._serial_open = False
-        # For the operator station and /metrics (read from other threads; ints are replaced atomically).
-        self.heartbeat_stalls = 0  # times the heartbeat stopped because the controller went silent
-        self.heartbeat_stalled = False
+        self._server = ModbusServerThread(
+            endpoint,
+            check_unit_id(unit_id, endpoint),
+            self._handshake,
+            limits,
+            heartbeat_period_s,
+            liveness_timeout_s,
+            cycle_timeout_s,
+        )
 
     # ---- lifetime ------------------------------------------------------------------------------
 
     def start(self, timeout_s: float = 5.0) -> None:
         """Open the TCP port or serial line and start serving; raises if that fails."""
-        if self._thread is not None:
-            raise RuntimeError("PlcLink already started; a link starts once")
-        self._thread = threading.Thread(target=self._run_loop, name=f"plc-link {self._endpoint}", daemon=True)
-        self._thread.start()
-        if not self._started.wait(timeout_s):
-            self.stop()
-            raise RuntimeError(f"Modbus server on {self._endpoint} did not start within {timeout_s} s")
-        if self._start_error is not None:
-            self._thread.join(timeout_s)
-            raise LinkStartError(_start_failure_text(self._endpoint, self._start_error)) from None
-        log.info("Modbus %s serving unit id %d", self._bound, self._unit_id)
+        self._server.start(timeout_s)
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Close all PLC connections and the port, stop the heartbeat, wake wait_trigger()."""
-        self._handshake.close()
-        thread, loop, stop = self._thread, self._loop, self._stop_requested
-        if thread is None:
-            return
-        if loop is not None and stop is not None and not loop.is_closed():
-            try:
-                loop.call_soon_threadsafe(stop.set)
-            except RuntimeError:  # loop closed between the check and the call: already stopping
-                pass
-        thread.join(timeout_s)
-        if thread.is_alive():
-            raise RuntimeError(f"Modbus server thread for {self._endpoint} did not stop within {timeout_s} s")
+        self._server.stop(timeout_s)
 
     def __enter__(self) -> PlcLink:
         self.start()
@@ -147,14 +112,21 @@ class PlcLink:
     @property
     def connected_clients(self) -> int:
         """TCP connections open now (RTU: 1 while the serial line is open)."""
-        if isinstance(self._endpoint, SerialEndpoint):
-            return int(self._serial_open)
-        return 0 if self._tcp is None else self._tcp.connection_count
+        return self._server.connected_clients
 
     @property
     def endpoint(self) -> Endpoint:
         """Where the link serves; for TCP port 0, the port actually bound once started."""
-        return self._bound
+        return self._server.bound
+
+    @property
+    def heartbeat_stalls(self) -> int:
+        """Times the heartbeat stopped because the controller went silent (station, /metrics)."""
+        return self._server.heartbeat_stalls
+
+    @property
+    def heartbeat_stalled(self) -> bool:
+        return self._server.heartbeat_stalled
 
     # ---- controller API ------------------------------------------------------------------------
 
@@ -216,95 +188,3 @@ class PlcLink:
     def publish_error(self, cycle: int, code: ErrorCode, *, cycle_time_ms: float) -> bool:
         """Publish that `cycle` failed with `code`; False if it had already timed out (see publish_result)."""
         return self._handshake.publish_error(cycle, code, cycle_time_ms=cycle_time_ms)
-
-    # ---- requests ------------------------------------------------------------------------------
-
-    def _answer(self, unit: int, pdu: bytes) -> bytes | None:
-        """The reply PDU for a request to `unit`, or None for no answer at all (RTU, other slave)."""
-        if isinstance(self._endpoint, SerialEndpoint):
-            return execute(pdu, self._handshake) if unit == self._unit_id else None
-        if self._unit_id != 0 and unit != self._unit_id:
-            return exception_reply(pdu[0], ExceptionCode.GATEWAY_NO_RESPONSE)
-        return execute(pdu, self._handshake)
-
-    # ---- server thread -------------------------------------------------------------------------
-
-    def _run_loop(self) -> None:
-        try:
-            asyncio.run(self._serve())
-        except BaseException as exc:  # report, never let the thread die silently
-            log.exception("Modbus server thread failed")
-            self._start_error = self._start_error or exc
-        finally:
-            self._started.set()
-
-    async def _serve(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._stop_requested = asyncio.Event()
-        heartbeat = asyncio.create_task(self._heartbeat(), name="plc heartbeat")
-        try:
-            if isinstance(self._endpoint, SerialEndpoint):
-                await self._serve_rtu(self._endpoint)
-            else:
-                await self._serve_tcp(self._endpoint)
-        finally:
-            heartbeat.cancel()
-            await asyncio.gather(heartbeat, return_exceptions=True)
-
-    async def _serve_tcp(self, endpoint: TcpEndpoint) -> None:
-        assert self._stop_requested is not None
-        self._tcp = TcpFrontEnd(self._limits, self._answer)
-        try:
-            server = await self._tcp.start(endpoint.host, endpoint.port)
-        except OSError as exc:
-            self._start_error = exc
-            return
-        host, port = server.sockets[0].getsockname()[:2]
-        self._bound = TcpEndpoint(str(host), int(port))
-        self._started.set()
-        try:
-            await self._stop_requested.wait()
-        finally:
-            server.close()
-            await self._tcp.close_all()
-            await server.wait_closed()
-
-    async def _serve_rtu(self, endpoint: SerialEndpoint) -> None:
-        assert self._stop_requested is not None
-        try:
-            line = SerialLine(endpoint, self._answer)
-        except (serial.SerialException, OSError, ValueError) as exc:
-            self._start_error = exc
-            return
-        self._started.set()
-        self._serial_open = True
-        try:
-            await serve_serial_line(line, endpoint, self._answer, self._stop_requested, self._on_serial_state)
-        finally:
-            self._serial_open = False
-
-    def _on_serial_state(self, line_open: bool) -> None:
-        self._serial_open = line_open
-
-    async def _heartbeat(self) -> None:
-        while True:
-            expired = self._handshake.expire_overdue(self._cycle_timeout_s)
-            beating = self._handshake.beat(self._liveness_timeout_s)
-            if not beating and not self.heartbeat_stalled:
-                self.heartbeat_stalls += 1
-            self.heartbeat_stalled = not beating
-            if expired is not None:
-                log.error(
-                    "cycle %d: not published within cycle_timeout_s = %g s; answered CYCLE_TIMEOUT",
-                    expired,
-                    self._cycle_timeout_s,
-                )
-            await asyncio.sleep(self._heartbeat_period_s)
-
-
-def _start_failure_text(endpoint: Endpoint, error: BaseException) -> str:
-    if isinstance(endpoint, SerialEndpoint):
-        hint = "does the serial port exist, is another program using it, is the user in group dialout?"
-    else:
-        hint = "is the port already in use (another cellctl running?) and is the address one of this PC's?"
-    return f"cannot serve Modbus on {endpoint}: {error} ({hint})"

@@ -25,11 +25,15 @@ __all__ = [
 ]
 
 
-def open_frame_source(config: CameraConfig, calib: Calibration) -> FrameSource:
-    """The backend the config names; nothing is opened yet (a missing camera shows at the first grab)."""
+def open_frame_source(config: CameraConfig, calib: Calibration | None) -> FrameSource:
+    """The backend the config names; nothing is opened yet (a missing camera shows at the first grab).
+    Only the simulated cameras need `calib` (they render through it): ValueError without one."""
     tolerance_s = config.sync_tolerance_ms / 1000.0
     if config.backend == "simulated":
         from cellctl.cameras.simulated import SimulatedCameras
+
+        if calib is None:
+            raise ValueError("the simulated cameras render through the calibration, which did not load")
 
         sim = config.simulated
         return SimulatedCameras(

@@ -31,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from cellctl.calib.board import Checkerboard
-    from cellctl.cameras import CameraError, open_frame_source
+    from cellctl.cli.cameras import opened_cameras
     from cellctl.service.capture import save_pair
     from cellctl.service.config import CellConfig
     from cellctl.vision.calibration import Calibration
@@ -45,20 +45,14 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(f"--board {spec}: {exc}") from None
     calib = Calibration.load(config.calibration.path) if config.cameras.backend == "simulated" else None
-    source = open_frame_source(config.cameras, calib)  # type: ignore[arg-type]  # only the simulator needs it
     usable = 0
-    try:
-        source.open()
+    with opened_cameras(config, calib, "cameras: {}") as source:
         for i in range(args.count):
             if i:
                 time.sleep(args.interval)  # the person moves the board meanwhile
             saved, _ = save_pair(source.grab_pair(), args.out, board)
             usable += bool(saved.board_left and saved.board_right)
             print(saved.describe(), flush=True)
-    except CameraError as exc:
-        raise UserError(f"cameras: {exc}") from None
-    finally:
-        source.close()
     if board is not None:
         print(
             f"{usable} of {args.count} pairs show the whole board in both images; `cellctl calibrate {args.out}` next"

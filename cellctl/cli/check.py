@@ -15,6 +15,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cellctl.errors import UserError
+
 if TYPE_CHECKING:
     from cellctl.service.config import CellConfig
 
@@ -133,19 +135,16 @@ def _bindable(host: str, port: int, keys: str) -> None:
 
 
 def _cameras(config: CellConfig, context: dict[str, Any]) -> str:
-    from cellctl.cameras import CameraError, open_frame_source
+    from cellctl.cli.cameras import opened_cameras
 
     calib = context.get("calib")
     if config.cameras.backend == "simulated" and calib is None:
         raise CheckFailed("the simulated cameras render through the calibration, which did not load")
-    source = open_frame_source(config.cameras, calib)  # type: ignore[arg-type]  # None: only the simulator needs one
     try:
-        source.open()
-        frame = source.grab_pair()
-    except CameraError as exc:
-        raise CheckFailed(f"{exc}") from None
-    finally:
-        source.close()
+        with opened_cameras(config, calib, "{}") as source:
+            frame = source.grab_pair()
+    except UserError as exc:
+        raise CheckFailed(str(exc)) from None
     context["frame"] = frame
     height, width = frame.left.shape[:2]
     return f"{config.cameras.backend}: pair of {width}x{height}, skew {frame.skew_s * 1000:.1f} ms"

@@ -15,6 +15,9 @@ from cellctl.errors import UserError
 if TYPE_CHECKING:
     import numpy as np
 
+    from cellctl.vision.measurement import MeasurementResult
+    from cellctl.vision.reconstruction import ReconstructionResult
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -109,31 +112,37 @@ def _read(path: Path, name: str) -> np.ndarray:
         raise UserError(str(exc)) from None
 
 
-def _write_ply(path: Path, reconstruction) -> None:  # noqa: ANN001 - Reconstruction, imported lazily
+def _write_ply(path: Path, reconstruction: ReconstructionResult) -> None:
     import open3d as o3d
 
+    from cellctl.vision.reconstruction import ReconstructionRefused
+
     if len(reconstruction.sole_points) == 0:
-        raise UserError(f"no sole points to write to {path}: {reconstruction.reason}")
-    if not o3d.io.write_point_cloud(str(path), reconstruction.point_cloud()):
+        why = reconstruction.reason if isinstance(reconstruction, ReconstructionRefused) else "none found"
+        raise UserError(f"no sole points to write to {path}: {why}")
+    if not o3d.io.write_point_cloud(path, reconstruction.point_cloud()):
         raise UserError(f"cannot write {path}: check the directory exists and is writable")
 
 
-def _export(directory: Path, reconstruction, result) -> None:  # noqa: ANN001 - imported lazily
+def _export(directory: Path, reconstruction: ReconstructionResult, result: MeasurementResult) -> None:
     from cellctl.vision.export import cloud_normals, write_cloud_ply, write_glue_csv, write_glue_ply
+    from cellctl.vision.measurement import SoleMeasurement
 
     if not directory.is_dir():
         raise UserError(f"--export {directory} is not a directory: create it first")
     points = reconstruction.sole_points
     if len(points):
         write_cloud_ply(directory / "cloud.ply", points, cloud_normals(points), reconstruction.sole_colors[:, ::-1])
-    if result.glue_path is not None:
+    if isinstance(result, SoleMeasurement):
         path = result.glue_path
         write_glue_csv(directory / "glue-path.csv", path.points, path.normals)
         write_glue_ply(directory / "glue-path.ply", path.points, path.normals, "table", path.closed)
 
 
-def _summary(result) -> str:  # noqa: ANN001 - SoleMeasurement
-    if not result.valid:
+def _summary(result: MeasurementResult) -> str:
+    from cellctl.vision.measurement import MeasurementRefused
+
+    if isinstance(result, MeasurementRefused):
         return f"not measured: {result.reason}"
     path = result.glue_path
     total = sum(result.timings.values())

@@ -8,27 +8,10 @@ import json
 import sys
 from pathlib import Path
 
-from cellctl.service.journal import CycleRecord, Journal
+from cellctl.service.journal import ADDED_COLUMNS, SUMMARY_FIELDS, CycleRecord, Journal
 from cellctl.service.timefmt import iso_time, local_time
 
-CSV_FIELDS = (
-    "id",
-    "cycle",
-    "triggered_at",
-    "status",
-    "error_code",
-    "reason",
-    "length_mm",
-    "heel_height_mm",
-    "toe_height_mm",
-    "cycle_time_ms",
-    "glue_points",
-    "ply_path",
-    "overlay_path",
-    "recipe",
-    "in_tolerance",
-    "failed_features",
-)
+CSV_FIELDS = (*SUMMARY_FIELDS, "glue_points", "ply_path", "overlay_path", *ADDED_COLUMNS)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

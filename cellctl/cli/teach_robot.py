@@ -19,6 +19,9 @@ from cellctl.errors import UserError
 if TYPE_CHECKING:  # numpy is imported where used: `cellctl --help` loads no heavy library
     import numpy as np
 
+    from cellctl.service.config import CellConfig
+    from cellctl.vision.calibration import Calibration
+
 COLUMNS = ("robot_x", "robot_y", "robot_z", "cell_x", "cell_y", "cell_z")
 
 
@@ -161,18 +164,14 @@ def _locate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _grab(config, calib) -> list[np.ndarray]:  # noqa: ANN001 - CellConfig, Calibration (imported lazily)
+def _grab(config: CellConfig, calib: Calibration) -> list[np.ndarray]:
     """One synchronised pair from the cell's own cameras."""
-    from cellctl.cameras import CameraError, open_frame_source
+    from cellctl.cli.cameras import opened_cameras
 
-    source = open_frame_source(config.cameras, calib)
-    try:
-        source.open()
+    with opened_cameras(
+        config, calib, "cannot grab a pair: {} (is `cellctl run` still holding the cameras?)"
+    ) as source:
         frame = source.grab_pair()
-    except CameraError as exc:
-        raise UserError(f"cannot grab a pair: {exc} (is `cellctl run` still holding the cameras?)") from None
-    finally:
-        source.close()
     return [frame.left, frame.right]
 
 

@@ -23,7 +23,13 @@ import numpy as np
 from cellctl.eval.methods import opencv_sgbm
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
-from cellctl.vision.measurement import GLUE_OFFSET_MM, GLUE_SPACING_MM, SoleMeasurement, measure_sole
+from cellctl.vision.measurement import (
+    GLUE_OFFSET_MM,
+    GLUE_SPACING_MM,
+    MeasurementResult,
+    SoleMeasurement,
+    measure_sole,
+)
 from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
 
 DEFAULT_SOLES: tuple[tuple[int, str], ...] = ((1, "white"), (2, "black"), (3, "white"), (4, "black"))
@@ -135,7 +141,7 @@ def bench_cycles(
     reconstructors = [_reconstructor(calib, depth_range_mm, scene, whole_pair) for scene in scenes]
     disparities = (reconstructors[0].min_disparity, reconstructors[0].num_disparities)
 
-    def cycle(which: int) -> SoleMeasurement:
+    def cycle(which: int) -> MeasurementResult:
         reconstruction = reconstructors[which].reconstruct(pairs[which].left, pairs[which].right)
         return measure_sole(reconstruction, GLUE_OFFSET_MM, GLUE_SPACING_MM)
 
@@ -153,10 +159,8 @@ def bench_cycles(
             bench.stages_s.setdefault(name, []).append(seconds)
         if reconstructors[which].last_fallback:
             bench.whole_pair.append(reconstructors[which].last_fallback)
-        if result.valid:
+        if isinstance(result, SoleMeasurement):
             truth = truths[which]
-            assert result.length_mm is not None and result.heel_height_mm is not None
-            assert result.toe_height_mm is not None
             bench.errors_mm.append(
                 {
                     "length": result.length_mm - truth.length_mm,

@@ -64,7 +64,7 @@ def synthetic_case(
     """A textured pair with a smooth disparity field spanning most of the range."""
     rng = np.random.default_rng(seed)
     texture = cv2.GaussianBlur(rng.integers(0, 256, (height, width + num_disparities), np.uint8), (0, 0), 1.2)
-    texture = cv2.normalize(texture, None, 0, 255, cv2.NORM_MINMAX)
+    texture = cv2.normalize(texture, np.empty_like(texture), 0, 255, cv2.NORM_MINMAX)
     yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
     disparity = 0.1 * num_disparities + 0.8 * num_disparities * (0.5 + 0.5 * np.sin(xx / 211.0) * np.cos(yy / 157.0))
     # left(x) = right(x - d): sample the right texture at x - d.
@@ -162,7 +162,7 @@ def ratios(results: list[Timing]) -> dict[str, dict[str, float]]:
     return out
 
 
-def to_markdown(results: list[Timing], threads: int, core_bytes: dict[str, int]) -> str:
+def to_markdown(results: list[Timing], threads: int, core_bytes: dict[str, str]) -> str:
     lines = [
         f"threads: {threads}",
         "",

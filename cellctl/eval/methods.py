@@ -57,7 +57,7 @@ _cached = functools.lru_cache(maxsize=16)
 
 @_cached
 def _stereo_bm(min_d: int, num_d: int) -> Any:
-    bm = cv2.StereoBM_create(numDisparities=num_d, blockSize=SAD_BLOCK_SIZE)
+    bm = cv2.StereoBM.create(numDisparities=num_d, blockSize=SAD_BLOCK_SIZE)
     bm.setMinDisparity(min_d)
     bm.setTextureThreshold(SAD_TEXTURE_THRESHOLD)
     bm.setUniquenessRatio(SAD_UNIQUENESS_RATIO)
@@ -74,7 +74,7 @@ def sad_block_matching(left: np.ndarray, right: np.ndarray, min_disparity: int, 
 def sgbm_create(mode: int, min_disparity: int, num_disparities: int, channels: int) -> Any:
     """OpenCV StereoSGBM with the settings every comparison here uses (docs/benchmarks.md, section 1)."""
     area = channels * SGBM_BLOCK_SIZE**2
-    return cv2.StereoSGBM_create(
+    return cv2.StereoSGBM.create(
         minDisparity=min_disparity,
         numDisparities=num_disparities,
         blockSize=SGBM_BLOCK_SIZE,

@@ -19,7 +19,7 @@ from cellctl.sim.render_cache import RenderCache
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM
-from cellctl.vision.measurement import SoleMeasurement, measure_sole
+from cellctl.vision.measurement import MeasurementRefused, MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.teach import TeachError, average_exposures
 
@@ -98,18 +98,22 @@ def measure_scene(
     assert scene.sole is not None
     pair = cache.render(scene) if cache else scene.render()
     start = time.perf_counter()
+    result: MeasurementResult | None
     try:
         result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
+        reason, failure = (
+            (result.reason, result.failure.value) if isinstance(result, MeasurementRefused) else (None, None)
+        )
     except Exception as exc:  # noqa: BLE001 - a crash is a finding of the benchmark, not the end of the run
-        result = SoleMeasurement(None, None, None, None, 0, False, f"{CRASHED}: {type(exc).__name__}: {exc}")
+        result, reason, failure = None, f"{CRASHED}: {type(exc).__name__}: {exc}", CRASHED
     seconds = time.perf_counter() - start
     truth = scene.sole.truth()
     row = SoleBenchRow(
         scene.seed,
         scene.color,
         truth.length_mm,
-        result.valid,
-        result.reason,
+        isinstance(result, SoleMeasurement),
+        reason,
         None,
         None,
         None,
@@ -118,16 +122,10 @@ def measure_scene(
         None,
         seconds,
         variations,
-        CRASHED
-        if result.failure is None and not result.valid
-        else None
-        if result.failure is None
-        else result.failure.value,
+        failure,
         truth.half_area_difference,
     )
-    if result.valid:
-        assert result.length_mm is not None and result.heel_height_mm is not None
-        assert result.toe_height_mm is not None and result.glue_path is not None
+    if isinstance(result, SoleMeasurement):
         row.length_error_mm = result.length_mm - truth.length_mm
         row.heel_error_mm = result.heel_height_mm - truth.heel_height_mm
         row.toe_error_mm = result.toe_height_mm - truth.toe_height_mm

@@ -209,11 +209,9 @@ class ArtifactWriter:
             write_cloud_ply(ply, points, cloud_normals(points), colours, frame="table")
 
         def write_glue() -> None:
-            path = job.measurement.glue_path
-            if path is not None:
-                folder = ply.parent
-                write_glue_csv(folder / f"cycle-{job.cycle}-glue.csv", path.points, path.normals)
-                write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
+            path, folder = job.measurement.glue_path, ply.parent
+            write_glue_csv(folder / f"cycle-{job.cycle}-glue.csv", path.points, path.normals)
+            write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
 
         def draw() -> None:
             picture.append(draw_on_left(job.frame.left, self.calib, job.measurement))
@@ -227,3 +225,13 @@ class ArtifactWriter:
 
 def _paths(job: ArtifactJob, folder: Path) -> tuple[Path, Path]:
     return folder / f"cycle-{job.cycle}.ply", folder / f"cycle-{job.cycle}-overlay.png"
+
+
+def finish_artifacts(writer: ArtifactWriter, journal: Journal, timeout_s: float = 10.0) -> None:
+    """At stop: write what is pending (flush), record it in the journal, end the writer's thread."""
+    if not writer.flush(timeout_s):
+        log.warning("stopping with artifacts not written")
+    writer.attach_finished(journal)
+    writer.close()
+    if writer.dropped:
+        log.info("artifacts of %d cycles skipped for lack of idle time", writer.dropped)

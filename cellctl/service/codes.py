@@ -28,3 +28,16 @@ FAILURE_CODES: dict[FailureKind, ErrorCode] = {
     FailureKind.CAMERAS_OUT_OF_SYNC: ErrorCode.CAMERAS_OUT_OF_SYNC,
     FailureKind.RECIPE_UNKNOWN: ErrorCode.RECIPE_UNKNOWN,
 }
+
+
+class CycleFailed(Exception):
+    """A cycle ends with an error code for the PLC."""
+
+    def __init__(self, code: ErrorCode, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+
+    @classmethod
+    def of(cls, failure: FailureKind, reason: str) -> CycleFailed:
+        """A failure of a kind, answered with the code the table above gives it."""
+        return cls(FAILURE_CODES[failure], reason)

@@ -9,19 +9,20 @@ instead: unknown keys (a typo must not silently fall back to a default), wrong t
 files that do not exist. Relative paths are taken relative to the config file, so a config and its
 calibration can be moved together.
 
-Longer than most modules on purpose: every section's checks sit beside the one table reader, so each key
-of the file is refused the same way and its defaults have one home.
+The table reader that refuses every key the same way is cellctl.service.config_table; the [plc] section
+(the longest) is cellctl.service.config_plc; the cameras' section is cellctl.cameras.config.
 """
 
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from cellctl.cameras.config import CameraConfig, SimulatedCameraConfig
+from cellctl.service.config_plc import PlcConfig, read_plc
+from cellctl.service.config_table import ConfigError, Table, read_toml
 from cellctl.vision.defaults import (
     DEPTH_RANGE_MM,
     GLUE_OFFSET_MM,
@@ -29,105 +30,12 @@ from cellctl.vision.defaults import (
     GLUE_SPACING_MM,
     GLUE_SPACING_RANGE_MM,
 )
-from firmware_io.endpoints import DEFAULT_TCP_PORT, Endpoint, SerialEndpoint, TcpEndpoint, check_unit_id
-from firmware_io.registers import WordOrder
-from firmware_io.tcp import ConnectionLimits
+
+__all__ = ["CellConfig", "ConfigError", "ImageLogConfig", "MeasureConfig", "OpcUaConfig", "PlcConfig"]
 
 BACKENDS = ("simulated", "replay", "v4l2")
 PIXEL_FORMATS = ("MJPEG", "YUYV")
 SOLE_COLOURS = ("white", "black")  # cellctl.sim.render.SOLE_MATERIALS (not imported: it pulls in Open3D)
-
-
-class ConfigError(ValueError):
-    """The configuration file is missing, malformed or asks for something impossible."""
-
-
-class _Table:
-    """One TOML table being read: hands out keys and complains about the ones nobody asked for."""
-
-    def __init__(self, data: dict[str, Any], name: str, source: Path) -> None:
-        self.data, self.name, self.source = data, name, source
-        self._taken: set[str] = set()
-
-    def fail(self, key: str, problem: str) -> ConfigError:
-        return ConfigError(f"{self.source}: [{self.name}] {key}: {problem}")
-
-    def get(self, key: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
-        self._taken.add(key)
-        if key not in self.data:
-            if default is ...:
-                raise ConfigError(f"{self.source}: [{self.name}] is missing the required key {key!r}")
-            return default
-        value = self.data[key]
-        kinds = kind if isinstance(kind, tuple) else (kind,)
-        # bool is an int in Python; a number key given `true` is a mistake, not 1.
-        if isinstance(value, bool) and bool not in kinds or not isinstance(value, kinds):
-            names = " or ".join(k.__name__ for k in kinds)
-            raise self.fail(key, f"expected {names}, got {type(value).__name__} {value!r}")
-        return float(value) if float in kinds and isinstance(value, int) and not isinstance(value, bool) else value
-
-    def number(
-        self,
-        key: str,
-        default: Any = ...,
-        *,
-        low: float | None = None,
-        high: float | None = None,
-        above: float | None = None,
-    ) -> float:
-        value = self.get(key, (int, float), default)
-        if value is None:
-            return value
-        value = float(value)
-        if (
-            (low is not None and value < low)
-            or (high is not None and value > high)
-            or (above is not None and value <= above)
-        ):
-            bounds = (
-                f"above {above:g}"
-                if above is not None
-                else f"in {low:g}..{high:g}"
-                if high is not None
-                else f">= {low:g}"
-            )
-            raise self.fail(key, f"{value:g} is impossible: must be {bounds}")
-        return value
-
-    def integer(self, key: str, default: Any = ..., *, low: int | None = None, high: int | None = None) -> int:
-        """A whole number: 5020.7 is refused, not truncated to 5020."""
-        value = self.get(key, int, default)
-        if (low is not None and value < low) or (high is not None and value > high):
-            bounds = f"in {low}..{high}" if low is not None and high is not None else f">= {low}"
-            raise self.fail(key, f"{value} is impossible: must be {bounds}")
-        return int(value)
-
-    def choice(self, key: str, choices: tuple[str, ...], default: Any = ...) -> str:
-        value = self.get(key, str, default)
-        if value not in choices:
-            raise self.fail(key, f"{value!r} is not one of {', '.join(repr(c) for c in choices)}")
-        return value
-
-    def path(self, key: str, default: Any = ...) -> Path | None:
-        value = self.get(key, str, default)
-        if value is None:
-            return None
-        if not value:
-            raise self.fail(key, "empty path")
-        path = Path(value).expanduser()
-        return path if path.is_absolute() else (self.source.parent / path).resolve()
-
-    def table(self, key: str) -> _Table:
-        value = self.get(key, dict, {})
-        return _Table(value, f"{self.name}.{key}", self.source)
-
-    def finish(self) -> None:
-        unknown = sorted(set(self.data) - self._taken)
-        if unknown:
-            known = ", ".join(sorted(self._taken))
-            raise ConfigError(
-                f"{self.source}: [{self.name}] has unknown key(s) {', '.join(unknown)} (known keys: {known})"
-            )
 
 
 @dataclass(frozen=True)
@@ -140,39 +48,6 @@ class MeasureConfig:
     depth_range_mm: tuple[float, float] = DEPTH_RANGE_MM
     glue_offset_mm: float = GLUE_OFFSET_MM
     glue_spacing_mm: float = GLUE_SPACING_MM
-
-
-@dataclass(frozen=True)
-class PlcConfig:
-    transport: str = "tcp"
-    host: str = "127.0.0.1"
-    port: int = DEFAULT_TCP_PORT
-    serial_port: str | None = None
-    baudrate: int = 19200
-    parity: str = "E"
-    stopbits: int = 1
-    bytesize: int = 8
-    unit_id: int = 1
-    word_order: WordOrder = WordOrder.HIGH_FIRST
-    heartbeat_period_s: float = 0.25
-    liveness_timeout_s: float = 5.0
-    map_version: int = 1  # docs/modbus.md; 2 adds recipes, normals, frame; 1 for PLCs programmed for it
-    # A cycle not published within this is answered CYCLE_TIMEOUT (below the PLC's documented 5 s timeout).
-    cycle_timeout_s: float = 4.0
-    max_connections: int = 8
-    idle_timeout_s: float = 60.0
-    allowed_clients: tuple[str, ...] = ()
-
-    def limits(self) -> ConnectionLimits:
-        """Who may connect to the Modbus TCP server, how many at once, how long idle."""
-        return ConnectionLimits(self.max_connections, self.idle_timeout_s, self.allowed_clients)
-
-    def endpoint(self) -> Endpoint:
-        """Where PlcLink serves."""
-        if self.transport == "rtu":
-            assert self.serial_port is not None
-            return SerialEndpoint(self.serial_port, self.baudrate, self.parity, self.stopbits, self.bytesize)  # type: ignore[arg-type]
-        return TcpEndpoint(self.host, self.port)
 
 
 @dataclass(frozen=True)
@@ -249,17 +124,11 @@ class CellConfig:
         source = Path(path).expanduser().resolve()
         if not source.is_file():
             raise ConfigError(f"config file {source} does not exist (see deploy/cell-line.example.toml)")
-        try:
-            data = tomllib.loads(source.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source} is not valid TOML: {exc}") from None
-        except UnicodeDecodeError as exc:
-            raise ConfigError(f"{source} is not UTF-8 text: {exc}") from None
-        return cls.from_dict(data, source)
+        return cls.from_dict(read_toml(source), source)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: Path) -> CellConfig:
-        root = _Table(data, "top level", source)
+        root = Table(data, "top level", source)
         sections = {
             name: root.table(name)
             for name in (
@@ -278,7 +147,7 @@ class CellConfig:
             cameras=_cameras(sections["cameras"]),
             calibration=_calibration(sections["calibration"]),
             measure=_measure(sections["measure"]),
-            plc=_plc(sections["plc"]),
+            plc=read_plc(sections["plc"]),
             journal=_journal(sections["journal"]),
             station=_station(sections["station"]),
             image_log=_image_log(sections["image_log"]),
@@ -289,7 +158,7 @@ class CellConfig:
         return config
 
 
-def _cameras(t: _Table) -> CameraConfig:
+def _cameras(t: Table) -> CameraConfig:
     backend = t.choice("backend", BACKENDS)
     left = t.get("left", str, None)
     right = t.get("right", str, None)
@@ -307,8 +176,8 @@ def _cameras(t: _Table) -> CameraConfig:
         replay_dir=replay_dir,
         size=size,
         pixel_format=t.choice("pixel_format", PIXEL_FORMATS, "MJPEG"),
-        exposure=t.number("exposure", None, low=0),
-        gain=t.number("gain", None, low=0),
+        exposure=t.optional_number("exposure", low=0),
+        gain=t.optional_number("gain", low=0),
         sync_tolerance_ms=t.number("sync_tolerance_ms", 8.0, above=0, high=1000),
         timeout_ms=t.number("timeout_ms", 1000.0, above=0, high=60000),
         max_regrabs=t.integer("max_regrabs", 4, low=0, high=100),
@@ -333,7 +202,7 @@ def _cameras(t: _Table) -> CameraConfig:
     return config
 
 
-def _simulated(t: _Table) -> SimulatedCameraConfig:
+def _simulated(t: Table) -> SimulatedCameraConfig:
     seeds = t.get("seeds", list, [1, 2, 3, 4, 5])
     if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
         raise t.fail("seeds", f"expected a non-empty list of scene numbers >= 0, got {seeds!r}")
@@ -346,7 +215,7 @@ def _simulated(t: _Table) -> SimulatedCameraConfig:
     return config
 
 
-def _calibration(t: _Table) -> CalibrationConfig:
+def _calibration(t: Table) -> CalibrationConfig:
     path = t.path("path")
     t.finish()
     assert path is not None
@@ -355,7 +224,7 @@ def _calibration(t: _Table) -> CalibrationConfig:
     return CalibrationConfig(path)
 
 
-def _measure(t: _Table) -> MeasureConfig:
+def _measure(t: Table) -> MeasureConfig:
     depth = t.get("depth_range_mm", list, list(DEPTH_RANGE_MM))
     if len(depth) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in depth):
         raise t.fail("depth_range_mm", f"expected [near, far] in mm, got {depth!r}")
@@ -374,45 +243,7 @@ def _measure(t: _Table) -> MeasureConfig:
     return config
 
 
-def _plc(t: _Table) -> PlcConfig:
-    transport = t.choice("transport", ("tcp", "rtu"), "tcp")
-    allowed = t.get("allowed_clients", list, [])
-    if not all(isinstance(entry, str) for entry in allowed):
-        raise t.fail("allowed_clients", f'expected a list of addresses such as ["192.168.10.5"], got {allowed!r}')
-    config = PlcConfig(
-        transport=transport,
-        host=t.get("host", str, "127.0.0.1"),
-        port=t.integer("port", DEFAULT_TCP_PORT, low=0, high=65535),
-        serial_port=t.get("serial_port", str, None),
-        baudrate=t.integer("baudrate", 19200, low=300, high=4_000_000),
-        parity=t.choice("parity", ("N", "E", "O"), "E"),
-        stopbits=t.integer("stopbits", 1, low=1, high=2),
-        bytesize=t.integer("bytesize", 8, low=7, high=8),
-        unit_id=t.integer("unit_id", 1, low=0, high=255),
-        word_order=WordOrder(t.choice("word_order", tuple(w.value for w in WordOrder), "high_first")),
-        heartbeat_period_s=t.number("heartbeat_period_s", 0.25, above=0, high=0.49),
-        liveness_timeout_s=t.number("liveness_timeout_s", 5.0, above=0.5, high=600),
-        map_version=int(t.number("map_version", 1, low=1, high=2)),
-        cycle_timeout_s=t.number("cycle_timeout_s", 4.0, above=0.5, high=600),
-        max_connections=t.integer("max_connections", 8, low=1, high=256),
-        idle_timeout_s=t.number("idle_timeout_s", 60.0, above=0, high=86400),
-        allowed_clients=tuple(allowed),
-    )
-    t.finish()
-    if transport == "rtu" and not config.serial_port:
-        raise t.fail("serial_port", "required for transport 'rtu', e.g. /dev/serial/by-id/usb-FTDI_...-if00-port0")
-    try:
-        check_unit_id(config.unit_id, config.endpoint())
-    except ValueError as exc:
-        raise t.fail("unit_id", str(exc)) from None
-    try:
-        config.limits()
-    except ValueError as exc:
-        raise t.fail("allowed_clients", str(exc)) from None
-    return config
-
-
-def _journal(t: _Table) -> JournalConfig:
+def _journal(t: Table) -> JournalConfig:
     state_dir = t.path("state_dir")
     assert state_dir is not None
     config = JournalConfig(state_dir=state_dir, keep_artifacts=t.integer("keep_artifacts", 500, low=0, high=1_000_000))
@@ -422,7 +253,7 @@ def _journal(t: _Table) -> JournalConfig:
     return config
 
 
-def _station(t: _Table) -> StationConfig:
+def _station(t: Table) -> StationConfig:
     token = t.get("token", str, None)
     if token is not None and len(token) < 8:
         raise t.fail("token", "too short: use at least 8 characters (e.g. `openssl rand -hex 16`)")
@@ -440,7 +271,7 @@ def _station(t: _Table) -> StationConfig:
     return config
 
 
-def _image_log(t: _Table) -> ImageLogConfig:
+def _image_log(t: Table) -> ImageLogConfig:
     config = ImageLogConfig(
         every_nth_good=int(t.number("every_nth_good", 0, low=0)),
         keep_cycles=int(t.number("keep_cycles", 200, low=0)),
@@ -450,7 +281,7 @@ def _image_log(t: _Table) -> ImageLogConfig:
     return config
 
 
-def _recipes(t: _Table) -> RecipesConfig:
+def _recipes(t: Table) -> RecipesConfig:
     directory = t.path("dir", None)
     t.finish()
     if directory is not None and not directory.is_dir():
@@ -458,7 +289,7 @@ def _recipes(t: _Table) -> RecipesConfig:
     return RecipesConfig(directory)
 
 
-def _robot(t: _Table) -> RobotConfig:
+def _robot(t: Table) -> RobotConfig:
     config = RobotConfig(
         frame_file=t.path("frame_file", None),
         publish_frame=t.choice("publish_frame", ("table", "robot"), "table"),
@@ -468,7 +299,7 @@ def _robot(t: _Table) -> RobotConfig:
     return config
 
 
-def _opcua(t: _Table) -> OpcUaConfig:
+def _opcua(t: Table) -> OpcUaConfig:
     config = OpcUaConfig(
         enabled=t.get("enabled", bool, False),
         endpoint=t.get("endpoint", str, OpcUaConfig.endpoint),

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from cellctl.cameras.base import StereoFrame
 from cellctl.errors import FailureKind, MeasurementInputError
-from cellctl.vision.measurement import SoleMeasurement, measure_sole
+from cellctl.vision.measurement import MeasurementRefused, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor
 from cellctl.vision.stereo_order import cameras_swapped
 
@@ -60,11 +60,12 @@ def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings
         return Refused(exc.kind, f"cameras deliver frames the measurement cannot use: {exc}")
     measurement = measure_sole(reconstruction, settings.glue_offset_mm, settings.glue_spacing_mm)
     timings = dict(measurement.timings)
-    if not measurement.valid:
-        failure = measurement.failure or FailureKind.MEASUREMENT_INVALID
-        if failure in _SWAP_SYMPTOMS and cameras_swapped(
+    if isinstance(measurement, MeasurementRefused):
+        if measurement.failure in _SWAP_SYMPTOMS and cameras_swapped(
             reconstructor.calib, frame.left, frame.right, reconstructor.min_disparity
         ):
             return Refused(FailureKind.CALIBRATION_MISMATCH, SWAPPED, timings)
-        return Refused(failure, measurement.reason or "not measured", timings)
+        return Refused(measurement.failure, measurement.reason, timings)
+    # A measurement is only made of a reconstruction that found a sole.
+    assert isinstance(reconstruction, Reconstruction)
     return Measured(reconstruction, measurement, timings)

@@ -50,7 +50,8 @@ ADDED_COLUMNS = {
     "failed_features": "TEXT NOT NULL DEFAULT '[]'",
 }
 
-COLUMNS = (
+#: What a cycle's summary shows wherever it is listed (the journal's first columns, the CSV exports).
+SUMMARY_FIELDS = (
     "id",
     "cycle",
     "triggered_at",
@@ -61,6 +62,10 @@ COLUMNS = (
     "heel_height_mm",
     "toe_height_mm",
     "cycle_time_ms",
+)
+
+COLUMNS = (
+    *SUMMARY_FIELDS,
     "timings",
     "glue_path",
     "source",
@@ -150,7 +155,9 @@ class Journal:
         marks = ", ".join(f":{name}" for name in values)
         with self._db:
             cursor = self._db.execute(f"INSERT INTO cycles ({names}) VALUES ({marks})", values)
-        record.id = int(cursor.lastrowid)
+        if cursor.lastrowid is None:  # sqlite3 sets it after every INSERT; None would be a driver fault
+            raise sqlite3.DatabaseError("the journal's INSERT returned no row id")
+        record.id = cursor.lastrowid
         return record.id
 
     def last_cycle(self) -> int:

@@ -35,7 +35,9 @@ from asyncua.crypto.permission_rules import User, UserRole
 from cellctl.errors import UserError
 from cellctl.service.config import OpcUaConfig
 from cellctl.service.outcome import CycleOutcome
+from cellctl.service.recipes import Recipe, RecipeBook
 from firmware_io.registers import StatusBit
+from firmware_io.server import PlcLink
 
 log = logging.getLogger(__name__)
 # asyncua reports every connection and endpoint at INFO; the service log keeps its warnings and errors.
@@ -289,3 +291,19 @@ def _bound_endpoint(url: str, port: int | None) -> str:
 def _log_failure(future: Any) -> None:
     if not future.cancelled() and future.exception() is not None:
         log.error("OPC UA: publishing a result failed: %s", future.exception())
+
+
+def serve_cell(
+    config: OpcUaConfig, link: PlcLink, recipes: RecipeBook, active: Callable[[], Recipe | None]
+) -> OpcUaServer:
+    """The cell's OPC UA server, started: its state from the PLC link, the recipes loaded, the active one."""
+
+    def active_recipe() -> tuple[int, str]:
+        recipe = active()
+        return (0, "") if recipe is None else (recipe.number, recipe.name)
+
+    server = OpcUaServer(
+        config, status=lambda: link.status, recipes=[(r.number, r.name) for r in recipes], active_recipe=active_recipe
+    )
+    server.start()
+    return server

@@ -98,21 +98,17 @@ def journal_record(
         timings={k: round(v, 5) for k, v in timings.items()},
         source={} if frame is None else {**frame.info, "skew_ms": round(frame.skew_s * 1000.0, 3)},
     )
-    path = None if measurement is None else measurement.glue_path
-    if code is not ErrorCode.NONE or measurement is None or path is None:
+    if code is not ErrorCode.NONE or measurement is None:
         return record
+    path = measurement.glue_path
     record.status = "ok"
     if failed is not None:
         record.in_tolerance = not failed
         record.failed_features = [bit.name or "" for bit in FeatureBit if failed & bit]
-    record.length_mm = _number(measurement.length_mm)
-    record.heel_height_mm = _number(measurement.heel_height_mm)
-    record.toe_height_mm = _number(measurement.toe_height_mm)
+    record.length_mm = float(measurement.length_mm)
+    record.heel_height_mm = float(measurement.heel_height_mm)
+    record.toe_height_mm = float(measurement.toe_height_mm)
     # Table frame, thinned and float32 as the PLC gets it with [robot] publish_frame = "table" and no nozzle
     # offset: the journal keeps the measurement, whatever frame the robot is given.
     record.glue_path = path.points[thinned(len(path.points))].astype(np.float32).astype(float).tolist()
     return record
-
-
-def _number(value: float | None) -> float | None:
-    return None if value is None else float(value)

@@ -15,11 +15,11 @@ of failing soles on the line. Format and examples: deploy/recipes/*.toml, docs/r
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from cellctl.service.config import ConfigError, MeasureConfig, _Table
+from cellctl.service.config import ConfigError, MeasureConfig
+from cellctl.service.config_table import Table, read_toml
 from firmware_io.registers import FeatureBit
 
 #: The recipe number meaning "the cell's [measure] settings, no tolerances".
@@ -113,13 +113,7 @@ class RecipeBook:
 
 def load_recipe(path: Path, measure: MeasureConfig) -> Recipe:
     """One recipe file; keys it leaves out take the cell's [measure] values."""
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path} is not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path} is not UTF-8 text: {exc}") from None
-    root = _Table(data, "recipe", path)
+    root = Table(read_toml(path), "recipe", path)
     number = int(root.number("number", low=1, high=MAX_RECIPE_NUMBER))
     if number != root.data["number"]:
         raise root.fail("number", f"{root.data['number']!r} is not a whole number")
@@ -148,16 +142,16 @@ def load_recipe(path: Path, measure: MeasureConfig) -> Recipe:
     return recipe
 
 
-def _tolerance(root: _Table, key: str) -> Tolerance | None:
+def _tolerance(root: Table, key: str) -> Tolerance | None:
     """[key] nominal = ..., tolerance = ± or minus/plus; absent: that feature is not checked."""
     if key not in root.data:
         root.get(key, dict, None)
         return None
     t = root.table(key)
     nominal = t.number("nominal", above=0)
-    symmetric = t.number("tolerance", None, above=0)
-    minus = t.number("minus", symmetric, above=0)
-    plus = t.number("plus", symmetric, above=0)
+    symmetric = t.optional_number("tolerance", above=0)
+    minus = t.optional_number("minus", symmetric, above=0)
+    plus = t.optional_number("plus", symmetric, above=0)
     t.finish()
     if minus is None or plus is None:
         raise t.fail("tolerance", "required: `tolerance = 1.0` (±) or both `minus` and `plus` (mm)")

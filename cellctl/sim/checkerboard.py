@@ -62,48 +62,12 @@ class BoardPair:
     kind: str = "good"  # "good" or one of BAD_KINDS
 
 
-@dataclass
-class CheckerboardSimulator:
-    """Renders checkerboard pairs as the rig `rig` would capture them."""
+class BoardCameras:
+    """The rig's two cameras looking at the board: where its corners appear, and its image at a pose."""
 
-    rig: Calibration
-    board: Checkerboard
-    seed: int = 0
-    noise_sigma: float = 3.0  # sensor noise, grey levels (a typical USB camera)
-    blur_sigma: float = 0.6  # optical blur, px, where the board is farthest and most oblique (more elsewhere)
-    distance_mm: tuple[float, float] = (420.0, 680.0)  # range of board distances
-    max_tilt_rad: float = 0.6  # ~35 degrees: Zhang's method needs tilted views to pin down the focal length
-    _rng: np.random.Generator = field(init=False, repr=False)
-    _rays: dict[str, np.ndarray] = field(default_factory=dict, init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        self._rng = np.random.default_rng(self.seed)
-
-    def pairs(self, good: int, bad: tuple[str, ...] = BAD_KINDS) -> list[BoardPair]:
-        """`good` sound pairs with the bad pairs of the given kinds spread among them."""
-        unknown = [kind for kind in bad if kind not in BAD_KINDS]
-        if unknown:
-            raise ValueError(f"unknown bad pair kind {unknown[0]!r}: choose from {', '.join(BAD_KINDS)}")
-        kinds = ["good"] * good
-        for i, kind in enumerate(bad):
-            # Spread the bad pairs evenly so they do not all sit at the end of the list.
-            kinds.insert(min(len(kinds), (i + 1) * (good + len(bad)) // (len(bad) + 1)), kind)
-        return [self.render(f"{i + 1:02d}", kind) for i, kind in enumerate(kinds)]
-
-    def render(self, name: str, kind: str = "good") -> BoardPair:
-        """Render one pair of the given kind at a fresh random pose."""
-        if kind == "good":
-            pose = self._visible_pose()
-            left, right = self._capture(pose, "left"), self._capture(pose, "right")
-        elif kind == "outside":
-            pose = self._outside_pose()
-            left, right = self._capture(pose, "left"), self._capture(pose, "right")
-        elif kind == "blur":
-            pose = self._visible_pose()
-            left, right = self._moving_capture(pose)
-        else:
-            raise ValueError(f"unknown pair kind {kind!r}: use 'good' or one of {', '.join(BAD_KINDS)}")
-        return BoardPair(name, left, right, pose, kind)
+    def __init__(self, rig: Calibration, board: Checkerboard, blur_sigma: float) -> None:
+        self.rig, self.board, self.blur_sigma = rig, board, blur_sigma
+        self._rays: dict[str, np.ndarray] = {}
 
     def render_image(self, pose: BoardPose, side: str, texture: BoardTexture | None = None) -> np.ndarray:
         """The noiseless image of the board at `pose` in one camera, float32 grey levels.
@@ -111,7 +75,7 @@ class CheckerboardSimulator:
         `texture` defaults to the board blurred for this pose (see `texture_for`).
         """
         texture = texture or self.texture_for(pose)
-        rotation, translation = self._in_camera(pose, side)
+        rotation, translation = self.in_camera(pose, side)
         # Homography from the board plane (X, Y, 1) to normalised camera coordinates; its inverse maps
         # each pixel's ray back onto the board.
         to_board = np.linalg.inv(np.column_stack([rotation[:, 0], rotation[:, 1], translation.ravel()]))
@@ -139,7 +103,7 @@ class CheckerboardSimulator:
         """
         finest_mm_per_px = 0.0
         for side in ("left", "right"):
-            rotation, translation = self._in_camera(pose, side)
+            rotation, translation = self.in_camera(pose, side)
             depth = (self.board.outline() @ rotation.T + translation.T)[:, 2].max()
             facing = max(abs(rotation[2, 2]), 0.3)  # cosine of the tilt between board normal and view axis
             K = self.rig.K1 if side == "left" else self.rig.K2
@@ -148,7 +112,104 @@ class CheckerboardSimulator:
 
     def projected_corners(self, pose: BoardPose, side: str) -> np.ndarray:
         """Where the board's inner corners truly appear in one camera (N x 2 px)."""
-        return self._project(self.board.object_points().astype(np.float64), pose, side)
+        return self.project(self.board.object_points().astype(np.float64), pose, side)
+
+    def _board_texture(self, blur_mm: float) -> BoardTexture:
+        # 1.5 texels per blur sigma is enough for bilinear sampling to follow the blurred edges smoothly;
+        # a whole number of texels per square puts every edge exactly on a texel boundary.
+        texel_mm = self.board.square_mm / np.ceil(self.board.square_mm / (blur_mm / 1.5))
+        outline = self.board.outline()
+        size_mm = outline[2, :2] - outline[0, :2]
+        width, height = (int(np.ceil(v / texel_mm)) for v in size_mm)
+        # Square index of each texel centre; the square between the first four inner corners is dark (the
+        # convention the corner detection uses to number corners the same way in both cameras).
+        xs = (outline[0, 0] + (np.arange(width) + 0.5) * texel_mm) / self.board.square_mm
+        ys = (outline[0, 1] + (np.arange(height) + 0.5) * texel_mm) / self.board.square_mm
+        col, row = np.floor(xs).astype(int), np.floor(ys).astype(int)
+        in_x = (col >= -1) & (col <= self.board.cols - 1)
+        in_y = (row >= -1) & (row <= self.board.rows - 1)
+        dark = ((col[None, :] + row[:, None]) % 2 == 0) & in_x[None, :] & in_y[:, None]
+        sharp = np.where(dark, _DARK, _LIGHT).astype(np.float32)
+        return BoardTexture(cv2.GaussianBlur(sharp, (0, 0), 1.5, borderType=cv2.BORDER_REPLICATE), texel_mm)
+
+    def _pixel_rays(self, side: str) -> np.ndarray:
+        """Homogeneous normalised ray (x, y, 1) of every pixel of one camera, lens distortion removed."""
+        if side not in self._rays:
+            K, D = (self.rig.K1, self.rig.D1) if side == "left" else (self.rig.K2, self.rig.D2)
+            width, height = self.rig.image_size
+            grid = np.stack(np.meshgrid(np.arange(width), np.arange(height)), axis=-1).reshape(-1, 1, 2)
+            criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+            normalised = cv2.undistortPoints(grid.astype(np.float64), K, D, criteria=criteria).reshape(height, width, 2)
+            self._rays[side] = np.concatenate([normalised, np.ones((height, width, 1))], axis=-1)
+        return self._rays[side]
+
+    def in_camera(self, pose: BoardPose, side: str) -> tuple[np.ndarray, np.ndarray]:
+        if side == "left":
+            return pose.rotation, pose.translation
+        return self.rig.R @ pose.rotation, self.rig.R @ pose.translation + self.rig.T
+
+    def project(self, points: np.ndarray, pose: BoardPose, side: str) -> np.ndarray:
+        rotation, translation = self.in_camera(pose, side)
+        K, D = (self.rig.K1, self.rig.D1) if side == "left" else (self.rig.K2, self.rig.D2)
+        projected, _ = cv2.projectPoints(points, cv2.Rodrigues(rotation)[0], translation, K, D)
+        return projected.reshape(-1, 2)
+
+
+@dataclass
+class CheckerboardSimulator:
+    """Renders checkerboard pairs as the rig `rig` would capture them."""
+
+    rig: Calibration
+    board: Checkerboard
+    seed: int = 0
+    noise_sigma: float = 3.0  # sensor noise, grey levels (a typical USB camera)
+    blur_sigma: float = 0.6  # optical blur, px, where the board is farthest and most oblique (more elsewhere)
+    distance_mm: tuple[float, float] = (420.0, 680.0)  # range of board distances
+    max_tilt_rad: float = 0.6  # ~35 degrees: Zhang's method needs tilted views to pin down the focal length
+    _rng: np.random.Generator = field(init=False, repr=False)
+    cameras: BoardCameras = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+        self.cameras = BoardCameras(self.rig, self.board, self.blur_sigma)
+
+    def render_image(self, pose: BoardPose, side: str, texture: BoardTexture | None = None) -> np.ndarray:
+        """The noiseless image of the board at `pose` in one camera, float32 grey levels (BoardCameras)."""
+        return self.cameras.render_image(pose, side, texture)
+
+    def texture_for(self, pose: BoardPose) -> BoardTexture:
+        """The board blurred so that its image at `pose` is blurred by at least `blur_sigma` px."""
+        return self.cameras.texture_for(pose)
+
+    def projected_corners(self, pose: BoardPose, side: str) -> np.ndarray:
+        """Where the board's inner corners truly appear in one camera (N x 2 px)."""
+        return self.cameras.projected_corners(pose, side)
+
+    def pairs(self, good: int, bad: tuple[str, ...] = BAD_KINDS) -> list[BoardPair]:
+        """`good` sound pairs with the bad pairs of the given kinds spread among them."""
+        unknown = [kind for kind in bad if kind not in BAD_KINDS]
+        if unknown:
+            raise ValueError(f"unknown bad pair kind {unknown[0]!r}: choose from {', '.join(BAD_KINDS)}")
+        kinds = ["good"] * good
+        for i, kind in enumerate(bad):
+            # Spread the bad pairs evenly so they do not all sit at the end of the list.
+            kinds.insert(min(len(kinds), (i + 1) * (good + len(bad)) // (len(bad) + 1)), kind)
+        return [self.render(f"{i + 1:02d}", kind) for i, kind in enumerate(kinds)]
+
+    def render(self, name: str, kind: str = "good") -> BoardPair:
+        """Render one pair of the given kind at a fresh random pose."""
+        if kind == "good":
+            pose = self._visible_pose()
+            left, right = self._capture(pose, "left"), self._capture(pose, "right")
+        elif kind == "outside":
+            pose = self._outside_pose()
+            left, right = self._capture(pose, "left"), self._capture(pose, "right")
+        elif kind == "blur":
+            pose = self._visible_pose()
+            left, right = self._moving_capture(pose)
+        else:
+            raise ValueError(f"unknown pair kind {kind!r}: use 'good' or one of {', '.join(BAD_KINDS)}")
+        return BoardPair(name, left, right, pose, kind)
 
     # -- poses ------------------------------------------------------------------------------------
 
@@ -186,10 +247,10 @@ class CheckerboardSimulator:
         # Sample the outline densely: with lens distortion a straight board edge is curved in the image.
         outline = self.board.outline(margin_squares=0.5)
         edges = np.concatenate([np.linspace(a, b, 20) for a, b in zip(outline, np.roll(outline, -1, axis=0))])
-        rotation, translation = self._in_camera(pose, side)
+        rotation, translation = self.cameras.in_camera(pose, side)
         if np.any((edges @ rotation.T + translation.T)[:, 2] <= 0):
             return False
-        points = self._project(edges, pose, side)
+        points = self.cameras.project(edges, pose, side)
         limit = np.array([width, height]) - margin_px
         return bool(np.all(points >= margin_px) and np.all(points < limit))
 
@@ -216,46 +277,6 @@ class CheckerboardSimulator:
     def _sensor(self, image: np.ndarray) -> np.ndarray:
         noisy = image + self.noise_sigma * self._rng.standard_normal(image.shape, dtype=np.float32)
         return np.clip(noisy + 0.5, 0, 255).astype(np.uint8)
-
-    def _board_texture(self, blur_mm: float) -> BoardTexture:
-        # 1.5 texels per blur sigma is enough for bilinear sampling to follow the blurred edges smoothly;
-        # a whole number of texels per square puts every edge exactly on a texel boundary.
-        texel_mm = self.board.square_mm / np.ceil(self.board.square_mm / (blur_mm / 1.5))
-        outline = self.board.outline()
-        size_mm = outline[2, :2] - outline[0, :2]
-        width, height = (int(np.ceil(v / texel_mm)) for v in size_mm)
-        # Square index of each texel centre; the square between the first four inner corners is dark (the
-        # convention the corner detection uses to number corners the same way in both cameras).
-        xs = (outline[0, 0] + (np.arange(width) + 0.5) * texel_mm) / self.board.square_mm
-        ys = (outline[0, 1] + (np.arange(height) + 0.5) * texel_mm) / self.board.square_mm
-        col, row = np.floor(xs).astype(int), np.floor(ys).astype(int)
-        in_x = (col >= -1) & (col <= self.board.cols - 1)
-        in_y = (row >= -1) & (row <= self.board.rows - 1)
-        dark = ((col[None, :] + row[:, None]) % 2 == 0) & in_x[None, :] & in_y[:, None]
-        sharp = np.where(dark, _DARK, _LIGHT).astype(np.float32)
-        return BoardTexture(cv2.GaussianBlur(sharp, (0, 0), 1.5, borderType=cv2.BORDER_REPLICATE), texel_mm)
-
-    def _pixel_rays(self, side: str) -> np.ndarray:
-        """Homogeneous normalised ray (x, y, 1) of every pixel of one camera, lens distortion removed."""
-        if side not in self._rays:
-            K, D = (self.rig.K1, self.rig.D1) if side == "left" else (self.rig.K2, self.rig.D2)
-            width, height = self.rig.image_size
-            grid = np.stack(np.meshgrid(np.arange(width), np.arange(height)), axis=-1).reshape(-1, 1, 2)
-            criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-            normalised = cv2.undistortPoints(grid.astype(np.float64), K, D, criteria=criteria).reshape(height, width, 2)
-            self._rays[side] = np.concatenate([normalised, np.ones((height, width, 1))], axis=-1)
-        return self._rays[side]
-
-    def _in_camera(self, pose: BoardPose, side: str) -> tuple[np.ndarray, np.ndarray]:
-        if side == "left":
-            return pose.rotation, pose.translation
-        return self.rig.R @ pose.rotation, self.rig.R @ pose.translation + self.rig.T
-
-    def _project(self, points: np.ndarray, pose: BoardPose, side: str) -> np.ndarray:
-        rotation, translation = self._in_camera(pose, side)
-        K, D = (self.rig.K1, self.rig.D1) if side == "left" else (self.rig.K2, self.rig.D2)
-        projected, _ = cv2.projectPoints(points, cv2.Rodrigues(rotation)[0], translation, K, D)
-        return projected.reshape(-1, 2)
 
 
 def write_pairs(pairs: list[BoardPair], out_dir: str | os.PathLike[str]) -> list[Path]:

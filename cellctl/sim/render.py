@@ -40,6 +40,7 @@ SHADOW_RAY_LIFT_MM = 0.05  # shadow rays start this far off the surface, so they
 LENS_BLUR_PX = 0.5
 VIGNETTING = 0.12  # relative fall-off at the image corners
 SUPERSAMPLE = 4
+_CPU = o3d.core.Device("CPU:0")  # every tensor of the renderer lives on the CPU
 
 
 def rig_pose(
@@ -125,8 +126,8 @@ class SceneRenderer:
         if sole is not None:
             vertices, triangles, self._parts = sole.mesh()
             mesh = o3d.t.geometry.TriangleMesh()
-            mesh.vertex.positions = o3d.core.Tensor(vertices.astype(np.float32))
-            mesh.triangle.indices = o3d.core.Tensor(triangles)
+            mesh.vertex.positions = _tensor(vertices, o3d.core.float32)
+            mesh.triangle.indices = _tensor(triangles, o3d.core.int32)
             self._scene.add_triangles(mesh)  # geometry id 1 = SOLE_GEOMETRY
 
     def render(self) -> RenderedPair:
@@ -183,7 +184,7 @@ class SceneRenderer:
         rays = np.empty((len(directions), 6), np.float32)
         rays[:, :3] = pose[:3, 3]
         rays[:, 3:] = directions
-        result = self._scene.cast_rays(o3d.core.Tensor(rays))
+        result = self._scene.cast_rays(_tensor(rays, o3d.core.float32))
         t = result["t_hit"].numpy()
         hit = np.isfinite(t)
         geometry = np.where(hit, result["geometry_ids"].numpy().astype(np.int32), -1)
@@ -249,7 +250,7 @@ class SceneRenderer:
         for k, light in enumerate(self.lights):
             # Ray direction = the full vector to the light: anything hit at t < 1 lies between point and light.
             rays = np.hstack([start, light.astype(np.float32) - start])
-            t = self._scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+            t = self._scene.cast_rays(_tensor(rays, o3d.core.float32))["t_hit"].numpy()
             lit[k, hit] = ~(t < 1.0)
         return lit
 
@@ -342,11 +343,16 @@ def _pixel_rays(K_bytes: bytes, D_bytes: bytes, size: tuple[int, int]) -> np.nda
     return rays
 
 
+def _tensor(array: np.ndarray, dtype: o3d.core.Dtype) -> o3d.core.Tensor:
+    """A copy of `array` as an Open3D tensor of `dtype` on the CPU (Open3D's stubs want both spelled out)."""
+    return o3d.core.Tensor(array, dtype, _CPU)
+
+
 def _table_mesh() -> o3d.t.geometry.TriangleMesh:
     half = 2000.0
     mesh = o3d.t.geometry.TriangleMesh()
-    mesh.vertex.positions = o3d.core.Tensor(
-        np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]], np.float32)
+    mesh.vertex.positions = _tensor(
+        np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]]), o3d.core.float32
     )
-    mesh.triangle.indices = o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], np.int32))
+    mesh.triangle.indices = _tensor(np.array([[0, 1, 2], [0, 2, 3]]), o3d.core.int32)
     return mesh

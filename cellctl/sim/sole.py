@@ -13,9 +13,8 @@ footprint on the table is exactly the outline.
 the densely sampled outline, exact height-field evaluation) following docs/measurements.md, without any of
 the measuring code, so the simulator can judge the measurement.
 
-The end shapes and the edge profile (sloped walls, rounded top edges) are in sole_profile.py. This module
-is over 350 lines because the outline, the surface with its profile, the truth and the mesh of one model
-are read together: each is defined in terms of the others.
+The end shapes and the edge profile (sloped walls, rounded top edges) are in sole_profile.py, the mesh the
+renderer casts rays at in sole_mesh.py, the polygon geometry of the truth in polygon.py.
 """
 
 from __future__ import annotations
@@ -27,6 +26,10 @@ import cv2
 import numpy as np
 
 from cellctl.sim.look import SceneLook
+from cellctl.sim.polygon import clip_half_plane as _clip_half_plane
+from cellctl.sim.polygon import polygon_area as _polygon_area
+from cellctl.sim.polygon import polygon_moments as _polygon_moments
+from cellctl.sim.sole_mesh import sole_mesh
 from cellctl.sim.sole_profile import EdgeProfile, EndShape
 
 # Parameter ranges of the generated soles (mm unless noted).
@@ -41,11 +44,8 @@ HEIGHT_CLASS_RANGES_MM: dict[str, tuple[tuple[float, float], tuple[float, float]
 }
 EDGE_DISTANCE_SAMPLES = 1500  # outline samples (about twice as many points) for exact distances to it
 MIN_EDGE_THICKNESS_MM = 5.0  # thinnest the top surface gets above the sole's underside at the edge
-# Samples of the outline used for the truth; the rendered mesh uses fewer (MESH_U_SAMPLES).
+# Samples of the outline used for the truth; the rendered mesh uses fewer (cellctl.sim.sole_mesh).
 TRUTH_OUTLINE_SAMPLES = 20000
-MESH_U_SAMPLES = 600
-MESH_S_SAMPLES = 61
-MESH_S_SAMPLES_EDGED = 121  # with an edge profile: columns crowd towards the outline to resolve the profile
 EDGE_NORMAL_STEP_MM = 0.02  # central differences of the edge profile (distances are float32-exact to ~2e-5 mm)
 HEIGHT_POINT_FRACTION = 0.10  # heights are taken 10 % of the length in from each end
 
@@ -80,41 +80,7 @@ class SoleShape:
     @classmethod
     def random(cls, rng: np.random.Generator, look: SceneLook | None = None) -> SoleShape:
         """A plausible sole with the parameter ranges of the simulator, and the ends and edge of `look`."""
-        look = look or SceneLook()
-        heel_range, toe_range, cross_bound = HEIGHT_CLASS_RANGES_MM[look.height]
-        length = rng.uniform(*LENGTH_RANGE_MM)
-        heel_half = length * rng.uniform(0.115, 0.135)
-        ball_half = length * rng.uniform(0.170, 0.190)
-        heel_height = rng.uniform(*heel_range)
-        # A toe higher than the heel is not a shoe: draw the toe height up to the heel height.
-        toe_height = rng.uniform(toe_range[0], min(toe_range[1], heel_height))
-        cross = rng.uniform(-cross_bound, cross_bound)
-        spring_start = rng.uniform(0.60, 0.70)
-        # The toe spring may take at most what leaves the forefoot MIN_EDGE_THICKNESS_MM thick.
-        lift_at_toe_point = rng.uniform(1.0, max(1.0, min(8.0, toe_height - cross - MIN_EDGE_THICKNESS_MM)))
-        reach = ((1.0 - HEIGHT_POINT_FRACTION) - spring_start) / (1.0 - spring_start)
-        toe_spring = lift_at_toe_point / reach**2
-        forefoot = max(MIN_EDGE_THICKNESS_MM, toe_height - cross - lift_at_toe_point)
-        return cls(
-            length=length,
-            heel_half_width=heel_half,
-            ball_half_width=ball_half,
-            medial_arch=ball_half * rng.uniform(0.20, 0.35),
-            lateral_arch=ball_half * rng.uniform(0.04, 0.12),
-            heel_cap=heel_half * rng.uniform(0.9, 1.2),
-            toe_cap=length * rng.uniform(0.14, 0.20),
-            toe_shift=length * rng.uniform(0.0, 0.03),
-            heel_thickness=heel_height - cross,
-            forefoot_thickness=forefoot,
-            thickness_blend=(rng.uniform(0.18, 0.25), rng.uniform(0.55, 0.65)),
-            toe_spring_start=spring_start,
-            toe_spring=toe_spring,
-            cross_curvature=cross,
-            # Drawn after the plain shape's numbers, so a plain look gives the plain simulator's soles.
-            heel_end=EndShape.draw(look.heel, rng),
-            toe_end=EndShape.draw(look.toe, rng),
-            edge=EdgeProfile(look.wall_slope_deg, look.top_edge_radius_mm),
-        )
+        return draw_shape(rng, look or SceneLook())
 
     # ---- outline -------------------------------------------------------------------------------------
 
@@ -229,6 +195,44 @@ class SoleShape:
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
+def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
+    """A plausible sole with the parameter ranges of the simulator, and the ends and edge of `look`."""
+    heel_range, toe_range, cross_bound = HEIGHT_CLASS_RANGES_MM[look.height]
+    length = rng.uniform(*LENGTH_RANGE_MM)
+    heel_half = length * rng.uniform(0.115, 0.135)
+    ball_half = length * rng.uniform(0.170, 0.190)
+    heel_height = rng.uniform(*heel_range)
+    # A toe higher than the heel is not a shoe: draw the toe height up to the heel height.
+    toe_height = rng.uniform(toe_range[0], min(toe_range[1], heel_height))
+    cross = rng.uniform(-cross_bound, cross_bound)
+    spring_start = rng.uniform(0.60, 0.70)
+    # The toe spring may take at most what leaves the forefoot MIN_EDGE_THICKNESS_MM thick.
+    lift_at_toe_point = rng.uniform(1.0, max(1.0, min(8.0, toe_height - cross - MIN_EDGE_THICKNESS_MM)))
+    reach = ((1.0 - HEIGHT_POINT_FRACTION) - spring_start) / (1.0 - spring_start)
+    toe_spring = lift_at_toe_point / reach**2
+    forefoot = max(MIN_EDGE_THICKNESS_MM, toe_height - cross - lift_at_toe_point)
+    return SoleShape(
+        length=length,
+        heel_half_width=heel_half,
+        ball_half_width=ball_half,
+        medial_arch=ball_half * rng.uniform(0.20, 0.35),
+        lateral_arch=ball_half * rng.uniform(0.04, 0.12),
+        heel_cap=heel_half * rng.uniform(0.9, 1.2),
+        toe_cap=length * rng.uniform(0.14, 0.20),
+        toe_shift=length * rng.uniform(0.0, 0.03),
+        heel_thickness=heel_height - cross,
+        forefoot_thickness=forefoot,
+        thickness_blend=(rng.uniform(0.18, 0.25), rng.uniform(0.55, 0.65)),
+        toe_spring_start=spring_start,
+        toe_spring=toe_spring,
+        cross_curvature=cross,
+        # Drawn after the plain shape's numbers, so a plain look gives the plain simulator's soles.
+        heel_end=EndShape.draw(look.heel, rng),
+        toe_end=EndShape.draw(look.toe, rng),
+        edge=EdgeProfile(look.wall_slope_deg, look.top_edge_radius_mm),
+    )
+
+
 @dataclass(frozen=True)
 class SolePose:
     """Where the sole lies on the table: mid-length point, heading of the heel->toe direction, and side."""
@@ -338,96 +342,6 @@ class SoleModel:
         )
 
     def mesh(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Closed triangle mesh in the table frame: vertices (V x 3), triangles (T x 3), part per triangle.
-
-        Parts: 0 top surface, 1 side wall, 2 underside, 3 top surface within the edge profile. The top is a
-        (u, s) grid where s in [-1, 1] runs from the lateral to the medial edge; the grid collapses to a point
-        at each tip. With an edge profile the columns crowd towards the edges and the top takes the profile.
-        """
-        shape = self.shape
-        u = shape.u_samples(MESH_U_SAMPLES)
-        if shape.edge.plain:
-            s = np.linspace(-1.0, 1.0, MESH_S_SAMPLES)
-        else:
-            t = np.linspace(-1.0, 1.0, MESH_S_SAMPLES_EDGED)
-            s = np.sign(t) * (1.0 - (1.0 - np.abs(t)) ** 2)
-        centre = shape.centre_line(u)
-        medial, lateral = shape.half_width(u, True), shape.half_width(u, False)
-        uu = np.repeat(u, s.size)
-        ss = np.tile(s, u.size)
-        vv = np.repeat(centre, s.size) + np.where(
-            ss >= 0, ss * np.repeat(medial, s.size), ss * np.repeat(lateral, s.size)
-        )
-        xy = self.pose.to_table(np.column_stack([uu, vv]), shape.length)
-        plain_top = shape.top_height(uu, vv)
-        top_z = shape.surface_height(uu, vv)
-        top = np.column_stack([xy, top_z])
-        bottom = np.column_stack([xy, shape.underside(uu)])
-        grid = _grid_triangles(u.size, s.size)
-        n_grid = top.shape[0]
-        # Wall quads between the top and underside edge rings (lateral s=-1 and medial s=+1 columns).
-        walls = []
-        for column in (0, s.size - 1):
-            ring = np.arange(u.size) * s.size + column
-            a, b = ring[:-1], ring[1:]
-            quads = np.vstack([np.column_stack([a, b, b + n_grid]), np.column_stack([a, b + n_grid, a + n_grid])])
-            # Winding so that facet normals point out of the sole: the lateral ring (s = -1) runs the other way.
-            walls.append(quads[:, ::-1] if column == 0 else quads)
-        vertices = np.vstack([top, bottom])
-        triangles = np.vstack([grid, *walls, grid[:, ::-1] + n_grid])
-        on_profile = np.any((plain_top - top_z)[grid] > 1e-9, axis=1)
-        parts = np.concatenate(
-            [
-                np.where(on_profile, 3, 0).astype(np.int32),
-                np.ones(sum(len(w) for w in walls), np.int32),
-                np.full(len(grid), 2, np.int32),
-            ]
-        )
-        if self.pose.mirrored:
-            # Mirroring reverses the winding; keep triangle normals pointing out of the sole.
-            triangles = triangles[:, ::-1]
-        return vertices, triangles.astype(np.int32), parts
-
-
-def _grid_triangles(rows: int, cols: int) -> np.ndarray:
-    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
-    a = (r * cols + c).ravel()
-    b, d = a + 1, a + cols
-    return np.vstack([np.column_stack([a, d, b]), np.column_stack([b, d, d + 1])])
-
-
-def _polygon_area(poly: np.ndarray) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-
-
-def _polygon_moments(poly: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Area, centroid and second central moments (2 x 2, per unit area) of a simple polygon (Green's theorem)."""
-    # Shift to a point near the centroid first: the formulas lose precision far from the origin.
-    origin = poly.mean(axis=0)
-    x, y = (poly - origin).T
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cross = x * yn - xn * y
-    area = 0.5 * np.sum(cross)
-    cx = np.sum((x + xn) * cross) / (6 * area)
-    cy = np.sum((y + yn) * cross) / (6 * area)
-    sxx = np.sum((x * x + x * xn + xn * xn) * cross) / (12 * area) - cx * cx
-    syy = np.sum((y * y + y * yn + yn * yn) * cross) / (12 * area) - cy * cy
-    sxy = np.sum((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * cross) / (24 * area) - cx * cy
-    return float(area), np.array([cx, cy]) + origin, np.array([[sxx, sxy], [sxy, syy]])
-
-
-def _clip_half_plane(poly: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
-    """Part of a polygon where p . normal >= offset (Sutherland-Hodgman against one line, vectorised)."""
-    side = poly @ normal - offset
-    nxt = np.roll(poly, -1, axis=0)
-    side_next = np.roll(side, -1)
-    inside = side >= 0
-    crossing = inside != (side_next >= 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        f = np.where(crossing, side / (side - side_next), 0.0)
-    cut = poly + f[:, None] * (nxt - poly)
-    # Per edge: the start vertex if inside, then the crossing point if the edge crosses the line.
-    candidates = np.stack([poly, cut], axis=1).reshape(-1, 2)
-    keep = np.stack([inside, crossing], axis=1).ravel()
-    return candidates[keep]
+        """Closed triangle mesh in the table frame: vertices (V x 3), triangles (T x 3), part per triangle
+        (cellctl.sim.sole_mesh)."""
+        return sole_mesh(self)

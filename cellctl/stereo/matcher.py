@@ -10,14 +10,13 @@ in pixels.  Invalid pixels are NaN, never a placeholder value.
     m = StereoMatcher(min_disparity=0, num_disparities=64)
     disp = m.compute(left, right)
 
-The stage functions at the end (`census_transform`, `cost_volume`, `select`,
+The parameters are cellctl.stereo.params. The stage functions at the end (`census_transform`, `cost_volume`, `select`,
 `postprocess`) run the same C code the pipeline runs, one stage at a time, for
 tests and debugging.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -25,170 +24,13 @@ import cv2
 import numpy as np
 
 from cellctl.stereo._core import ffi, lib
+from cellctl.stereo.params import DEFAULTS, DISP_SCALE, INVALID, MatcherParams, make_params
 
-DISP_SCALE = lib.CC_DISP_SCALE
-INVALID = lib.CC_INVALID
-
-_COSTS = {"census_bt": lib.CC_COST_CENSUS_BT, "census": lib.CC_COST_CENSUS, "bt": lib.CC_COST_BT}
-_FILLS = {"none": lib.CC_FILL_NONE, "background": lib.CC_FILL_BACKGROUND, "weighted": lib.CC_FILL_WEIGHTED}
-_SIMD = {"auto": lib.CC_SIMD_AUTO, "scalar": lib.CC_SIMD_SCALAR}
-_ERRORS = {
+_ERRORS = {  # what the core's error codes mean, for the messages
     lib.CC_ERR_NULL: "a required buffer is missing",
     lib.CC_ERR_SIZE: "the image size or row stride is out of range",
     lib.CC_ERR_NOMEM: "not enough memory for the cost volume",
 }
-
-
-# Parameters stored under the same name and unit in the C struct cc_params.
-_SAME_IN_C = (
-    "min_disparity",
-    "num_disparities",
-    "census_smooth",
-    "lambda_census",
-    "lambda_bt",
-    "bt_prefilter",
-    "cost_scale",
-    "p1",
-    "p2",
-    "p2_gamma",
-    "paths",
-    "uniqueness",
-    "median",
-    "fill_interpolate",
-    "fill_radius",
-    "border_fit",
-    "weighted_median",
-    "wm_sigma_colour",
-    "wm_sigma_space",
-    "threads",
-)
-
-
-@dataclass(frozen=True)
-class MatcherParams:
-    """Every parameter of the matcher; the defaults are the tuned ones of the C core."""
-
-    min_disparity: int
-    num_disparities: int
-    census_window: tuple[int, int]  # (width, height), odd, up to 9x7
-    census_smooth: int  # 0: census of the pixels, 1: of their 3x3 sums (robust in flat regions)
-    cost: str  # "census_bt" (the paper), "census" or "bt"
-    lambda_census: float  # rho scale of the Hamming distance, bits
-    lambda_bt: float  # rho scale of the BT cost, levels of the BT image
-    bt_prefilter: int  # BT image: 0 raw grey, 1..63 horizontal Sobel clipped to +-cap (OpenCV's preFilterCap)
-    cost_scale: int  # each rho term is quantised to 0..cost_scale
-    p1: int  # penalty of a 1 px disparity step
-    p2: int  # penalty of larger steps (p2 > p1)
-    p2_gamma: int  # 0: constant P2; > 0: P2 lowered across intensity edges
-    paths: int  # 4 (the paper) or 8
-    subpixel: bool  # parabola refinement
-    uniqueness: int  # % margin of the best cost over costs > 1 level away, else invalid; 0 = off
-    lr_max_diff: float  # left-right tolerance in px; negative disables the check
-    fill: str  # "weighted" (background, then colour-weighted median), "background" or "none"
-    median: int  # 0, 3 or 5
-    fill_interpolate: int  # fill: runs between valid pixels this close (px) follow a line, 0 = off
-    fill_radius: int  # window radius (px) of the weighted fill, 1..15
-    border_fit: int  # fill: border-occluded strips follow a line fitted to this many px, 0 = off
-    weighted_median: int  # window radius (px) of the final colour-weighted median, 0 = off
-    wm_sigma_colour: float  # weighted medians: colour scale, summed |dB| + |dG| + |dR|
-    wm_sigma_space: float  # weighted medians: distance scale, px
-    threads: int  # 0: all cores
-    simd: str  # "auto" or "scalar"
-
-    def to_c(self) -> Any:
-        """The C struct, after the core's own validation (ValueError naming the problem)."""
-        p = ffi.new("cc_params *")
-        lib.cc_params_default(p)
-        for name in _SAME_IN_C:
-            setattr(p, name, getattr(self, name))
-        p.census_width, p.census_height = self.census_window
-        p.cost_mode = _choice("cost", self.cost, _COSTS)
-        p.subpixel = int(self.subpixel)
-        p.lr_max_diff = -1 if self.lr_max_diff < 0 else round(self.lr_max_diff * DISP_SCALE)
-        p.fill_mode = _choice("fill", self.fill, _FILLS)
-        p.simd = _choice("simd", self.simd, _SIMD)
-        message = ffi.new("const char **")
-        if lib.cc_params_check(p, message) != 0:
-            raise ValueError(f"invalid matcher parameter: {ffi.string(message[0]).decode()}")
-        return p
-
-
-def _c_defaults() -> dict[str, Any]:
-    p = ffi.new("cc_params *")
-    lib.cc_params_default(p)
-    costs, fills = {v: k for k, v in _COSTS.items()}, {v: k for k, v in _FILLS.items()}
-    return {name: getattr(p, name) for name in _SAME_IN_C} | dict(
-        census_window=(p.census_width, p.census_height),
-        cost=costs[p.cost_mode],
-        subpixel=bool(p.subpixel),
-        lr_max_diff=p.lr_max_diff / DISP_SCALE,
-        fill=fills[p.fill_mode],
-        simd="auto",
-    )
-
-
-DEFAULTS: dict[str, Any] = _c_defaults()
-
-
-def _choice(name: str, value: str, options: dict[str, int]) -> int:
-    if value not in options:
-        raise ValueError(f"{name} must be one of {', '.join(options)} (got {value!r})")
-    return options[value]
-
-
-def _as_int(name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        if isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
-            return int(value)
-        raise ValueError(f"{name} must be a whole number (got {value!r})")
-    return int(value)
-
-
-def _as_float(name: str, value: Any) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number (got {value!r})") from None
-    if not math.isfinite(out):
-        raise ValueError(f"{name} must be a finite number (got {value!r})")
-    return out
-
-
-def make_params(**overrides: Any) -> MatcherParams:
-    """MatcherParams from the defaults and keyword overrides, type-checked."""
-    unknown = set(overrides) - set(DEFAULTS)
-    if unknown:
-        raise ValueError(f"unknown matcher parameter(s): {', '.join(sorted(unknown))}")
-    v = {**DEFAULTS, **overrides}
-    window = v["census_window"]
-    if not (isinstance(window, (tuple, list)) and len(window) == 2):
-        raise ValueError(f"census_window must be (width, height) (got {window!r})")
-    ints = (
-        "min_disparity",
-        "num_disparities",
-        "bt_prefilter",
-        "cost_scale",
-        "p1",
-        "p2",
-        "p2_gamma",
-        "paths",
-        "uniqueness",
-        "median",
-        "fill_interpolate",
-        "fill_radius",
-        "border_fit",
-        "weighted_median",
-        "threads",
-    )
-    for name in ints:
-        v[name] = _as_int(name, v[name])
-    for name in ("lambda_census", "lambda_bt", "lr_max_diff", "wm_sigma_colour", "wm_sigma_space"):
-        v[name] = _as_float(name, v[name])
-    v["census_window"] = (_as_int("census_window", window[0]), _as_int("census_window", window[1]))
-    v["subpixel"] = bool(v["subpixel"])
-    params = MatcherParams(**v)
-    params.to_c()  # validate now, not at the first pair
-    return params
 
 
 @dataclass(frozen=True)

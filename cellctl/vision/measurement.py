@@ -2,13 +2,17 @@
 
     reconstruction = SoleReconstructor(calib).reconstruct(left, right)
     result = measure_sole(reconstruction)
-    if result.valid:
+    if isinstance(result, SoleMeasurement):
         print(result.length_mm, result.heel_height_mm, result.toe_height_mm)
-    else:
+    else:  # MeasurementRefused
         print("not measured:", result.reason, result.failure)
 
-An invalid result carries no numbers (None), only the reason in words and its `FailureKind` (what a
-program acts on, e.g. the service's PLC error code): the robot must never get a silent wrong value.
+A refusal carries no numbers, only the reason in words and its `FailureKind` (what a program acts on,
+e.g. the service's PLC error code), and what was found on the way for pictures: the robot must never get
+a silent wrong value.
+
+Over 350 lines (~490): the result types (success and refusal) and the one procedure that fills them,
+whose steps refuse in order; the issue 11 rework of its internals is under way, the split after it.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ from cellctl.vision.defaults import (
 )
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.local_fit import local_planes
-from cellctl.vision.reconstruction import Reconstruction
+from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
 MAX_UNMEASURED_FRACTION = 0.05  # of the sole's changed pixels without depth: beyond, blame the lost pixels
@@ -84,24 +88,25 @@ class GluePath:
 
 @dataclass
 class SoleMeasurement:
-    """The measurements of one sole, or the reason why there are none."""
+    """The measurements of one sole (the success of `MeasurementResult`)."""
 
-    length_mm: float | None
-    heel_height_mm: float | None
-    toe_height_mm: float | None
-    glue_path: GluePath | None
+    length_mm: float
+    heel_height_mm: float
+    toe_height_mm: float
+    glue_path: GluePath
     points: int  # sole points the measurement rests on
-    valid: bool
-    reason: str | None = None  # why not measured, in words
-    failure: FailureKind | None = None  # the same, as a kind a program can act on
+    # Where the numbers come from (table frame), for drawings and diagnostics.
+    axis: np.ndarray  # unit heel->toe direction (x, y)
+    heel_point: np.ndarray  # (x, y, z) where heel_height_mm is taken
+    toe_point: np.ndarray
+    outline: np.ndarray  # footprint outline, N x 2
+    half_area_difference: float  # (toe half - heel half) / area
+    camera_to_table: np.ndarray  # 4 x 4, rectified left camera -> table
     timings: dict[str, float] = field(default_factory=dict)
-    # Where the numbers come from (table frame), for drawings and diagnostics; None when unknown.
-    axis: np.ndarray | None = None  # unit heel->toe direction (x, y)
-    heel_point: np.ndarray | None = None  # (x, y, z) where heel_height_mm is taken
-    toe_point: np.ndarray | None = None
-    outline: np.ndarray | None = None  # footprint outline, N x 2
-    half_area_difference: float | None = None  # (toe half - heel half) / area
-    camera_to_table: np.ndarray | None = None  # 4 x 4, rectified left camera -> table
+
+    @property
+    def valid(self) -> bool:
+        return True
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready summary (keys of the `cellctl measure --json` output)."""
@@ -110,12 +115,51 @@ class SoleMeasurement:
             "length_mm": _round(self.length_mm),
             "heel_height_mm": _round(self.heel_height_mm),
             "toe_height_mm": _round(self.toe_height_mm),
-            "glue_path": [] if path is None else np.round(path.points, 3).tolist(),
-            "glue_normals": [] if path is None else np.round(path.normals, 4).tolist(),
+            "glue_path": np.round(path.points, 3).tolist(),
+            "glue_normals": np.round(path.normals, 4).tolist(),
             "points": int(self.points),
-            "valid": bool(self.valid),
+            "valid": True,
+            "reason": None,
+            "failure": None,
+            "heel_point": np.round(self.heel_point, 3).tolist(),
+            "toe_point": np.round(self.toe_point, 3).tolist(),
+            "camera_to_table": np.round(self.camera_to_table, 6).tolist(),
+            "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
+        }
+
+
+@dataclass
+class MeasurementRefused:
+    """No measurements: why (kind for programs, reason for people) and what was found before the refusal
+    (None where the measurement did not get that far), for pictures and diagnostics."""
+
+    failure: FailureKind
+    reason: str
+    points: int  # sole points found
+    timings: dict[str, float] = field(default_factory=dict)
+    axis: np.ndarray | None = None
+    heel_point: np.ndarray | None = None
+    toe_point: np.ndarray | None = None
+    outline: np.ndarray | None = None
+    half_area_difference: float | None = None
+    camera_to_table: np.ndarray | None = None
+
+    @property
+    def valid(self) -> bool:
+        return False
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready summary: the keys of SoleMeasurement.to_dict, without numbers."""
+        return {
+            "length_mm": None,
+            "heel_height_mm": None,
+            "toe_height_mm": None,
+            "glue_path": [],
+            "glue_normals": [],
+            "points": int(self.points),
+            "valid": False,
             "reason": self.reason,
-            "failure": None if self.failure is None else self.failure.value,
+            "failure": self.failure.value,
             "heel_point": None if self.heel_point is None else np.round(self.heel_point, 3).tolist(),
             "toe_point": None if self.toe_point is None else np.round(self.toe_point, 3).tolist(),
             "camera_to_table": None if self.camera_to_table is None else np.round(self.camera_to_table, 6).tolist(),
@@ -123,8 +167,11 @@ class SoleMeasurement:
         }
 
 
-def _round(value: float | None) -> float | None:
-    return None if value is None else round(float(value), 3)
+MeasurementResult = SoleMeasurement | MeasurementRefused
+
+
+def _round(value: float) -> float:
+    return round(float(value), 3)
 
 
 def check_glue_settings(glue_offset_mm: float, glue_spacing_mm: float) -> None:
@@ -138,20 +185,18 @@ def check_glue_settings(glue_offset_mm: float, glue_spacing_mm: float) -> None:
 
 
 def measure_sole(
-    reconstruction: Reconstruction,
+    reconstruction: ReconstructionResult,
     glue_offset_mm: float = GLUE_OFFSET_MM,
     glue_spacing_mm: float = GLUE_SPACING_MM,
-) -> SoleMeasurement:
+) -> MeasurementResult:
     """Length, heel and toe height and glue path of a reconstructed sole."""
     check_glue_settings(glue_offset_mm, glue_spacing_mm)
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
     # What every result carries, valid or not; grows as the measurement learns more about the sole.
     base: dict[str, Any] = dict(points=len(points), timings=timings, camera_to_table=reconstruction.camera_to_table)
-    if not reconstruction.valid or reconstruction.footprint is None:
-        return _invalid(
-            reconstruction.failure or FailureKind.NO_SOLE, reconstruction.reason or "no sole reconstructed", **base
-        )
+    if isinstance(reconstruction, ReconstructionRefused):
+        return _invalid(reconstruction.failure, reconstruction.reason, **base)
     start = time.perf_counter()
     footprint = reconstruction.footprint
     smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
@@ -216,7 +261,9 @@ def measure_sole(
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
-    problem = check_glue_coverage(np.isfinite(surface.coarse_heights(path.points[:, :2], GLUE_COVER_RADIUS_MM)))
+    problem = check_glue_coverage(
+        np.isfinite(surface.coarse_heights(path.points[:, :2], _cover_radius(reconstruction)))
+    )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     sole_z = np.quantile(points[:, 2], [0.01, 0.99])
@@ -230,9 +277,7 @@ def measure_sole(
     implausible = _implausible(length, heel_z, toe_z)
     if implausible:
         return _invalid(FailureKind.MEASUREMENT_INVALID, implausible, **base)
-    return SoleMeasurement(
-        length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, valid=True, **base
-    )
+    return SoleMeasurement(length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, **base)
 
 
 def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> CheckFailure | None:
@@ -254,7 +299,7 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> Che
     if problem is not None:
         return problem
     changed_right, calib = reconstruction.changed_right, reconstruction.calibration
-    if changed_right is None or calib is None or reconstruction.camera_to_table is None:
+    if changed_right is None or calib is None:
         return None
     to_camera = np.linalg.inv(reconstruction.camera_to_table)
     f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
@@ -268,7 +313,6 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> Che
     centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
     edge_height = SoleSurface(reconstruction).coarse_heights(ring - 3.0 * outward, 3.0)
     edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
-    assert reconstruction.footprint is not None
     table_level = None
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
         table_level = Footprint(
@@ -302,6 +346,16 @@ def _height_map(reconstruction: Reconstruction) -> Callable[[np.ndarray], np.nda
     return height
 
 
+def _cover_radius(reconstruction: Reconstruction) -> float:
+    """Radius holding MIN_CLOUD_POINTS where about half the pixels are measured (GLUE_COVER_RADIUS_MM at least):
+    the same density of measurement asked of any rig, also one whose pixels cover more of the table."""
+    calib, to_table = reconstruction.calibration, reconstruction.camera_to_table
+    if calib is None or to_table is None:
+        return GLUE_COVER_RADIUS_MM
+    pixel_mm = abs(float(to_table[2, 3])) / calib.focal_px  # camera height above the table / focal length
+    return max(GLUE_COVER_RADIUS_MM, float(np.sqrt(2.0 * MIN_CLOUD_POINTS / np.pi)) * pixel_mm)
+
+
 def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
     """Why values outside what a sole can be are refused, or None: better no number than a wrong one."""
     low, high = PLAUSIBLE_LENGTH_MM
@@ -314,8 +368,8 @@ def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
     return None
 
 
-def _invalid(failure: FailureKind, reason: str, **fields_: Any) -> SoleMeasurement:
-    return SoleMeasurement(None, None, None, None, valid=False, reason=reason, failure=failure, **fields_)
+def _invalid(failure: FailureKind, reason: str, **fields_: Any) -> MeasurementRefused:
+    return MeasurementRefused(failure, reason, **fields_)
 
 
 def _principal_axis(outline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,12 +3,14 @@ top view of the reconstructed cloud coloured by height, side by side."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
 from cellctl.vision.calibration import Calibration
-from cellctl.vision.measurement import SoleMeasurement
-from cellctl.vision.reconstruction import Reconstruction
+from cellctl.vision.measurement import MeasurementResult, SoleMeasurement
+from cellctl.vision.reconstruction import ReconstructionResult
 
 EDGE_BGR = (0, 255, 0)
 GLUE_BGR = (0, 200, 255)
@@ -27,7 +29,7 @@ def project_to_left(calib: Calibration, camera_to_table: np.ndarray, points: np.
 
 
 def draw_overlay(
-    left: np.ndarray, calib: Calibration, reconstruction: Reconstruction, measurement: SoleMeasurement
+    left: np.ndarray, calib: Calibration, reconstruction: ReconstructionResult, measurement: MeasurementResult
 ) -> np.ndarray:
     """Left image with edge, glue path and heel/toe points, next to a top view of the cloud (BGR)."""
     image = draw_on_left(left, calib, measurement)
@@ -70,7 +72,7 @@ def height_scale(low_mm: float, high_mm: float, height: int, width: int = 110) -
     return bar
 
 
-def draw_on_left(left: np.ndarray, calib: Calibration, measurement: SoleMeasurement) -> np.ndarray:
+def draw_on_left(left: np.ndarray, calib: Calibration, measurement: MeasurementResult) -> np.ndarray:
     """The raw left image with edge, glue path and heel/toe points where the camera saw them (BGR, no caption)."""
     image = cv2.cvtColor(left, cv2.COLOR_GRAY2BGR) if left.ndim == 2 else left.copy()
     transform = measurement.camera_to_table
@@ -79,7 +81,7 @@ def draw_on_left(left: np.ndarray, calib: Calibration, measurement: SoleMeasurem
     return image
 
 
-def top_view(reconstruction: Reconstruction, measurement: SoleMeasurement) -> np.ndarray | None:
+def top_view(reconstruction: ReconstructionResult, measurement: MeasurementResult) -> np.ndarray | None:
     """The sole's points seen from above (+z), coloured by height, with edge, glue path and points."""
     points = reconstruction.sole_points
     if len(points) == 0:
@@ -102,11 +104,13 @@ def top_view(reconstruction: Reconstruction, measurement: SoleMeasurement) -> np
     return view
 
 
-def _draw_geometry(image: np.ndarray, measurement: SoleMeasurement, to_px) -> None:  # noqa: ANN001
+def _draw_geometry(
+    image: np.ndarray, measurement: MeasurementResult, to_px: Callable[[np.ndarray], np.ndarray]
+) -> None:
     if measurement.outline is not None and len(measurement.outline):
         outline = np.column_stack([measurement.outline, _edge_heights(measurement)])
         cv2.polylines(image, [np.round(to_px(outline)).astype(np.int32)], True, EDGE_BGR, 1, cv2.LINE_AA)
-    if measurement.glue_path is not None:
+    if isinstance(measurement, SoleMeasurement):
         path = np.round(to_px(measurement.glue_path.points)).astype(np.int32)
         cv2.polylines(image, [path], True, GLUE_BGR, 1, cv2.LINE_AA)
         cv2.circle(image, tuple(int(v) for v in path[0]), 5, GLUE_BGR, 2, cv2.LINE_AA)  # where the path starts
@@ -116,21 +120,21 @@ def _draw_geometry(image: np.ndarray, measurement: SoleMeasurement, to_px) -> No
             cv2.drawMarker(image, (int(centre[0]), int(centre[1])), colour, cv2.MARKER_CROSS, 20, 2, cv2.LINE_AA)
 
 
-def _edge_heights(measurement: SoleMeasurement) -> np.ndarray:
+def _edge_heights(measurement: MeasurementResult) -> np.ndarray:
     """Height of the top surface along the outline (from the nearest glue path point): the camera sees the
     edge up there, not on the table."""
     outline = measurement.outline
     if outline is None:
         return np.zeros(0)
-    if measurement.glue_path is None:
+    if not isinstance(measurement, SoleMeasurement):
         return np.zeros(len(outline))
     path = measurement.glue_path.points
     distance = np.linalg.norm(outline[:, None, :] - path[None, :, :2], axis=2)
     return path[np.argmin(distance, axis=1), 2]
 
 
-def _caption(image: np.ndarray, measurement: SoleMeasurement) -> None:
-    if measurement.valid:
+def _caption(image: np.ndarray, measurement: MeasurementResult) -> None:
+    if isinstance(measurement, SoleMeasurement):
         text = (
             f"length {measurement.length_mm:.1f} mm  heel {measurement.heel_height_mm:.1f} mm  "
             f"toe {measurement.toe_height_mm:.1f} mm"

@@ -26,13 +26,21 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud, cloud_from_disparity, disparity_range
 from cellctl.vision.defaults import DEPTH_RANGE_MM
 from cellctl.vision.search_region import SearchRegion, coarse_pair, coarse_range, find_region
-from cellctl.vision.segmentation import MIN_HEIGHT_MM, Reconstruction, Segmentation
+from cellctl.vision.segmentation import (
+    MIN_HEIGHT_MM,
+    Reconstruction,
+    ReconstructionRefused,
+    ReconstructionResult,
+    Segmentation,
+)
 from cellctl.vision.table import TablePlane
 from cellctl.vision.teach import TaughtTable, teach_table
 
 __all__ = [
     "DEFAULT_DEPTH_RANGE_MM",
     "Reconstruction",
+    "ReconstructionRefused",
+    "ReconstructionResult",
     "SoleReconstructor",
     "StereoCloud",
     "TaughtTable",
@@ -92,7 +100,7 @@ class SoleReconstructor:
         self.table_plane = plane
         return plane
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
         """The sole's cloud from one raw (unrectified) stereo pair."""
         self._check_pair(left, right)
         timings: dict[str, float] = {}
@@ -103,10 +111,13 @@ class SoleReconstructor:
             if region is not None:
                 result = self.segment(self._cloud(rect_left, rect_right, timings, region))
                 cut_px = REGION_CUT_MM * self.calib.focal_px / self.table_plane.offset
-                if result.valid and not region.cuts(result.sole_pixels, cut_px):
+                if isinstance(result, ReconstructionRefused):
+                    why = f"refused: {result.reason}"
+                elif region.cuts(result.sole_pixels, cut_px):
+                    why = "the sole reaches the search region's edge"
+                else:
                     self.last_region = region
                     return result
-                why = "the sole reaches the search region's edge" if result.valid else f"refused: {result.reason}"
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
@@ -168,7 +179,7 @@ class SoleReconstructor:
         timings["reproject"] = time.perf_counter() - start
         return cloud
 
-    def segment(self, cloud: StereoCloud) -> Reconstruction:
+    def segment(self, cloud: StereoCloud) -> ReconstructionResult:
         """Table plane, background removal, largest region and outlier removal on a measured cloud."""
         return Segmentation(cloud, self.table_plane, self.min_height_mm, self.taught).run()
 

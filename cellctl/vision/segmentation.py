@@ -11,6 +11,9 @@ are none (docs/measurements.md).
 3. the sole is the largest connected region of the footprint raster (cellctl.vision.footprint), holes filled;
 4. statistical outlier removal (cellctl.vision.outliers) on the sole's points, and a mask of the sole's
    pixels so that heights can be refined on the images (cellctl.vision.surface, cellctl.vision.subpixel).
+
+Over 350 lines (~430): the result types and one run's steps, which share its state (Segmentation, a class
+over 150 lines for that reason); the issue 11 rework of these steps is under way, the split after it.
 """
 
 from __future__ import annotations
@@ -47,24 +50,37 @@ UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches 
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 
 
+class _SolePoints:
+    """The sole's points as an Open3D cloud (both result types carry the points found, possibly none)."""
+
+    sole_points: np.ndarray
+    sole_colors: np.ndarray
+
+    def point_cloud(self) -> o3d.geometry.PointCloud:
+        """The sole as an Open3D cloud with RGB colours (for PLY output and viewing)."""
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(self.sole_points, np.float64)))
+        # Contiguous float64: Open3D copies that in one go, anything else element by element (~50 ms per cycle).
+        rgb = np.ascontiguousarray(np.clip(self.sole_colors[:, ::-1] / 255.0, 0.0, 1.0), np.float64)
+        cloud.colors = o3d.utility.Vector3dVector(rgb)
+        return cloud
+
+
 @dataclass
-class Reconstruction:
-    """The sole's points in the table frame, or the reason there are none."""
+class Reconstruction(_SolePoints):
+    """A sole found: its points in the table frame (the success of `ReconstructionResult`)."""
 
     sole_points: np.ndarray  # N x 3, table frame, mm
     sole_colors: np.ndarray  # N x 3 BGR 0..255
     sole_pixels: np.ndarray  # N x 2 (x, y) in the rectified left image
-    footprint: Footprint | None
-    camera_to_table: np.ndarray | None  # 4 x 4, rectified left camera -> table
-    table_plane: TablePlane | None
+    footprint: Footprint
+    camera_to_table: np.ndarray  # 4 x 4, rectified left camera -> table
+    table_plane: TablePlane
     colour_filter: bool  # whether the colour filter was applied
     colour_separation: float  # sole/table colour distance in standard deviations
     measured_points: int
     measured_fraction: float
-    reason: str | None = None  # why there is no sole, in words (None: valid)
-    failure: FailureKind | None = None  # the same, as a kind a program can act on
     timings: dict[str, float] = field(default_factory=dict)
-    calibration: Calibration | None = None
+    calibration: Calibration | None = None  # None: not a stereo cloud (e.g. a true depth map)
     rectified: tuple[np.ndarray, np.ndarray] | None = None  # grey float32 rectified pair
     sole_mask: np.ndarray | None = None  # bool, rectified left pixels on the sole (off its very edge)
     # The depth step on the footprint's raster, for the outline's self-check (cellctl.vision.checks):
@@ -76,15 +92,33 @@ class Reconstruction:
 
     @property
     def valid(self) -> bool:
-        return self.reason is None
+        return True
 
-    def point_cloud(self) -> o3d.geometry.PointCloud:
-        """The sole as an Open3D cloud with RGB colours (for PLY output and viewing)."""
-        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(self.sole_points, np.float64)))
-        # Contiguous float64: Open3D copies that in one go, anything else element by element (~50 ms per cycle).
-        rgb = np.ascontiguousarray(np.clip(self.sole_colors[:, ::-1] / 255.0, 0.0, 1.0), np.float64)
-        cloud.colors = o3d.utility.Vector3dVector(rgb)
-        return cloud
+
+@dataclass
+class ReconstructionRefused(_SolePoints):
+    """No sole to measure: why (kind for programs, reason for people) and what was learnt on the way there."""
+
+    failure: FailureKind
+    reason: str
+    measured_points: int
+    measured_fraction: float
+    table_plane: TablePlane | None = None
+    camera_to_table: np.ndarray | None = None  # 4 x 4, rectified left camera -> table, once the plane is known
+    colour_filter: bool = False
+    colour_separation: float = 0.0
+    timings: dict[str, float] = field(default_factory=dict)
+    # The sole's points when it was found but refused (e.g. cut by the border), for pictures; else none.
+    sole_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    sole_colors: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    footprint: Footprint | None = None
+
+    @property
+    def valid(self) -> bool:
+        return False
+
+
+ReconstructionResult = Reconstruction | ReconstructionRefused
 
 
 class Segmentation:
@@ -112,7 +146,7 @@ class Segmentation:
         self.changed_right: np.ndarray | None = None
         self._changed_left: np.ndarray | None = None
 
-    def run(self) -> Reconstruction:
+    def run(self) -> ReconstructionResult:
         if self.fraction < MIN_VALID_FRACTION:
             return self._fail(
                 FailureKind.TOO_FEW_POINTS,
@@ -146,7 +180,7 @@ class Segmentation:
         self.transform = transform
         return self._sole(points)
 
-    def _sole(self, points: np.ndarray) -> Reconstruction:
+    def _sole(self, points: np.ndarray) -> ReconstructionResult:
         start = time.perf_counter()
         xy, z = points[:, :2], points[:, 2]
         # Indices rather than masks: most points are table, and only the high ones can be sole.
@@ -229,7 +263,7 @@ class Segmentation:
         closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
         return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
 
-    def _no_sole(self, points: np.ndarray, reason: str) -> Reconstruction:
+    def _no_sole(self, points: np.ndarray, reason: str) -> ReconstructionResult:
         """NO_SOLE, unless the taught table shows a sole-sized change that depth did not measure.
 
         Heavy sensor noise or glare on a dark sole can leave too few matched points to raise a sole-sized
@@ -349,18 +383,32 @@ class Segmentation:
             )
         return None, None
 
-    def _fail(self, failure: FailureKind, reason: str) -> Reconstruction:
-        return self._result(
-            failure,
-            reason,
-            sole_points=np.zeros((0, 3)),
-            sole_colors=np.zeros((0, 3)),
-            sole_pixels=np.zeros((0, 2)),
-            footprint=None,
+    def _fail(self, failure: FailureKind, reason: str) -> ReconstructionRefused:
+        return self._refused(failure, reason)
+
+    def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
+        """A refusal with what this run found about the table and the cloud, plus the sole's points if any."""
+        return ReconstructionRefused(
+            failure=failure,
+            reason=reason,
+            measured_points=self.measured,
+            measured_fraction=self.fraction,
+            table_plane=self.plane,
+            camera_to_table=self.transform,
+            colour_filter=self.colour_filter,
+            colour_separation=self.separation,
+            timings=self.timings,
+            **sole,
         )
 
-    def _result(self, failure: FailureKind | None, reason: str | None, **sole: Any) -> Reconstruction:
-        """A Reconstruction with what this reconstructor found about the table and the cloud, plus `sole`."""
+    def _result(self, failure: FailureKind | None, reason: str | None, **sole: Any) -> ReconstructionResult:
+        """The sole found (or refused with `failure`), with what this run found about the table and the cloud."""
+        if failure is not None or reason is not None:
+            refused = ("sole_points", "sole_colors", "footprint")
+            return self._refused(
+                failure or FailureKind.NO_SOLE, reason or "no sole", **{k: sole[k] for k in refused if k in sole}
+            )
+        assert self.plane is not None and self.transform is not None  # a sole is only found on a table
         return Reconstruction(
             camera_to_table=self.transform,
             table_plane=self.plane,
@@ -368,8 +416,6 @@ class Segmentation:
             colour_separation=self.separation,
             measured_points=self.measured,
             measured_fraction=self.fraction,
-            reason=reason,
-            failure=failure,
             timings=self.timings,
             calibration=self.cloud.calibration,
             raised=self.raised,

@@ -27,7 +27,7 @@ from cellctl.service.journal import Journal
 from cellctl.service.sdnotify import SystemdNotifier
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene
-from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor
+from cellctl.vision.reconstruction import ReconstructionRefused, ReconstructionResult, SoleReconstructor
 from firmware_io.endpoints import TcpEndpoint
 from firmware_io.plc_sim import ModbusRequestError, PlcSimulator, TriggerRefused
 from firmware_io.registers import ErrorCode, Register, StatusBit
@@ -291,23 +291,10 @@ class FailingReconstructor:
         self.calib, self.min_disparity = real.calib, real.min_disparity
         self.reason = f"simulated failure: {kind.value}"
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
         if self.kind is FailureKind.CALIBRATION_MISMATCH:
             return self.real.reconstruct(left[::2, ::2], right[::2, ::2])
-        return Reconstruction(
-            sole_points=np.zeros((0, 3)),
-            sole_colors=np.zeros((0, 3)),
-            sole_pixels=np.zeros((0, 2)),
-            footprint=None,
-            camera_to_table=None,
-            table_plane=None,
-            colour_filter=False,
-            colour_separation=0.0,
-            measured_points=0,
-            measured_fraction=0.0,
-            reason=self.reason,
-            failure=self.kind,
-        )
+        return ReconstructionRefused(failure=self.kind, reason=self.reason, measured_points=0, measured_fraction=0.0)
 
 
 def test_every_failure_kind_has_its_plc_code() -> None:
@@ -318,8 +305,8 @@ def test_every_failure_kind_has_its_plc_code() -> None:
 def test_each_failure_kind_reaches_the_plc_as_its_error_code(
     service: Service, plc: PlcSimulator, monkeypatch: pytest.MonkeyPatch, kind: FailureKind
 ) -> None:
-    failing = FailingReconstructor(kind, service.daemon._reconstructor)
-    monkeypatch.setattr(service.daemon, "_reconstructor", failing)
+    failing = FailingReconstructor(kind, service.daemon.measurer.reconstructor)
+    monkeypatch.setattr(service.daemon.measurer, "reconstructor", failing)
     reading = plc.run_cycle()
     assert reading.error_code == EXPECTED_CODES[kind], ErrorCode(reading.error_code).name
     assert reading.status & StatusBit.ERROR and not reading.status & StatusBit.RESULT_VALID
@@ -336,15 +323,15 @@ class StuckReconstructor:
     def __init__(self, real: SoleReconstructor) -> None:
         self.real, self.release = real, threading.Event()
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> Reconstruction:
+    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
         assert self.release.wait(30)
         return self.real.reconstruct(left, right)
 
 
 def test_a_slow_cycle_keeps_the_heartbeat_and_an_overrun_is_answered_cycle_timeout(tmp_path: Path) -> None:
     service = Service(write_config(tmp_path, [1], tmp_path / "state", cycle_timeout_s=2.0))
-    stuck = StuckReconstructor(service.daemon._reconstructor)  # type: ignore[arg-type]
-    service.daemon._reconstructor = stuck  # type: ignore[assignment]
+    stuck = StuckReconstructor(service.daemon.measurer.reconstructor)  # type: ignore[arg-type]
+    service.daemon.measurer.reconstructor = stuck  # type: ignore[assignment]
     try:
         with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as plc:
             cycle = plc.next_cycle_number()

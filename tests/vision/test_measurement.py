@@ -21,7 +21,7 @@ from cellctl.errors import FailureKind, MeasurementInputError
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene, true_cloud
 from cellctl.sim.sole import SoleModel, SolePose
-from cellctl.vision.measurement import SoleMeasurement, measure_sole
+from cellctl.vision.measurement import MeasurementRefused, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor, StereoCloud
 
 TOLERANCE_MM = 1.3  # Wang et al. 2022, Table 4
@@ -132,7 +132,7 @@ def test_no_sole_in_view(rig, reconstructor) -> None:  # noqa: ANN001
     result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
     assert not result.valid and "no sole in view" in result.reason
     assert result.failure is FailureKind.NO_SOLE
-    assert result.length_mm is None and result.heel_height_mm is None and result.glue_path is None
+    assert isinstance(result, MeasurementRefused)  # no length, heights or glue path: the type has none
 
 
 def test_sole_cut_by_the_image_border(rig, reconstructor) -> None:  # noqa: ANN001
@@ -147,7 +147,7 @@ def test_sole_cut_by_the_image_border(rig, reconstructor) -> None:  # noqa: ANN0
     result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
     assert not result.valid and "cut by the image border" in result.reason
     assert result.failure is FailureKind.SOLE_AT_BORDER
-    assert result.length_mm is None
+    assert isinstance(result, MeasurementRefused)  # no numbers: the type has none
 
 
 def test_calibration_not_matching_the_images(reconstructor, stereo_results) -> None:  # noqa: ANN001
@@ -167,7 +167,7 @@ def test_sole_coloured_like_the_table_is_not_measured(rig, reconstructor, stereo
     result = measure_sole(reconstructor.segment(true_cloud(rig, pair.depth_left, cv2.merge([grey] * 3))))
     assert not result.valid and "colours too similar" in result.reason
     assert result.failure is FailureKind.COLOURS_TOO_SIMILAR
-    assert result.length_mm is None
+    assert isinstance(result, MeasurementRefused)  # no numbers: the type has none
 
 
 def test_no_table_plane(rig, reconstructor) -> None:  # noqa: ANN001
@@ -192,7 +192,7 @@ def test_no_surface_measured_at_the_heel_point(rig, reconstructor) -> None:  # n
     holed = dataclasses.replace(reconstruction, sole_points=reconstruction.sole_points[far])
     result = measure_sole(holed)
     assert not result.valid and "no measured surface at the heel point" in result.reason
-    assert result.failure is FailureKind.SURFACE_NOT_MEASURED and result.heel_height_mm is None
+    assert result.failure is FailureKind.SURFACE_NOT_MEASURED and isinstance(result, MeasurementRefused)
 
 
 def test_too_few_measured_points(rig, reconstructor) -> None:  # noqa: ANN001
@@ -221,7 +221,7 @@ def test_toe_and_heel_too_close_to_call(rig, reconstructor) -> None:  # noqa: AN
     result = measure_sole(reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left)))
     assert not result.valid and "too close to call" in result.reason
     assert result.failure is FailureKind.ENDS_TOO_CLOSE_TO_CALL
-    assert result.heel_height_mm is None and result.toe_height_mm is None
+    assert isinstance(result, MeasurementRefused)  # no heights: the type has none
 
 
 # ---- the command ---------------------------------------------------------------------------------------
@@ -248,7 +248,7 @@ def test_implausible_results_are_refused_not_reported(
     monkeypatch.setattr(measurement, bound, limits)
     result = measure_sole(reconstruction)
     assert not result.valid and result.failure is FailureKind.MEASUREMENT_INVALID
-    assert named in result.reason and result.length_mm is None and result.glue_path is None
+    assert named in result.reason and isinstance(result, MeasurementRefused)  # no length or glue path
 
 
 def test_measure_command_json(tmp_path: Path, stereo_results, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001

@@ -8,21 +8,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from html import escape
 
-from cellctl.service.journal import CycleRecord
+from cellctl.service.journal import SUMMARY_FIELDS, CycleRecord
 from cellctl.service.timefmt import iso_time
 
-CSV_FIELDS = (
-    "id",
-    "cycle",
-    "time",
-    "status",
-    "error_code",
-    "reason",
-    "length_mm",
-    "heel_height_mm",
-    "toe_height_mm",
-    "cycle_time_ms",
-)
+# The summary with the trigger time, in ISO 8601, named "time" as the station has always called it.
+CSV_FIELDS = tuple("time" if name == "triggered_at" else name for name in SUMMARY_FIELDS)
 
 
 @dataclass(frozen=True)

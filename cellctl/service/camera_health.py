@@ -1,0 +1,80 @@
+"""The cell's cameras as the service sees them: working or not, the calibrated ones or not.
+
+While the cameras fail, the daemon probes them between cycles (`probe`), so CAMERAS_OK and READY come back
+by themselves when a camera is plugged in again; every grab holds `lock`, so the station's live view grabs
+between cycles only.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+from cellctl.cameras import CameraError, FrameSource, StereoFrame
+from cellctl.cameras.identity import identity_problem
+from cellctl.service.codes import CycleFailed
+from cellctl.service.quiet_log import RepeatQuietLog
+from cellctl.vision.calibration import Calibration
+
+log = logging.getLogger("cellctl.service.daemon")  # the service's one log, as operators know it
+
+#: Cameras that failed are probed this often between cycles so READY comes back without a trigger.
+CAMERA_PROBE_PERIOD_S = 1.0
+#: The same camera failure is logged again (at warning level) at most this often.
+CAMERA_LOG_REPEAT_S = 60.0
+
+
+class CameraHealth:
+    """Grabs for the cycles, and knows whether the cameras work and are the calibrated ones."""
+
+    def __init__(self, source: FrameSource, calib: Calibration | None) -> None:
+        self.source = source
+        self.calib = calib
+        self.lock = threading.Lock()  # held for every grab
+        self.ok = False
+        self.identity_problem: str | None = None  # the calibration was made with other cameras
+        self._log = RepeatQuietLog(log, CAMERA_LOG_REPEAT_S)
+        self._last_probe = 0.0
+
+    @property
+    def calibration_ok(self) -> bool:
+        return self.calib is not None and self.identity_problem is None
+
+    def probe(self, force: bool = False) -> bool:
+        """Open the cameras if they are not known to work (at start, and every few s while failing);
+        True when they work again since this call."""
+        now = time.monotonic()
+        if self.ok or (not force and now - self._last_probe < CAMERA_PROBE_PERIOD_S):
+            return False
+        self._last_probe = now
+        try:
+            with self.lock:
+                self.source.open()
+                frame = self.source.grab_pair()
+        except CameraError as exc:
+            self._log.warning(str(exc), "cameras not ready: %s", exc)
+            return False
+        self.ok = True
+        self._log.reset()
+        log.info("cameras ok")
+        # At start and after a reconnect: are these the calibrated cameras (a replug may have swapped them)?
+        self.identity_problem = identity_problem(self.calib.cameras if self.calib else None, frame.info)
+        if self.identity_problem:
+            log.error("calibration does not match the cameras: %s", self.identity_problem)
+        return True
+
+    def grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
+        """A pair exposed after `not_before` (the trigger); CycleFailed with the camera's code otherwise."""
+        start = time.perf_counter()
+        try:
+            with self.lock:
+                frame = self.source.grab_pair(not_before=not_before)  # frames exposed after the trigger only
+        except CameraError as exc:
+            self.ok = False
+            self._last_probe = time.monotonic()
+            raise CycleFailed.of(exc.kind, str(exc)) from exc
+        finally:
+            timings["grab"] = time.perf_counter() - start
+        self.ok = True
+        return frame

@@ -1,0 +1,143 @@
+"""The cell's reconstructors: the configured depth range's, and at most one more for a recipe's own range.
+
+Each matcher keeps its cost volume (~0.5 GB at 1280x1024), so a line switching among several depth ranges
+re-allocates rather than piling them up. A recipe's reconstructor starts from the table plane the cell's
+own one learnt (or the taught table), so it searches only the sole's region from its first cycle instead of
+finding the table again. The warm-up does one cycle's work before READY (the table plane learnt when none is
+taught, rectification maps built, the matchers' buffers allocated) for the cell's range and each recipe's,
+so the first trigger of any recipe costs what every other one does.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterable
+
+from cellctl.cameras import CameraError, FrameSource, StereoFrame
+from cellctl.cameras.identity import identity_problem
+from cellctl.errors import FailureKind
+from cellctl.service.camera_health import CameraHealth
+from cellctl.service.codes import CycleFailed
+from cellctl.service.config import CellConfig
+from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
+from cellctl.service.recipes import Recipe
+from cellctl.vision.calibration import Calibration
+from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.teach import TaughtTable, TeachError, load_taught
+from firmware_io.handshake import Trigger
+from firmware_io.registers import ErrorCode
+
+log = logging.getLogger("cellctl.service.daemon")  # the service's one log, as operators know it
+
+
+class CellMeasurer:
+    """Measures a grabbed pair with the reconstructor of the recipe's depth range."""
+
+    def __init__(self, config: CellConfig) -> None:
+        self.config = config
+        self.calib, self.calibration_problem = load_calibration(config)
+        self.reconstructor = (
+            None
+            if self.calib is None
+            else SoleReconstructor(
+                self.calib, config.measure.depth_range_mm, taught=load_taught_table(config, self.calib)
+            )
+        )
+        self._recipe_reconstructor: SoleReconstructor | None = None
+        self.warmed_up = False
+
+    def warm_up(self, source: FrameSource, recipes: Iterable[Recipe] = ()) -> None:
+        """One cycle's work on a grabbed pair (not locked: nothing else grabs before READY), with the cell's
+        reconstructor and then with each other depth range the recipes ask for."""
+        if self.reconstructor is None:
+            return
+        start = time.monotonic()
+        try:
+            frame = source.grab_pair()
+        except CameraError as exc:
+            log.warning("warm-up skipped, no pair: %s", exc)
+            return
+        if self.reconstructor.table_plane is None:
+            plane = self.reconstructor.learn_table(frame.left, frame.right)
+            log.info("table plane %s", "learnt from the warm-up pair" if plane is not None else "NOT found")
+        measure = self.config.measure
+        result = measure_frame(
+            frame, self.reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
+        )
+        outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
+        log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
+        for depth_range in sorted({r.depth_range_mm for r in recipes} - {measure.depth_range_mm}):
+            start = time.monotonic()
+            reconstructor = self._reconstructor_for(depth_range)
+            measure_frame(frame, reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm))
+            log.info("warmed up depth range %g..%g mm in %.1f s", *depth_range, time.monotonic() - start)
+        self.warmed_up = True
+
+    def answer(
+        self, trigger: Trigger, recipe: Recipe | None, cameras: CameraHealth, timings: dict[str, float]
+    ) -> tuple[StereoFrame | None, tuple[ErrorCode, str | None, Measured | None]]:
+        """Grab and measure for a trigger: the frame (None if none was grabbed) and the code, reason and result
+        for the PLC; never raises (the PLC always gets an answer)."""
+        frame: StereoFrame | None = None
+        try:
+            if recipe is None:
+                raise CycleFailed.of(
+                    FailureKind.RECIPE_UNKNOWN, f"recipe {trigger.recipe} selected by the PLC is not loaded"
+                )
+            frame = cameras.grab(timings, not_before=trigger.received_at)
+            return frame, (ErrorCode.NONE, None, self.measure(frame, timings, recipe))
+        except CycleFailed as failure:
+            return frame, (failure.code, str(failure), None)
+        except Exception as exc:  # never leave the PLC without an answer
+            log.exception("cycle %d: unexpected failure", trigger.cycle)
+            return frame, (ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}", None)
+
+    def measure(self, frame: StereoFrame, timings: dict[str, float], recipe: Recipe) -> Measured:
+        """The sole in `frame`, measured as `recipe` asks; CycleFailed with the failure's code otherwise."""
+        if self.calib is None:
+            raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self.calibration_problem}")
+        if problem := identity_problem(self.calib.cameras, frame.info):
+            raise CycleFailed.of(FailureKind.CALIBRATION_MISMATCH, problem)
+        reconstructor = self.reconstructor
+        if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
+            reconstructor = self._reconstructor_for(recipe.depth_range_mm)
+        result = measure_frame(frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm))
+        timings.update(result.timings)
+        if isinstance(result, Refused):
+            raise CycleFailed.of(result.failure, result.reason)
+        return result
+
+    def _reconstructor_for(self, depth_range_mm: tuple[float, float]) -> SoleReconstructor:
+        """The reconstructor of a recipe's own depth range (the matcher's disparity range follows from it),
+        holding the cell's table plane or taught table."""
+        assert self.calib is not None  # measure() and warm_up() refuse first without a calibration
+        held = self._recipe_reconstructor
+        if held is not None and held.depth_range_mm == depth_range_mm:
+            return held
+        self._recipe_reconstructor = None  # release the old buffers before allocating new ones
+        own = self.reconstructor
+        taught = None if own is None else own.taught
+        plane = None if own is None or taught is not None else own.table_plane
+        self._recipe_reconstructor = SoleReconstructor(self.calib, depth_range_mm, table_plane=plane, taught=taught)
+        return self._recipe_reconstructor
+
+
+def load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None]:
+    """The calibration and None, or None and why it cannot be used (logged)."""
+    try:
+        return Calibration.load(config.calibration.path), None
+    except (OSError, ValueError) as exc:
+        log.error("calibration %s not usable: %s", config.calibration.path, exc)
+        return None, str(exc)
+
+
+def load_taught_table(config: CellConfig, calib: Calibration) -> TaughtTable | None:
+    """The table taught beside the calibration (`cellctl teach`), None if none or unusable (logged)."""
+    try:
+        taught = load_taught(config.calibration.path, calib)
+    except TeachError as exc:
+        log.error("taught table not used: %s", exc)
+        return None
+    log.info("taught table %s", "loaded" if taught is not None else "absent: measuring without (cellctl teach)")
+    return taught
