@@ -216,7 +216,9 @@ def measure_sole(
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
-    problem = check_glue_coverage(np.isfinite(surface.coarse_heights(path.points[:, :2], GLUE_COVER_RADIUS_MM)))
+    problem = check_glue_coverage(
+        np.isfinite(surface.coarse_heights(path.points[:, :2], _cover_radius(reconstruction)))
+    )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     sole_z = np.quantile(points[:, 2], [0.01, 0.99])
@@ -300,6 +302,16 @@ def _height_map(reconstruction: Reconstruction) -> Callable[[np.ndarray], np.nda
         return np.where(inside, grid[r * raster.mask.shape[1] + c], np.nan)
 
     return height
+
+
+def _cover_radius(reconstruction: Reconstruction) -> float:
+    """Radius holding MIN_CLOUD_POINTS where about half the pixels are measured (GLUE_COVER_RADIUS_MM at least):
+    the same density of measurement asked of any rig, also one whose pixels cover more of the table."""
+    calib, to_table = reconstruction.calibration, reconstruction.camera_to_table
+    if calib is None or to_table is None:
+        return GLUE_COVER_RADIUS_MM
+    pixel_mm = abs(float(to_table[2, 3])) / calib.focal_px  # camera height above the table / focal length
+    return max(GLUE_COVER_RADIUS_MM, float(np.sqrt(2.0 * MIN_CLOUD_POINTS / np.pi)) * pixel_mm)
 
 
 def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
