@@ -107,7 +107,7 @@ class Footprint:
         mask = np.zeros_like(self.mask)
         cv2.fillPoly(mask, [np.round(cells * (1 << shift)).astype(np.int32)], 1, cv2.LINE_8, shift)
         # fillPoly also marks cells the edge merely touches: test the centres of the boundary cells exactly.
-        rows, cols = np.nonzero(mask & ~cv2.erode(mask, np.ones((3, 3), np.uint8)))
+        rows, cols = np.nonzero((mask > 0) & (cv2.erode(mask, np.ones((3, 3), np.uint8)) == 0))
         contour = cells.astype(np.float32).reshape(-1, 1, 2)
         outside = [
             cv2.pointPolygonTest(contour, (float(c), float(r)), False) < 0 for r, c in zip(rows, cols, strict=True)
