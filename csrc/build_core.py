@@ -15,32 +15,47 @@ from cffi import FFI
 HERE = Path(__file__).resolve().parent
 
 
-def _cdef_from_header(text: str) -> str:
+def _cdef_from_header(text: str, defines: bool = True) -> str:
     """The public header minus what cffi's parser does not take (guards, includes)."""
     lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
     text = "\n".join(lines)
     text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
-    defines = """
+    if not defines:
+        return text
+    constants = """
         #define CC_DISP_SCALE ...
         #define CC_INVALID ...
         #define CC_MAX_P2 ...
         #define CC_MAX_DISPARITIES ...
         #define CC_MAX_DIM ...
     """
-    return defines + text
+    return constants + text
 
 
 ffibuilder = FFI()
 ffibuilder.cdef(_cdef_from_header((HERE / "cellctl_core.h").read_text()))
+# The measurement's hot loops (cellctl.vision.outliers, subpixel) share the module: one extension to build.
+ffibuilder.cdef(_cdef_from_header((HERE / "cloud_kernels.h").read_text(), defines=False))
 
 _sources = sorted(str(p.relative_to(HERE.parent)) for p in HERE.glob("*.c"))
 _extra = os.environ.get("CELLCTL_CFLAGS", "").split()
 ffibuilder.set_source(
     "cellctl.stereo._core",
-    '#include "cellctl_core.h"',
+    '#include "cellctl_core.h"\n#include "cloud_kernels.h"',
     sources=_sources,
     include_dirs=[str(HERE.relative_to(HERE.parent))],
-    extra_compile_args=["-std=c11", "-O3", "-fopenmp", "-Wall", "-Wextra", "-Wno-unused-parameter", *_extra],
+    # -fvisibility=hidden: the module exports only its init function, so calls between the core's
+    # units go direct instead of through the PLT (cc_path_step runs once per pixel and path).
+    extra_compile_args=[
+        "-std=c11",
+        "-O3",
+        "-fopenmp",
+        "-fvisibility=hidden",
+        "-Wall",
+        "-Wextra",
+        "-Wno-unused-parameter",
+        *_extra,
+    ],
     extra_link_args=["-fopenmp", *_extra],
 )
 

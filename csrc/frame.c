@@ -222,14 +222,14 @@ size_t cc_frame_scratch_bytes(int width)
     return (12 * (size_t)width + CENSUS_WORK(width) * sizeof(uint16_t) + 127) / 64 * 64;
 }
 
-/* scratch: threads * cc_frame_scratch_bytes(width) bytes, one slice per thread. */
+/* scratch: one slice of `slice` bytes per thread. */
 void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int stride_left,
-                      const uint8_t *right, int stride_right, int threads, uint8_t *scratch)
+                      const uint8_t *right, int stride_right, int threads, uint8_t *scratch, size_t slice)
 {
-    int w = f->width, h = f->height;
+    int h = f->height;
 #pragma omp parallel num_threads(threads)
     {
-        uint8_t *mine = scratch + cc_frame_scratch_bytes(w) * (size_t)omp_get_thread_num();
+        uint8_t *mine = scratch + slice * (size_t)omp_get_thread_num();
 #pragma omp for schedule(dynamic, 8)
         for (int i = 0; i < 2 * h; i++) {
             int y = i >> 1, mirrored = i & 1;

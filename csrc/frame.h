@@ -22,9 +22,10 @@ int cc_frame_alloc(cc_frame *f, const cc_setup *s, int width, int height);
 void cc_frame_free(cc_frame *f);
 /* Per-thread scratch of cc_frame_prepare. */
 size_t cc_frame_scratch_bytes(int width);
-/* scratch: threads * cc_frame_scratch_bytes(width) bytes, one slice per thread. */
+/* scratch: one slice of `slice` >= cc_frame_scratch_bytes(width) bytes per thread (the matcher
+ * lends its per-thread scratch; pass 3 sets its path guards again after this). */
 void cc_frame_prepare(cc_frame *f, const cc_setup *s, const uint8_t *left, int stride_left,
-                      const uint8_t *right, int stride_right, int threads, uint8_t *scratch);
+                      const uint8_t *right, int stride_right, int threads, uint8_t *scratch, size_t slice);
 size_t cc_census_scratch_bytes(int width);
 /* Census of row y as uint64 per pixel; scratch: cc_census_scratch_bytes(width) bytes. */
 void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw, int ch,

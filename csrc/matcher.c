@@ -94,7 +94,7 @@ static void run_passes(cc_matcher *m, const uint8_t *left, const uint8_t *right,
                        int stride_right, int16_t *raw_left, int16_t *raw_right, uint16_t *volume_out)
 {
     cc_frame_prepare(&m->frame, &m->setup, left, stride_left, right, stride_right, m->ws.threads,
-                     m->ws.scratch);
+                     m->ws.scratch, m->ws.scratch_stride);
     cc_pass_vertical(&m->setup, &m->frame, &m->ws, 1);
     cc_pass_vertical(&m->setup, &m->frame, &m->ws, 0);
     cc_pass_rows(&m->setup, &m->frame, &m->ws, raw_left, raw_right, volume_out);
@@ -180,7 +180,8 @@ int cc_cost_volume(const cc_params *p, const uint8_t *left, const uint8_t *right
     if (rc == CC_OK && (!scratch || !cost))
         rc = CC_ERR_NOMEM;
     if (rc == CC_OK) {
-        cc_frame_prepare(&f, &s, left, stride_left, right, stride_right, threads, scratch);
+        cc_frame_prepare(&f, &s, left, stride_left, right, stride_right, threads, scratch,
+                         cc_frame_scratch_bytes(width));
         for (int y = 0; y < height; y++) {
             cc_cost_segment(&s, &f, 0, width, y, cost, s.Dp);
             for (int x = 0; x < width; x++)

@@ -236,16 +236,21 @@ static void median_row(const int16_t *in, int width, int height, int y, int size
 size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, int threads)
 {
     size_t n = (size_t)width * height;
-    /* map, levels and packed guide, each with 8 pixels of slack for the vector loads */
+    /* map, levels and packed guide, each with 8 pixels of slack for the vector loads; level runs */
     return cc_round_up(n * sizeof(int16_t), 64) + cc_round_up((n + 8) * sizeof(uint16_t), 64) +
+           cc_round_up(n * sizeof(uint16_t), 64) +
            cc_round_up((n + 8) * sizeof(uint32_t), 64) +
            cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64) * (size_t)threads;
 }
 
-static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out)
+/* Levels of a row for the weighted medians, and their runs (cc_wm_pixel). */
+static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out, uint16_t *run)
 {
     for (int x = 0; x < width; x++)
         out[x] = (uint16_t)cc_wm_level(in[x], p->min_disparity, p->num_disparities);
+    run[width - 1] = 1;
+    for (int x = width - 2; x >= 0; x--)
+        run[x] = out[x] == out[x + 1] && run[x + 1] < UINT16_MAX ? (uint16_t)(run[x + 1] + 1) : 1;
 }
 
 /* Stages, each over all rows before the next starts (the windows read
@@ -263,7 +268,8 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
     int16_t *tmp = scratch;
     uint16_t *level = (uint16_t *)((uint8_t *)scratch + map_bytes);
     uint32_t *packed = (uint32_t *)((uint8_t *)level + cc_round_up((n + 8) * sizeof(uint16_t), 64));
-    uint8_t *hist_base = (uint8_t *)packed + cc_round_up((n + 8) * sizeof(uint32_t), 64);
+    uint16_t *run = (uint16_t *)((uint8_t *)packed + cc_round_up((n + 8) * sizeof(uint32_t), 64));
+    uint8_t *hist_base = (uint8_t *)run + cc_round_up(n * sizeof(uint16_t), 64);
     cc_wm_image g = *guide;
     g.packed = packed;
     g.use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();
@@ -291,7 +297,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             else
                 memcpy(fill_out + o, checked + o, sizeof(int16_t) * width);
             if (weighted_fill)
-                levels_row(p, tmp + o, width, level + o);
+                levels_row(p, tmp + o, width, level + o, run + o);
             if (weighted_fill || wmedian)
                 cc_wm_pack_row(&g, y, packed + o);
         }
@@ -305,7 +311,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                 for (int x = left_end; x < right_begin; x++) {
                     size_t o = (size_t)y * width + x;
                     filled[o] = checked[o] == CC_INVALID
-                                    ? cc_wm_pixel(&tables, &g, tmp, level, x, y, p->fill_radius, &h)
+                                    ? cc_wm_pixel(&tables, &g, tmp, level, run, x, y, p->fill_radius, &h)
                                     : tmp[o];
                 }
             }
@@ -318,13 +324,13 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             else if (!wmedian)
                 memcpy(disp + o, filled + o, sizeof(int16_t) * width);
             if (wmedian) /* levels of the weighted median's input, complete for this row */
-                levels_row(p, p->median ? median_out + o : filled + o, width, level + o);
+                levels_row(p, p->median ? median_out + o : filled + o, width, level + o, run + o);
         }
         if (wmedian) {
 #pragma omp for schedule(dynamic, 4)
             for (int y = 0; y < height; y++)
                 for (int x = 0; x < width; x++)
-                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, &g, wm_in, level, x, y,
+                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, &g, wm_in, level, run, x, y,
                                                               p->weighted_median, &h);
         }
     }

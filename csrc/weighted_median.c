@@ -30,9 +30,16 @@ void cc_wm_tables_init(cc_wm_tables *t, float sigma_colour, float sigma_space)
     for (int d2 = 0; d2 < CC_WM_SPACES; d2++)
         t->space[d2] = (uint16_t)rounded_weight(sqrt((double)d2), sigma_space);
     t->gather_pad[0] = t->gather_pad[1] = 0;
+    memset(t->space_win, 0, sizeof t->space_win);
+    for (int dy = -CC_MAX_WM_RADIUS; dy <= CC_MAX_WM_RADIUS; dy++)
+        for (int dx = -CC_MAX_WM_RADIUS; dx <= CC_MAX_WM_RADIUS; dx++)
+            t->space_win[dy + CC_MAX_WM_RADIUS][dx + CC_MAX_WM_RADIUS] = t->space[dy * dy + dx * dx];
 }
 
-size_t cc_wm_hist_bytes(int levels) { return (size_t)levels * (sizeof(uint32_t) + sizeof(int64_t)); }
+/* The histogram, then the window buffers (32-byte aligned for the vector loads). */
+static size_t hist_part_bytes(int levels) { return cc_round_up((size_t)levels * (sizeof(uint32_t) + sizeof(int64_t)), 32); }
+
+size_t cc_wm_hist_bytes(int levels) { return hist_part_bytes(levels) + 2 * CC_WM_CHUNKS * 8 * sizeof(uint32_t); }
 
 void cc_wm_hist_clear(cc_wm_hist *h, int levels)
 {
@@ -45,20 +52,14 @@ cc_wm_hist cc_wm_hist_at(void *base, int levels)
     cc_wm_hist h;
     h.value = base;
     h.weight = (uint32_t *)((int64_t *)base + levels);
+    h.win_weight = (uint32_t *)((uint8_t *)base + hist_part_bytes(levels));
+    h.win_level = h.win_weight + CC_WM_CHUNKS * 8;
     return h;
 }
 
 
 /* floor(a / b) for b > 0. */
 static inline int64_t floor_div64(int64_t a, int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-
-int cc_wm_level(int v, int dmin, int levels)
-{
-    if (v == CC_INVALID)
-        return CC_WM_NO_LEVEL;
-    int b = cc_whole_px(v) - dmin;
-    return b < 0 ? 0 : (b >= levels ? levels - 1 : b);
-}
 
 static inline int absdiff(int a, int b) { return a > b ? a - b : b - a; }
 
@@ -125,25 +126,35 @@ void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out)
 
 /* Votes of 8 neighbours xx..xx+7 of one window row, from the packed guide: the
  * same integer weights as the scalar loops (0 where there is no level or the
- * lane is past x1); their levels go to *levels. */
+ * lane is past x1, i.e. where `pos` = xx + lane is not below `end` = x1 + 1);
+ * their levels go to *levels.  `srow` is the row of space_win for this dy,
+ * shifted so that srow[xx - x] is dx = xx - x.  Both weights are below 2^15
+ * in 32-bit lanes, so one 16-bit multiply-add gives their product exactly. */
 AVX2 static inline __m256i chunk_weights(const cc_wm_tables *t, __m256i centre, const uint32_t *prow,
-                                         const uint16_t *lrow, int xx, int x, int x1, __m256i dy2,
-                                         __m256i *levels)
+                                         const uint16_t *lrow, const uint32_t *srow, int xx, int x, __m256i pos,
+                                         __m256i end, __m256i *levels)
 {
-    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), low16 = _mm256_set1_epi32(0xFFFF);
+    const __m256i low16 = _mm256_set1_epi32(0xFFFF);
     __m256i q = _mm256_loadu_si256((const __m256i *)(prow + xx));
     __m256i lv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(lrow + xx)));
     __m256i ad = _mm256_sub_epi8(_mm256_max_epu8(q, centre), _mm256_min_epu8(q, centre));
     __m256i cd = _mm256_madd_epi16(_mm256_maddubs_epi16(ad, _mm256_set1_epi8(1)), _mm256_set1_epi16(1));
     __m256i cw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->colour, cd, 2), low16);
-    __m256i dx = _mm256_add_epi32(_mm256_set1_epi32(xx - x), lane);
-    __m256i d2 = _mm256_min_epi32(_mm256_add_epi32(_mm256_mullo_epi32(dx, dx), dy2),
-                                  _mm256_set1_epi32(CC_WM_SPACES - 1));
-    __m256i sw = _mm256_and_si256(_mm256_i32gather_epi32((const int *)t->space, d2, 2), low16);
-    __m256i keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(lv, _mm256_set1_epi32(CC_WM_NO_LEVEL)),
-                                       _mm256_cmpgt_epi32(_mm256_set1_epi32(x1 - xx + 1), lane));
+    __m256i sw = _mm256_loadu_si256((const __m256i *)(srow + (xx - x)));
+    __m256i keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(lv, low16), _mm256_cmpgt_epi32(end, pos));
     *levels = lv;
-    return _mm256_and_si256(_mm256_mullo_epi32(cw, sw), keep);
+    return _mm256_and_si256(_mm256_madd_epi16(cw, sw), keep);
+}
+
+/* The lane sums of a, b and c (each below 2^32 in total: at most 31 * 31 votes of at most 2^16). */
+AVX2 static void hsum3(__m256i a, __m256i b, __m256i c, uint64_t out[3])
+{
+    __m256i ab = _mm256_hadd_epi32(a, b), cc = _mm256_hadd_epi32(c, c);
+    __m256i s = _mm256_hadd_epi32(ab, cc); /* per half: a, b, c, c */
+    __m128i t = _mm_add_epi32(_mm256_castsi256_si128(s), _mm256_extracti128_si256(s, 1));
+    out[0] = (uint32_t)_mm_cvtsi128_si32(t);
+    out[1] = (uint32_t)_mm_extract_epi32(t, 1);
+    out[2] = (uint32_t)_mm_extract_epi32(t, 2);
 }
 
 AVX2 static uint64_t hsum32(__m256i v)
@@ -156,60 +167,136 @@ AVX2 static uint64_t hsum32(__m256i v)
     return s;
 }
 
-/* Total weight and the weight below and at level c of the whole window.
- * Per-lane sums stay below 2^32: at most 31 * 31 votes of at most 2^16. */
-AVX2 static void split_window_avx2(const cc_wm_tables *t, const cc_wm_image *g, const uint16_t *level,
-                                   int x, int y, int x0, int x1, int y0, int y1, int c, uint64_t sums[3])
+/* Lane-wise smallest (max = 0) or largest (max = 1) of v. */
+AVX2 static uint32_t hext32(__m256i v, int max)
 {
-    const int w = g->width;
-    const __m256i centre = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
-    const __m256i vlev = _mm256_set1_epi32(c);
-    __m256i tot = _mm256_setzero_si256(), below = tot, at = tot, lv;
-    for (int yy = y0; yy <= y1; yy++) {
-        const __m256i dy2 = _mm256_set1_epi32((yy - y) * (yy - y));
-        for (int xx = x0; xx <= x1; xx += 8) {
-            __m256i wt = chunk_weights(t, centre, g->packed + (size_t)yy * w, level + (size_t)yy * w,
-                                       xx, x, x1, dy2, &lv);
-            tot = _mm256_add_epi32(tot, wt);
-            below = _mm256_add_epi32(below, _mm256_and_si256(wt, _mm256_cmpgt_epi32(vlev, lv)));
-            at = _mm256_add_epi32(at, _mm256_and_si256(wt, _mm256_cmpeq_epi32(lv, vlev)));
-        }
-    }
-    sums[0] = hsum32(tot);
-    sums[1] = hsum32(below);
-    sums[2] = hsum32(at);
+    uint32_t lanes[8];
+    _mm256_storeu_si256((__m256i *)lanes, v);
+    uint32_t r = lanes[0];
+    for (int k = 1; k < 8; k++)
+        r = max ? (lanes[k] > r ? lanes[k] : r) : (lanes[k] < r ? lanes[k] : r);
+    return r;
 }
 
-/* The histogram votes of the window: weights eight at a time, then scattered.
- * A vote of weight 0 changes nothing, so skipping it keeps the result. */
-AVX2 static uint64_t vote_window_avx2(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
-                                      const uint16_t *level, int x, int y, int x0, int x1, int y0, int y1,
-                                      cc_wm_hist *h, int *lo, int *hi)
+/* Weight of the stored votes on levels <= b. */
+AVX2 static uint64_t weight_up_to(const uint32_t *wb, const uint32_t *lb, int n, int b)
+{
+    const __m256i above = _mm256_set1_epi32(b);
+    __m256i s = _mm256_setzero_si256();
+    for (int i = 0; i < n; i++) {
+        __m256i lv = _mm256_loadu_si256((const __m256i *)(lb + 8 * i));
+        __m256i wt = _mm256_loadu_si256((const __m256i *)(wb + 8 * i));
+        s = _mm256_add_epi32(s, _mm256_andnot_si256(_mm256_cmpgt_epi32(lv, above), wt));
+    }
+    return hsum32(s);
+}
+
+/* The rounded weighted mean of the stored votes on level b.  A vote's weight
+ * times its value fits in int32 (2^16 * 2^15); the sums are kept in int64
+ * lanes.  The map is read 8 values at a time except where that would read
+ * past its end (the last row's last chunk); lanes past x1 have weight 0. */
+AVX2 static int16_t level_mean(const cc_wm_image *g, const int16_t *map, const uint32_t *wb, const uint32_t *lb,
+                               int b, int x0, int x1, int y0, int y1)
 {
     const int w = g->width;
-    const __m256i centre = _mm256_set1_epi32((int)g->packed[(size_t)y * w + x]);
-    uint64_t total = 0;
-    uint32_t wt[8], lv[8];
-    __m256i lvv;
+    const size_t end = (size_t)w * g->height;
+    const __m256i vb = _mm256_set1_epi32(b);
+    __m256i ws = _mm256_setzero_si256(), even = ws, odd = ws;
+    int n = 0;
     for (int yy = y0; yy <= y1; yy++) {
         const size_t r = (size_t)yy * w;
-        const __m256i dy2 = _mm256_set1_epi32((yy - y) * (yy - y));
-        for (int xx = x0; xx <= x1; xx += 8) {
-            _mm256_storeu_si256((__m256i *)wt, chunk_weights(t, centre, g->packed + r, level + r, xx, x, x1, dy2, &lvv));
-            _mm256_storeu_si256((__m256i *)lv, lvv);
-            for (int k = 0; k < 8; k++) {
-                if (!wt[k])
-                    continue;
-                const int b = (int)lv[k];
-                h->weight[b] += wt[k];
-                h->value[b] += (int64_t)wt[k] * map[r + xx + k];
-                total += wt[k];
-                *lo = b < *lo ? b : *lo;
-                *hi = b > *hi ? b : *hi;
+        for (int xx = x0; xx <= x1; xx += 8, n++) {
+            __m256i on = _mm256_cmpeq_epi32(_mm256_loadu_si256((const __m256i *)(lb + 8 * n)), vb);
+            __m256i wt = _mm256_and_si256(on, _mm256_loadu_si256((const __m256i *)(wb + 8 * n)));
+            __m256i mv;
+            if (r + xx + 8 <= end) {
+                mv = _mm256_cvtepi16_epi32(_mm_loadu_si128((const __m128i *)(map + r + xx)));
+            } else {
+                int32_t v[8] = {0};
+                for (int k = 0; k <= x1 - xx && k < 8; k++)
+                    v[k] = map[r + xx + k];
+                mv = _mm256_loadu_si256((const __m256i *)v);
             }
+            ws = _mm256_add_epi32(ws, wt);
+            even = _mm256_add_epi64(even, _mm256_mul_epi32(wt, mv));
+            odd = _mm256_add_epi64(odd, _mm256_mul_epi32(_mm256_srli_epi64(wt, 32), _mm256_srli_epi64(mv, 32)));
         }
     }
-    return total;
+    int64_t lanes[4], vs = 0;
+    _mm256_storeu_si256((__m256i *)lanes, _mm256_add_epi64(even, odd));
+    for (int k = 0; k < 4; k++)
+        vs += lanes[k];
+    const int64_t wsum = (int64_t)hsum32(ws);
+    return (int16_t)floor_div64(2 * vs + wsum, 2 * wsum);
+}
+
+/* Smallest and largest level of the stored votes of weight > 0 (a vote of weight 0 has no level). */
+AVX2 static void level_bounds(const uint32_t *wb, const uint32_t *lb, int n, int *lo, int *hi)
+{
+    const __m256i zero = _mm256_setzero_si256();
+    __m256i vmin = _mm256_set1_epi32(-1), vmax = zero;
+    for (int i = 0; i < n; i++) {
+        __m256i lv = _mm256_loadu_si256((const __m256i *)(lb + 8 * i));
+        __m256i none = _mm256_cmpeq_epi32(_mm256_loadu_si256((const __m256i *)(wb + 8 * i)), zero);
+        vmin = _mm256_min_epu32(vmin, _mm256_or_si256(lv, none));
+        vmax = _mm256_max_epu32(vmax, _mm256_andnot_si256(none, lv));
+    }
+    *lo = (int)hext32(vmin, 0);
+    *hi = (int)hext32(vmax, 1);
+}
+
+/* The weighted median at (x, y), as the scalar code defines it, in one pass
+ * that computes every vote's weight once and keeps them (with their levels)
+ * in the thread's window buffers.  Most pixels stop there: their own level
+ * is the median.  Otherwise the median level is found by bisection on the
+ * kept votes (no histogram, whose scattered read-modify-writes serialise on
+ * the few levels a window holds), and one more pass over them sums the
+ * values on that level. */
+AVX2 static int16_t wm_pixel_avx2(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
+                                  const uint16_t *level, int x, int y, int x0, int x1, int y0, int y1,
+                                  const cc_wm_hist *h)
+{
+    const int w = g->width, c = level[(size_t)y * w + x];
+    const uint32_t *packed = g->packed;
+    const __m256i centre = _mm256_set1_epi32((int)packed[(size_t)y * w + x]);
+    const __m256i vc = _mm256_set1_epi32(c), zero = _mm256_setzero_si256(), end = _mm256_set1_epi32(x1 + 1);
+    const __m256i first = _mm256_add_epi32(_mm256_set1_epi32(x0), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    __m256i tot = zero, below = zero, at = zero, lv;
+    uint32_t *wb = h->win_weight, *lb = h->win_level;
+    int n = 0;
+    for (int yy = y0; yy <= y1; yy++) {
+        const uint32_t *srow = t->space_win[yy - y + CC_MAX_WM_RADIUS] + CC_MAX_WM_RADIUS;
+        const size_t r = (size_t)yy * w;
+        __m256i pos = first;
+        for (int xx = x0; xx <= x1; xx += 8, n++, pos = _mm256_add_epi32(pos, _mm256_set1_epi32(8))) {
+            __m256i wt = chunk_weights(t, centre, packed + r, level + r, srow, xx, x, pos, end, &lv);
+            _mm256_storeu_si256((__m256i *)(wb + 8 * n), wt);
+            _mm256_storeu_si256((__m256i *)(lb + 8 * n), lv);
+            tot = _mm256_add_epi32(tot, wt);
+            below = _mm256_add_epi32(below, _mm256_and_si256(wt, _mm256_cmpgt_epi32(vc, lv)));
+            at = _mm256_add_epi32(at, _mm256_and_si256(wt, _mm256_cmpeq_epi32(lv, vc)));
+        }
+    }
+    uint64_t sums[3];
+    hsum3(tot, below, at, sums);
+    const uint64_t total = sums[0], lo_w = sums[1], at_w = sums[2];
+    if (2 * lo_w < total && 2 * (lo_w + at_w) >= total)
+        return map[(size_t)y * w + x];
+    /* the first level whose cumulative weight reaches half the total: below c or above it */
+    int lo, hi;
+    level_bounds(wb, lb, n, &lo, &hi);
+    if (2 * lo_w >= total)
+        hi = c - 1;
+    else
+        lo = c + 1;
+    while (lo < hi) {
+        int mid = lo + (hi - lo) / 2;
+        if (2 * weight_up_to(wb, lb, n, mid) >= total)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return level_mean(g, map, wb, lb, lo, x0, x1, y0, y1);
 }
 #endif
 
@@ -220,13 +307,6 @@ static int centre_is_median(const cc_wm_tables *t, const cc_wm_image *g, const u
                             const uint8_t *gc, int x, int y, int x0, int x1, int y0, int y1, int c)
 {
     const int w = g->width, ch = g->channels;
-#if CC_HAVE_X86
-    if (g->use_avx2 && g->packed) {
-        uint64_t sums[3];
-        split_window_avx2(t, g, level, x, y, x0, x1, y0, y1, c, sums);
-        return 2 * sums[1] < sums[0] && 2 * (sums[1] + sums[2]) >= sums[0];
-    }
-#endif
     uint64_t total = 0, below = 0, at = 0;
     for (int yy = y0; yy <= y1; yy++) {
         const uint8_t *grow = g->data + (size_t)yy * g->stride;
@@ -238,25 +318,18 @@ static int centre_is_median(const cc_wm_tables *t, const cc_wm_image *g, const u
     return 2 * below < total && 2 * (below + at) >= total;
 }
 
-int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
-                    const uint16_t *level, int x, int y, int radius, cc_wm_hist *h)
+/* noinline: the dispatcher below stays small for the vector kernel. */
+__attribute__((noinline)) static int16_t wm_pixel_scalar(const cc_wm_tables *t, const cc_wm_image *g,
+                                                         const int16_t *map, const uint16_t *level, int x, int y,
+                                                         int x0, int x1, int y0, int y1, cc_wm_hist *h)
 {
-    const int w = g->width, hgt = g->height, ch = g->channels;
+    const int w = g->width, ch = g->channels;
     const size_t o = (size_t)y * w + x;
-    if (level[o] == CC_WM_NO_LEVEL)
-        return CC_INVALID;
     const uint8_t *gc = g->data + (size_t)y * g->stride + (size_t)x * ch;
-    int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
-    int x0 = x - radius < 0 ? 0 : x - radius, x1 = x + radius >= w ? w - 1 : x + radius;
     if (centre_is_median(t, g, level, gc, x, y, x0, x1, y0, y1, level[o]))
         return map[o];
     int lo = INT32_MAX, hi = -1;
     uint64_t total = 0;
-#if CC_HAVE_X86
-    if (g->use_avx2 && g->packed)
-        total = vote_window_avx2(t, g, map, level, x, y, x0, x1, y0, y1, h, &lo, &hi);
-    else
-#endif
     for (int yy = y0; yy <= y1; yy++) {
         const size_t r = (size_t)yy * w;
         const uint8_t *grow = g->data + (size_t)yy * g->stride;
@@ -282,4 +355,33 @@ int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *
     memset(h->weight + lo, 0, sizeof(uint32_t) * (size_t)(hi - lo + 1));
     memset(h->value + lo, 0, sizeof(int64_t) * (size_t)(hi - lo + 1));
     return out;
+}
+
+/* Whether every pixel of the window has level c: then all the weight is on c and the centre is the
+ * median, whatever the weights. */
+static int window_on_level(const uint16_t *level, const uint16_t *run, int w, int c, int x0, int x1, int y0, int y1)
+{
+    for (int yy = y0; yy <= y1; yy++) {
+        const size_t q = (size_t)yy * w + x0;
+        if (level[q] != c || run[q] <= x1 - x0)
+            return 0;
+    }
+    return 1;
+}
+
+int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
+                    const uint16_t *level, const uint16_t *run, int x, int y, int radius, cc_wm_hist *h)
+{
+    const int w = g->width, hgt = g->height, c = level[(size_t)y * w + x];
+    if (c == CC_WM_NO_LEVEL)
+        return CC_INVALID;
+    int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
+    int x0 = x - radius < 0 ? 0 : x - radius, x1 = x + radius >= w ? w - 1 : x + radius;
+    if (run && window_on_level(level, run, w, c, x0, x1, y0, y1))
+        return map[(size_t)y * w + x];
+#if CC_HAVE_X86
+    if (g->use_avx2 && g->packed)
+        return wm_pixel_avx2(t, g, map, level, x, y, x0, x1, y0, y1, h);
+#endif
+    return wm_pixel_scalar(t, g, map, level, x, y, x0, x1, y0, y1, h);
 }

@@ -7,6 +7,10 @@
 typedef struct cc_workspace {
     int width, height, threads;
     uint16_t *volume;        /* aggregated cost S, [height][width][Dp] */
+    uint8_t *costs;          /* matching cost C, [height][width][cstride] + slack: pass 1 computes it,
+                                passes 2 and 3 read it (1 byte per cell instead of two recomputations) */
+    size_t cstride;          /* Dp rounded up to 32: the cost kernel writes 32 lanes at a time */
+    int stream;              /* the volume is far larger than the caches: pass 1 writes it past them */
     uint16_t *vpath;         /* vertical/diagonal paths: [paths][2 rows][width][vstride] */
     uint16_t *vmin;          /* their minima: [paths][2 rows][width] */
     size_t vstride;          /* Dp + 2 guards */
@@ -16,7 +20,6 @@ typedef struct cc_workspace {
 
 /* Per-thread scratch of pass 3 and the selection. */
 typedef struct cc_thread_scratch {
-    uint8_t *cost_row;       /* [width][Dp] + slack */
     uint16_t *sum_row;       /* [width][Dp] */
     uint16_t *hpath[2];      /* two pixels' path vectors with guards */
     uint16_t *select_tmp;    /* [width] */

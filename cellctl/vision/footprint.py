@@ -117,13 +117,41 @@ class Footprint:
 
     def eroded(self, distance_mm: float) -> Footprint:
         """Cells at least `distance_mm` inside the region's edge."""
-        inside = cv2.distanceTransform(self.mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * self.cell_mm
-        return Footprint((inside >= distance_mm).astype(np.uint8), self.origin, self.cell_mm)
+        # Only the region's bounding box and the ring of empty cells around it can hold a cell's nearest
+        # empty cell (any farther one is farther than the ring's): the distances there are the whole
+        # raster's, at a fraction of its cells.
+        rows, cols = self._box(1)
+        inside = cv2.distanceTransform(self.mask[rows, cols], cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * self.cell_mm
+        mask = np.zeros_like(self.mask)
+        mask[rows, cols] = inside >= distance_mm
+        return Footprint(mask, self.origin, self.cell_mm)
 
     def dilated(self, distance_mm: float) -> Footprint:
         """Cells within `distance_mm` of the region."""
-        outside = cv2.distanceTransform(1 - self.mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * self.cell_mm
-        return Footprint((outside <= distance_mm).astype(np.uint8), self.origin, self.cell_mm)
+        reach = distance_mm / self.cell_mm
+        mask = np.zeros_like(self.mask)
+        if reach <= _SMALL_REACH_CELLS:
+            # A short reach is a dilation by the disc of cell offsets whose distance, computed as the
+            # distance transform computes it (float32), is within it: the same cells, without the transform.
+            offset = np.arange(-int(reach), int(reach) + 1)
+            squared = (offset[:, None] ** 2 + offset[None, :] ** 2).astype(np.float32)
+            disc = (np.sqrt(squared) * np.float32(self.cell_mm) <= np.float32(distance_mm)).astype(np.uint8)
+            return Footprint(cv2.dilate(self.mask, disc), self.origin, self.cell_mm)
+        # Cells farther than the reach from the region's bounding box are farther from the region.
+        rows, cols = self._box(int(np.ceil(reach)) + 1)
+        outside = cv2.distanceTransform(1 - self.mask[rows, cols], cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * self.cell_mm
+        mask[rows, cols] = outside <= distance_mm
+        return Footprint(mask, self.origin, self.cell_mm)
+
+    def _box(self, margin: int) -> tuple[slice, slice]:
+        """Rows and columns of the region's bounding box plus `margin` cells, within the raster."""
+        x, y, width, height = cv2.boundingRect(self.mask)
+        if width == 0:
+            return slice(0, self.mask.shape[0]), slice(0, self.mask.shape[1])
+        return slice(max(y - margin, 0), y + height + margin), slice(max(x - margin, 0), x + width + margin)
+
+
+_SMALL_REACH_CELLS = 4  # up to a 9 x 9 disc a dilation is cheaper than the distance transform
 
 
 def _disc(diameter_cells: float) -> np.ndarray:

@@ -216,7 +216,8 @@ def measure_sole(
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
         )
-    problem = _outline_problem(reconstruction, outline)
+    surface = SoleSurface(reconstruction)  # one per reconstruction: its k-d tree serves every query below
+    problem = _outline_problem(reconstruction, outline, surface)
     if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
         # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
         return _invalid(
@@ -229,7 +230,6 @@ def measure_sole(
         return _invalid(problem.kind, problem.reason, **base)
     heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
     toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
-    surface = SoleSurface(reconstruction)
     heights = surface.sample(np.vstack([heel_xy, toe_xy]), HEIGHT_RADIUS_MM)
     timings["measure"] = time.perf_counter() - start
     for name, value, xy in (("heel", heights.z[0], heel_xy), ("toe", heights.z[1], toe_xy)):
@@ -280,7 +280,7 @@ def measure_sole(
     return SoleMeasurement(length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, **base)
 
 
-def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> CheckFailure | None:
+def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> CheckFailure | None:
     """The outline's self-checks: against the depth step, and against the right image when a table is taught."""
     ring = _resample_closed(outline, 1.0)
     outward = _outward_normals(ring)
@@ -311,7 +311,7 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray) -> Che
         )
 
     centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
-    edge_height = SoleSurface(reconstruction).coarse_heights(ring - 3.0 * outward, 3.0)
+    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
     edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
     table_level = None
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:

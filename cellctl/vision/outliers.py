@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 
+from cellctl.stereo.kernels import neighbour_means
+
 
 def statistical_inliers(pixels: np.ndarray, points: np.ndarray, spacing_mm: np.ndarray) -> np.ndarray:
     """Indices of the points (N x 3, with their pixels N x 2 and pixel spacing N, mm) that are not outliers.
@@ -30,25 +32,11 @@ def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm
     grid, rows, cols = _point_grid(pixels, points, margin=_WINDOW_HALVES[-1])
     flat = grid.reshape(3, -1)
     at = rows * grid.shape[2] + cols
+    # The first two cases, one pass over the points in C (cellctl.stereo.kernels; the numpy rule they
+    # follow is the reference in tests/vision/test_outliers.py): mostly the 19 nearest are the block's 20
+    # (within 2.3 px) but its farthest; else the 19 nearest of the 36 within 3.2 px, capped at 3.6 px.
+    mean, exact = neighbour_means(grid, at, spacing_mm, _NEAR_OFFSETS)
     centre = flat[:, at]
-
-    def distances(dx: int, dy: int) -> np.ndarray:  # to the pixel (dx, dy) away; inf where not measured
-        offset = np.take(flat, at + (dy * grid.shape[2] + dx), axis=1) - centre
-        return np.nan_to_num(np.sqrt(np.einsum("ij,ij->j", offset, offset)), nan=np.inf)
-
-    # The 36 pixels within 3.2 px: beyond them the nearest are 3.6 px away.
-    near = np.stack([distances(dx, dy) for dx, dy in _NEAR])  # 36 x N
-    block = near[: len(_NEAR_BLOCK)]  # the 20 within 2.3 px
-    largest = block.max(axis=0)
-    second = np.partition(block, -2, axis=0)[-2]
-    # Mostly the 19 nearest are the block's 20 but its farthest: complete, and nearer than any other pixel.
-    with np.errstate(invalid="ignore"):  # inf - inf where the block is not complete: recomputed below
-        mean = (block.sum(axis=0) - largest) / 20.0  # with the point itself (distance 0)
-    exact = np.isfinite(largest) & (second <= np.fmin(near[len(_NEAR_BLOCK) :].min(axis=0), 3.5 * spacing_mm))
-    rest = np.flatnonzero(~exact)
-    nearest = np.partition(near[:, rest], 18, axis=0)[:19]
-    mean[rest] = np.sum(np.fmin(nearest, 3.6 * spacing_mm[rest]), axis=0) / 20.0
-    exact[rest] = nearest.max(axis=0) <= 0.95 * 3.6 * spacing_mm[rest]
     others = np.flatnonzero(~exact)
     for half in _WINDOW_HALVES:  # larger windows only for the points whose 19 nearest lie farther out
         if others.size == 0:
@@ -72,6 +60,7 @@ def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm
 _WINDOW_HALVES = (7, 15, 31, 63)  # 15 x 15 to 127 x 127 pixels, each for fewer points
 _NEAR_BLOCK = [(dx, dy) for dy in range(-2, 3) for dx in range(-2, 3) if 0 < dx * dx + dy * dy <= 5]  # 20
 _NEAR = _NEAR_BLOCK + [(dx, dy) for dy in range(-3, 4) for dx in range(-3, 4) if 5 < dx * dx + dy * dy <= 10]  # + 16
+_NEAR_OFFSETS = np.array(_NEAR, np.int32)
 
 
 def _point_grid(pixels: np.ndarray, points: np.ndarray, margin: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cellctl.stereo.kernels import patch_shift, patch_step
+
 BLUR_LEVELS: tuple[tuple[float, int], ...] = ((2.0, 4), (1.0, 3), (0.0, 3))  # (Gaussian sigma px, iterations)
 MIN_PATCH_PIXELS = 40
 MAX_STEP_PX = 0.5  # per iteration: larger updates mean the linearisation does not hold
@@ -125,21 +127,23 @@ def fit_disparity_planes(
     dy = y_image - centres[ids, 1]
     sums = PatchSums(ids, count)
     sizes = sums.sizes
-    # Products of the Jacobian's columns (1, dx, dy) that the normal equations need: fixed per fit.
-    basis = np.vstack([np.ones_like(dx), dx, dy, dx * dx, dx * dy, dy * dy])
     last_step = np.full(count, np.inf)
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    right_at = _Sampler(y)
     for sigma, iterations in BLUR_LEVELS:
         l_img = cv2.GaussianBlur(left, (0, 0), sigma) if sigma > 0 else left
         r_img = cv2.GaussianBlur(right, (0, 0), sigma) if sigma > 0 else right
-        r_grad = cv2.Sobel(r_img, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+        # The right image and its x gradient as two channels: one remap samples both at the same points.
+        r_both = cv2.merge([r_img, cv2.Sobel(r_img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)])
         l_val = _sample(l_img, x, y)
         l_dev = l_val - sums.means_at_pixels(l_val)  # the left patch does not move: its statistics are fixed per level
         l_energy = sums(l_dev**2)
         for _ in range(iterations):
-            d = params[ids, 0] + params[ids, 1] * dx + params[ids, 2] * dy
-            r_val = _sample(r_img, x - d, y)
-            r_dev = r_val - sums.means_at_pixels(r_val)
-            step = _gauss_newton_step(l_dev, l_energy, r_dev, _sample(r_grad, x - d, y), basis, sums)
+            # Where each patch's plane puts its pixels (x - d), the right image there, and the step with its
+            # per-patch sums and 3 x 3 solves, in C (csrc/cloud_kernels.c); the numpy formulation the step
+            # follows is _gauss_newton_step, the tests' reference.
+            samples = right_at(r_both, patch_shift(starts, params, x, dx, dy))
+            step = patch_step(starts, l_dev, l_energy, samples, dx, dy)
             params += np.clip(step, -MAX_STEP_PX, MAX_STEP_PX)
             last_step = np.abs(step[:, 0])
     ok = (sizes >= MIN_PATCH_PIXELS) & (last_step < 0.02) & np.all(np.isfinite(params), axis=1)
@@ -195,14 +199,24 @@ def _sample(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     n = len(x)
     if n == 0:
         return np.zeros(0)
-    rows = -(-n // 1024)
-    mx = np.zeros(rows * 1024, np.float32)
-    my = np.zeros(rows * 1024, np.float32)
-    mx[:n], my[:n] = x, y
-    out = cv2.remap(
-        image, mx.reshape(rows, 1024), my.reshape(rows, 1024), cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE
-    )
-    return out.ravel()[:n].astype(np.float64)
+    return _Sampler(y)(image, x).ravel()[:n].astype(np.float64)
+
+
+class _Sampler:
+    """Bicubic samples on fixed rows y at changing x (cv2.remap over the points laid out 1024 a row)."""
+
+    def __init__(self, y: np.ndarray) -> None:
+        self.count = len(y)
+        rows = max(-(-self.count // 1024), 1)
+        self.map_x = np.zeros((rows, 1024), np.float32)
+        self.map_y = np.zeros((rows, 1024), np.float32)
+        self.map_y.ravel()[: self.count] = y
+
+    def __call__(self, image: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """N x C float32 samples of a C-channel image (N x 1 for a grey one) at (x, y)."""
+        self.map_x.ravel()[: self.count] = x
+        out = cv2.remap(image, self.map_x, self.map_y, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+        return out.reshape(self.map_x.size, -1)[: self.count]
 
 
 def _disc_offsets(radius: float) -> np.ndarray:

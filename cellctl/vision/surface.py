@@ -35,11 +35,16 @@ class SoleSurface:
 
     def __init__(self, reconstruction: Reconstruction) -> None:
         self.rec = reconstruction
-        points = reconstruction.sole_points
-        flat = o3d.geometry.PointCloud(
-            o3d.utility.Vector3dVector(np.column_stack([points[:, :2], np.zeros(len(points))]))
-        )
-        self._tree = o3d.geometry.KDTreeFlann(flat)  # neighbours in the table plane
+        self._tree: o3d.geometry.KDTreeFlann | None = None
+
+    @property
+    def tree(self) -> o3d.geometry.KDTreeFlann:
+        """Neighbours in the table plane: built at the first query (~10^5 points), then kept."""
+        if self._tree is None:
+            points = self.rec.sole_points
+            flat = np.column_stack([points[:, :2], np.zeros(len(points))])
+            self._tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(flat)))
+        return self._tree
 
     def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
         """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
@@ -61,11 +66,22 @@ class SoleSurface:
     def coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
         """Median height of the cloud's points within the radius (NaN where too few): the refinement's start."""
         points = self.rec.sole_points
+        found = [np.asarray(self.tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)[1]) for x, y in xy]
+        counts = np.array([len(index) for index in found], np.int64)
         z = np.full(len(xy), np.nan)
-        for k, (x, y) in enumerate(xy):
-            count, index, _ = self._tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
-            if count >= MIN_CLOUD_POINTS:
-                z[k] = np.median(points[np.asarray(index), 2])
+        enough = np.flatnonzero(counts >= MIN_CLOUD_POINTS)
+        if enough.size == 0:
+            return z
+        # All medians at once: each query's heights as a row (padded with inf), sorted along the rows; the
+        # median is the mean of the two middle values (one for odd counts), as np.median takes it.
+        rows = np.full((enough.size, int(counts[enough].max())), np.inf)
+        row = np.repeat(np.arange(enough.size), counts[enough])
+        column = np.arange(len(row)) - np.repeat(np.cumsum(counts[enough]) - counts[enough], counts[enough])
+        rows[row, column] = points[np.concatenate([found[k] for k in enough]), 2]
+        rows.sort(axis=1)
+        n = counts[enough]
+        lower, upper = rows[np.arange(enough.size), (n - 1) // 2], rows[np.arange(enough.size), n // 2]
+        z[enough] = (lower + upper) / 2
         return z
 
     def _from_cloud(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
@@ -73,7 +89,7 @@ class SoleSurface:
         z = np.full(len(xy), np.nan)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
         for k, (x, y) in enumerate(xy):
-            count, index, _ = self._tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
+            count, index, _ = self.tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
             if count < MIN_CLOUD_POINTS:
                 continue
             near = points[np.asarray(index)]

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from cellctl.eval.matcher_bench import synthetic_case
 from cellctl.eval.middlebury import resolve_data_dir
 from cellctl.stereo import StereoMatcher
 
@@ -65,6 +66,25 @@ def test_thread_count_and_simd_do_not_change_the_result():
             assert not np.array_equal(got, base)  # a real change of method does change it
         else:
             np.testing.assert_array_equal(got, base, err_msg=str(kw))
+
+
+@pytest.mark.parametrize("num_disparities", [16, 40])
+def test_buffer_layouts_do_not_change_the_result(num_disparities):
+    # 16: the smallest per-thread scratch, which the frame preparation borrows (it once overlapped the
+    # horizontal path guards); 40: cost slots padded from 48 to 64 bytes, written by adjacent stripes.
+    left, right, _ = _scene("tsukuba")
+    base = StereoMatcher(0, num_disparities, threads=1, simd="scalar").compute_fixed(left, right)
+    for kw in (dict(threads=1), dict(threads=2), dict(threads=3), dict(simd="scalar", threads=3)):
+        m = StereoMatcher(0, num_disparities, **kw)
+        np.testing.assert_array_equal(m.compute_fixed(left, right), base, err_msg=str(kw))
+        np.testing.assert_array_equal(m.compute_fixed(left, right), base, err_msg=f"{kw}, second call")
+
+
+def test_a_volume_written_past_the_caches_gives_the_same_result():
+    # 640 x 416 x 128 disparities: a 65 MiB volume, which pass 1 writes with non-temporal stores
+    case = synthetic_case(640, 416, 128)
+    base = StereoMatcher(0, 128, simd="scalar").compute_fixed(case.left, case.right)
+    np.testing.assert_array_equal(StereoMatcher(0, 128).compute_fixed(case.left, case.right), base)
 
 
 def test_repeated_calls_and_size_changes_reuse_buffers_correctly():

@@ -1,0 +1,132 @@
+"""The measurement's hot loops in C (csrc/cloud_kernels.c), behind numpy-level functions.
+
+They sit behind the stereo package because it is the one door to the compiled core; the vision layer
+(cellctl.vision.outliers, cellctl.vision.subpixel) calls them and keeps the numpy reference in its tests.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cellctl.stereo._core import ffi, lib
+
+_ERRORS = {
+    lib.CK_ERR_NULL: "a required array is missing",
+    lib.CK_ERR_SIZE: "a count or grid size is out of range",
+    lib.CK_ERR_RANGE: "an index lies outside its array",
+}
+
+
+def _check(rc: int, what: str) -> None:
+    if rc != lib.CK_OK:
+        raise ValueError(f"{what}: {_ERRORS.get(rc, f'error {rc}')}")
+
+
+def _ptr(kind: str, array: np.ndarray):  # noqa: ANN202 - a cffi pointer
+    return ffi.cast(kind, ffi.from_buffer(array))
+
+
+def neighbour_means(
+    grid: np.ndarray, at: np.ndarray, spacing_mm: np.ndarray, offsets: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: mean distance to its 19 nearest block neighbours (float32) and whether that is exact (bool).
+
+    grid: 3 x H x W float32 points (NaN where none); at: flat index of each point in one plane, at least 3 px
+    inside the grid; spacing_mm: mm between pixels at each point; offsets: 36 x 2 (dx, dy), the 20 within
+    2.3 px first (cellctl.vision.outliers defines the rule).
+    """
+    if grid.ndim != 3 or grid.shape[0] != 3:
+        raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
+    # Each pixel's x y z side by side: one cache line per neighbour instead of three.
+    points = np.ascontiguousarray(np.moveaxis(grid, 0, -1), np.float32)
+    at = np.ascontiguousarray(at, np.int64)
+    spacing = np.ascontiguousarray(np.broadcast_to(spacing_mm, at.shape), np.float64)
+    offsets = np.ascontiguousarray(offsets, np.int32)
+    if offsets.shape != (36, 2):
+        raise ValueError(f"offsets must be 36 x 2, got shape {offsets.shape}")
+    mean = np.empty(len(at), np.float32)
+    exact = np.empty(len(at), np.uint8)
+    rc = lib.ck_neighbour_means(
+        _ptr("const float *", points),
+        grid.shape[1],
+        grid.shape[2],
+        _ptr("const int64_t *", at),
+        len(at),
+        _ptr("const double *", spacing),
+        _ptr("const int32_t *", offsets),
+        _ptr("float *", mean),
+        _ptr("uint8_t *", exact),
+    )
+    _check(rc, "neighbour means")
+    return mean, exact.astype(bool)
+
+
+def _starts(starts: np.ndarray) -> tuple[np.ndarray, int, int]:
+    starts = np.ascontiguousarray(starts, np.int64)
+    if starts.ndim != 1 or len(starts) < 1:
+        raise ValueError("patch offsets (starts) must be a non-empty 1-D array")
+    return starts, len(starts) - 1, int(starts[-1])
+
+
+def _per_pixel(pixels: int, *arrays: np.ndarray) -> list[np.ndarray]:
+    out = [np.ascontiguousarray(a, np.float64) for a in arrays]
+    if any(a.shape != (pixels,) for a in out):
+        raise ValueError(f"per-pixel arrays must have the {pixels} pixels the patch offsets end at")
+    return out
+
+
+def patch_shift(starts: np.ndarray, params: np.ndarray, x: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """x - (a + b dx + c dy) per pixel (float32), (a, b, c) = params (K x 3) of its patch; pixels stored patch
+    after patch, patch k's are [starts[k], starts[k + 1])."""
+    starts, count, pixels = _starts(starts)
+    params = np.ascontiguousarray(params, np.float64)
+    if params.shape != (count, 3):
+        raise ValueError(f"patch shift: params must be {count} x 3, got {params.shape}")
+    x = np.ascontiguousarray(x, np.float32)
+    dx, dy = _per_pixel(pixels, dx, dy)
+    if x.shape != (pixels,):
+        raise ValueError(f"patch shift: x must have {pixels} pixels, got {x.shape}")
+    out = np.empty(pixels, np.float32)
+    rc = lib.ck_patch_shift(
+        count,
+        _ptr("const int64_t *", starts),
+        _ptr("const double *", params),
+        _ptr("const float *", x),
+        _ptr("const double *", dx),
+        _ptr("const double *", dy),
+        _ptr("float *", out),
+    )
+    _check(rc, "patch shift")
+    return out
+
+
+def patch_step(
+    starts: np.ndarray, l_dev: np.ndarray, l_energy: np.ndarray, right: np.ndarray, dx: np.ndarray, dy: np.ndarray
+) -> np.ndarray:
+    """One Gauss-Newton step (K x 3) of affine disparity patches (cellctl.vision.subpixel).
+
+    starts: K + 1 offsets, patch k's pixels are [starts[k], starts[k + 1]); per pixel (N): l_dev, dx, dy, and
+    right (N x 2 float32: the right image and its x gradient where the patch plane puts the pixel); per
+    patch (K): l_energy.
+    """
+    starts, count, pixels = _starts(starts)
+    l_dev, dx, dy = _per_pixel(pixels, l_dev, dx, dy)
+    right = np.ascontiguousarray(right, np.float32)
+    if right.shape != (pixels, 2):
+        raise ValueError(f"patch step: right must be {pixels} x 2 (value, gradient), got {right.shape}")
+    energy = np.ascontiguousarray(l_energy, np.float64)
+    if energy.shape != (count,):
+        raise ValueError(f"patch step: l_energy must have one value per patch ({count}), got {energy.shape}")
+    step = np.empty((count, 3), np.float64)
+    rc = lib.ck_patch_step(
+        count,
+        _ptr("const int64_t *", starts),
+        _ptr("const double *", l_dev),
+        _ptr("const double *", energy),
+        _ptr("const float *", right),
+        _ptr("const double *", dx),
+        _ptr("const double *", dy),
+        _ptr("double *", step),
+    )
+    _check(rc, "patch step")
+    return step

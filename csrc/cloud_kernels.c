@@ -1,0 +1,198 @@
+/* Hot loops of the measurement after the match; see cloud_kernels.h. */
+#include "cloud_kernels.h"
+
+#include <math.h>
+#include <stddef.h>
+
+#define CK_NEAR 36
+#define CK_BLOCK 20
+#define CK_REACH 3 /* largest |dx|, |dy| of the offsets */
+
+/* Minimum and maximum as single instructions: C's fmin/fmax are library calls without -ffast-math (their
+ * NaN rules). Inputs here are never NaN (missing neighbours are infinite). */
+static inline float min_f(float a, float b) { return a < b ? a : b; }
+static inline float max_f(float a, float b) { return a > b ? a : b; }
+static inline double min_d(double a, double b) { return a < b ? a : b; }
+static inline double max_d(double a, double b) { return a > b ? a : b; }
+
+int ck_neighbour_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
+                       const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact) {
+    if (!grid || !at || !spacing || !offsets || !mean || !exact)
+        return CK_ERR_NULL;
+    if (height <= 2 * CK_REACH || width <= 2 * CK_REACH || count < 0)
+        return CK_ERR_SIZE;
+    for (int j = 0; j < CK_NEAR; ++j)
+        if (offsets[2 * j] < -CK_REACH || offsets[2 * j] > CK_REACH || offsets[2 * j + 1] < -CK_REACH ||
+            offsets[2 * j + 1] > CK_REACH)
+            return CK_ERR_RANGE;
+    const int64_t plane = (int64_t)height * width;
+    /* Every neighbour read stays inside the grid (the caller keeps points 3 px off its sides). */
+    const int64_t lowest = (int64_t)CK_REACH * width + CK_REACH;
+    for (int64_t i = 0; i < count; ++i)
+        if (at[i] < lowest || at[i] >= plane - lowest)
+            return CK_ERR_RANGE;
+    int64_t shift[CK_NEAR];
+    for (int j = 0; j < CK_NEAR; ++j)
+        shift[j] = (int64_t)offsets[2 * j + 1] * width + offsets[2 * j];
+    for (int64_t i = 0; i < count; ++i) {
+        const int64_t c = at[i];
+        float near[CK_NEAR];
+        for (int j = 0; j < CK_NEAR; ++j) {
+            const int64_t o = c + shift[j];
+            /* float32 as numpy's einsum: (x*x + y*y) + z*z, then sqrt; NaN (no point) becomes inf */
+            float ox = grid[3 * o] - grid[3 * c], oy = grid[3 * o + 1] - grid[3 * c + 1];
+            float oz = grid[3 * o + 2] - grid[3 * c + 2];
+            float squared = ox * ox + oy * oy + oz * oz;
+            near[j] = isnan(squared) ? INFINITY : sqrtf(squared); /* sqrtf of NaN takes libm's slow path */
+        }
+        /* Branch-free: the data decide every comparison, so branches would be mispredicted half the time. */
+        float sum = 0.0f, largest = -INFINITY, second = -INFINITY;
+        for (int j = 0; j < CK_BLOCK; ++j) {
+            sum += near[j];
+            second = max_f(second, min_f(largest, near[j]));
+            largest = max_f(largest, near[j]);
+        }
+        float others = INFINITY;
+        for (int j = CK_BLOCK; j < CK_NEAR; ++j)
+            others = min_f(others, near[j]);
+        if (isfinite(largest) && (double)second <= min_d((double)others, 3.5 * spacing[i])) {
+            mean[i] = (sum - largest) / 20.0f;
+            exact[i] = 1;
+            continue;
+        }
+        /* Else the 19 nearest of the 36, each at most 3.6 spacings (where the next pixels lie): the
+         * measured ones sorted (at an edge or hole most are missing, i.e. infinite), then the missing. */
+        float finite[CK_NEAR];
+        int measured = 0;
+        for (int j = 0; j < CK_NEAR; ++j) {
+            finite[measured] = near[j];
+            measured += near[j] < INFINITY;
+        }
+        for (int j = 1; j < measured; ++j) {
+            float v = finite[j];
+            int k = j - 1;
+            for (; k >= 0 && finite[k] > v; --k)
+                finite[k + 1] = finite[k];
+            finite[k + 1] = v;
+        }
+        const double reach = 3.6 * spacing[i];
+        const int used = measured < 19 ? measured : 19;
+        double total = 0.0;
+        for (int j = 0; j < used; ++j)
+            total += min_d((double)finite[j], reach);
+        for (int j = used; j < 19; ++j)
+            total += reach;
+        mean[i] = (float)(total / 20.0);
+        exact[i] = (uint8_t)(measured >= 19 && (double)finite[18] <= 0.95 * reach);
+    }
+    return CK_OK;
+}
+
+/* Solves the 3 x 3 system a x = b by elimination with partial pivoting (as LAPACK's dgesv). */
+static void solve3(double a[3][3], double b[3], double x[3]) {
+    for (int col = 0; col < 3; ++col) {
+        int pivot = col;
+        for (int r = col + 1; r < 3; ++r)
+            if (fabs(a[r][col]) > fabs(a[pivot][col]))
+                pivot = r;
+        if (pivot != col) {
+            for (int k = 0; k < 3; ++k) {
+                double t = a[col][k];
+                a[col][k] = a[pivot][k];
+                a[pivot][k] = t;
+            }
+            double t = b[col];
+            b[col] = b[pivot];
+            b[pivot] = t;
+        }
+        for (int r = col + 1; r < 3; ++r) {
+            double f = a[r][col] / a[col][col];
+            for (int k = col; k < 3; ++k)
+                a[r][k] -= f * a[col][k];
+            b[r] -= f * b[col];
+        }
+    }
+    for (int r = 2; r >= 0; --r) {
+        double s = b[r];
+        for (int k = r + 1; k < 3; ++k)
+            s -= a[r][k] * x[k];
+        x[r] = s / a[r][r];
+    }
+}
+
+/* CK_OK when starts[0..patches] run from 0 without decreasing. */
+static int check_starts(int64_t patches, const int64_t *starts) {
+    if (patches < 0)
+        return CK_ERR_SIZE;
+    if (starts[0] != 0)
+        return CK_ERR_RANGE;
+    for (int64_t k = 0; k < patches; ++k)
+        if (starts[k + 1] < starts[k])
+            return CK_ERR_RANGE;
+    return CK_OK;
+}
+
+int ck_patch_shift(int64_t patches, const int64_t *starts, const double *params, const float *x,
+                   const double *dx, const double *dy, float *out) {
+    if (!starts || !params || !x || !dx || !dy || !out)
+        return CK_ERR_NULL;
+    int rc = check_starts(patches, starts);
+    if (rc != CK_OK)
+        return rc;
+    for (int64_t k = 0; k < patches; ++k) {
+        const double a = params[3 * k], b = params[3 * k + 1], c = params[3 * k + 2];
+        for (int64_t i = starts[k]; i < starts[k + 1]; ++i)
+            out[i] = (float)((double)x[i] - (a + b * dx[i] + c * dy[i]));
+    }
+    return CK_OK;
+}
+
+int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, const double *l_energy,
+                  const float *right, const double *dx, const double *dy, double *step) {
+    if (!starts || !l_dev || !l_energy || !right || !dx || !dy || !step)
+        return CK_ERR_NULL;
+    int rc = check_starts(patches, starts);
+    if (rc != CK_OK)
+        return rc;
+    for (int64_t k = 0; k < patches; ++k) {
+        const int64_t lo = starts[k], hi = starts[k + 1];
+        const double size = (double)(hi - lo > 1 ? hi - lo : 1);
+        double r_sum = 0.0;
+        for (int64_t i = lo; i < hi; ++i)
+            r_sum += (double)right[2 * i];
+        const double r_mean = r_sum / size;
+        double r_energy = 0.0;
+        for (int64_t i = lo; i < hi; ++i) {
+            double dev = (double)right[2 * i] - r_mean;
+            r_energy += dev * dev;
+        }
+        /* the right patch scaled to the left one's contrast (gain, vignetting, highlights) */
+        const double gain = sqrt(l_energy[k] / max_d(r_energy, 1e-9));
+        double abs_sum = 0.0;
+        for (int64_t i = lo; i < hi; ++i)
+            abs_sum += fabs(l_dev[i] - gain * ((double)right[2 * i] - r_mean));
+        /* Huber weights scaled by the patch's mean absolute residual (sqrt(pi / 2) * mean |e| = sigma) */
+        const double scale = 1.2533 * abs_sum / size + 1e-3;
+        double m[9] = {0.0};
+        for (int64_t i = lo; i < hi; ++i) {
+            const double error = l_dev[i] - gain * ((double)right[2 * i] - r_mean);
+            const double grad = (double)right[2 * i + 1] * gain;
+            const double weight = min_d(1.0, 2.0 * scale / max_d(fabs(error), 1e-9));
+            const double wg = weight * grad, ww = wg * grad, we = -wg * error;
+            const double x = dx[i], y = dy[i];
+            m[0] += ww;
+            m[1] += ww * x;
+            m[2] += ww * y;
+            m[3] += ww * (x * x);
+            m[4] += ww * (x * y);
+            m[5] += ww * (y * y);
+            m[6] += we;
+            m[7] += we * x;
+            m[8] += we * y;
+        }
+        double a[3][3] = {{m[0] + 1e-6, m[1], m[2]}, {m[1], m[3] + 1e-6, m[4]}, {m[2], m[4], m[5] + 1e-6}};
+        double b[3] = {m[6], m[7], m[8]};
+        solve3(a, b, step + 3 * k);
+    }
+    return CK_OK;
+}

@@ -1,0 +1,125 @@
+"""The measurement's C kernels (csrc/cloud_kernels.c) against their numpy formulations, and their bad input."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from cellctl.stereo.kernels import neighbour_means, patch_shift, patch_step
+from cellctl.vision import outliers, subpixel
+
+from ..vision.test_outliers import _stereo_cloud
+
+
+def _numpy_neighbour_means(grid: np.ndarray, at: np.ndarray, spacing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rule as numpy passes over the points (cellctl.vision.outliers before the kernel)."""
+    flat = grid.reshape(3, -1)
+    centre = flat[:, at]
+
+    def distances(dx: int, dy: int) -> np.ndarray:
+        offset = np.take(flat, at + (dy * grid.shape[2] + dx), axis=1) - centre
+        return np.nan_to_num(np.sqrt(np.einsum("ij,ij->j", offset, offset)), nan=np.inf)
+
+    near = np.stack([distances(dx, dy) for dx, dy in outliers._NEAR])
+    block = near[:20]
+    largest = block.max(axis=0)
+    second = np.partition(block, -2, axis=0)[-2]
+    with np.errstate(invalid="ignore"):
+        mean = (block.sum(axis=0) - largest) / 20.0
+    exact = np.isfinite(largest) & (second <= np.fmin(near[20:].min(axis=0), 3.5 * spacing))
+    rest = np.flatnonzero(~exact)
+    nearest = np.partition(near[:, rest], 18, axis=0)[:19]
+    mean[rest] = np.sum(np.fmin(nearest, 3.6 * spacing[rest]), axis=0) / 20.0
+    exact[rest] = nearest.max(axis=0) <= 0.95 * 3.6 * spacing[rest]
+    return mean, exact
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_neighbour_means_follow_the_numpy_rule(seed: int) -> None:
+    pixels, points, spacing = _stereo_cloud(seed)
+    grid, rows, cols = outliers._point_grid(pixels, points, margin=3)
+    at = rows * grid.shape[2] + cols
+    mean, exact = neighbour_means(grid, at, spacing, outliers._NEAR_OFFSETS)
+    expected_mean, expected_exact = _numpy_neighbour_means(grid, at, spacing)
+    assert 0 < np.count_nonzero(~expected_exact)  # the cloud has edges, holes and specks: not only the block case
+    np.testing.assert_array_equal(exact, expected_exact)
+    np.testing.assert_array_equal(mean, expected_mean)  # float32, summed in the same order
+
+
+def test_neighbour_means_refuse_points_at_the_grid_edge() -> None:
+    pixels, points, spacing = _stereo_cloud(0)
+    grid, rows, cols = outliers._point_grid(pixels, points, margin=2)  # one pixel short of the reach
+    with pytest.raises(ValueError, match="outside its array"):
+        neighbour_means(grid, rows * grid.shape[2] + cols, spacing, outliers._NEAR_OFFSETS)
+    with pytest.raises(ValueError, match="36 x 2"):
+        neighbour_means(grid, rows * grid.shape[2] + cols, spacing, outliers._NEAR_OFFSETS[:20])
+    with pytest.raises(ValueError, match="3 x H x W"):
+        neighbour_means(grid[:2], rows * grid.shape[2] + cols, spacing, outliers._NEAR_OFFSETS)
+
+
+def _patches(seed: int) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    sizes = np.where(rng.random(40) < 0.2, 0, rng.integers(12, 60, 40))  # empty patches too
+    count, pixels = len(sizes), int(sizes.sum())
+    ids = np.repeat(np.arange(count), sizes)
+    return {
+        "ids": ids,
+        "starts": np.concatenate([[0], np.cumsum(sizes)]),
+        "l_dev": rng.normal(0, 10, pixels),
+        "right": rng.normal(100, 20, (pixels, 2)).astype(np.float32),
+        "dx": rng.uniform(-8, 8, pixels),
+        "dy": rng.uniform(-8, 8, pixels),
+        "params": rng.normal(0, 1, (count, 3)),
+        "x": rng.uniform(0, 1000, pixels).astype(np.float32),
+    }
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_patch_step_is_the_numpy_gauss_newton_step(seed: int) -> None:
+    p = _patches(seed)
+    sums = subpixel.PatchSums(p["ids"], len(p["starts"]) - 1)
+    l_dev = p["l_dev"] - sums.means_at_pixels(p["l_dev"])
+    l_energy = sums(l_dev**2)
+    r_val, r_grad = p["right"].astype(np.float64).T
+    dx, dy = p["dx"], p["dy"]
+    basis = np.vstack([np.ones_like(dx), dx, dy, dx * dx, dx * dy, dy * dy])
+    expected = subpixel._gauss_newton_step(l_dev, l_energy, r_val - sums.means_at_pixels(r_val), r_grad, basis, sums)
+    step = patch_step(p["starts"], l_dev, l_energy, p["right"], dx, dy)
+    empty = sums.sizes == 0
+    assert np.all(step[empty] == 0.0)
+    np.testing.assert_allclose(step[~empty], expected[~empty], rtol=1e-8, atol=1e-10)  # summation order
+
+
+def test_patch_shift_is_x_minus_the_patch_plane() -> None:
+    p = _patches(3)
+    a, b, c = p["params"][p["ids"]].T
+    expected = (p["x"] - (a + b * p["dx"] + c * p["dy"])).astype(np.float32)
+    np.testing.assert_array_equal(patch_shift(p["starts"], p["params"], p["x"], p["dx"], p["dy"]), expected)
+
+
+def test_patch_kernels_refuse_inconsistent_input() -> None:
+    p = _patches(4)
+    unsorted = p["starts"].copy()
+    unsorted[[10, 11]] = unsorted[[11, 10]] + np.array([0, 5])  # a patch that ends before it starts
+    with pytest.raises(ValueError, match="outside its array"):
+        patch_shift(unsorted, p["params"], p["x"], p["dx"], p["dy"])
+    with pytest.raises(ValueError, match="per-pixel"):
+        patch_step(p["starts"], p["l_dev"][:-1], np.ones(len(p["starts"]) - 1), p["right"], p["dx"], p["dy"])
+    with pytest.raises(ValueError, match="one value per patch"):
+        patch_step(p["starts"], p["l_dev"], np.ones(3), p["right"], p["dx"], p["dy"])
+    with pytest.raises(ValueError, match="x 2"):
+        patch_step(p["starts"], p["l_dev"], np.ones(len(p["starts"]) - 1), p["right"][:, 0], p["dx"], p["dy"])
+
+
+def test_patch_fits_through_the_kernels_find_a_known_shift() -> None:
+    """End to end (cellctl.vision.subpixel.refine_patches): a textured right image shifted by 3 px is found
+    from a start 0.4 px off, to well under the 0.03 px a height needs."""
+    rng = np.random.default_rng(5)
+    left = cv2.GaussianBlur(rng.normal(100, 30, (80, 120)).astype(np.float32), (0, 0), 1.2)
+    right = np.roll(left, -3, axis=1)  # right(x) = left(x + 3): disparity 3
+    centres = np.array([[60.0, 40.0], [40.0, 30.0], [80.0, 50.0]])
+    fit = subpixel.refine_patches(left, right, np.ones(left.shape, bool), centres, 8.0, np.full(3, 2.6))
+    assert fit.ok.all()
+    np.testing.assert_allclose(fit.params[:, 0], 3.0, atol=0.01)
+    np.testing.assert_allclose(fit.params[:, 1:], 0.0, atol=0.005)
