@@ -182,21 +182,26 @@ def snap_to_inset(footprint: Footprint, xy: np.ndarray, inset_mm: float, iterati
     the offset then holds exactly, whatever the outline's shape. Points on the field's ridge (the medial
     axis of a wide part, where the gradient vanishes) are left where they are.
     """
-    mask = footprint.mask
     cell = footprint.cell_mm
+    # The region's bounding box with a ring of empty cells: every cell's nearest other-kind cell lies in it
+    # for the distances that matter here (within the box), at a fraction of the raster's cells.
+    x, y, width, height = cv2.boundingRect(footprint.mask)
+    margin = 2 + int(np.ceil(inset_mm / cell))
+    top, left = max(y - margin, 0), max(x - margin, 0)
+    mask = footprint.mask[top : y + height + margin, left : x + width + margin]
     inside = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     outside = cv2.distanceTransform(1 - mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     # Cell centres lie half a cell from the edge between a marked and an unmarked cell.
     signed = np.where(mask > 0, inside - 0.5, 0.5 - outside).astype(np.float32) * cell
-    grad_y, grad_x = np.gradient(signed, cell)
+    grad_y, grad_x = (g.astype(np.float32) for g in np.gradient(signed, cell))
     points = np.asarray(xy, np.float64).copy()
     for _ in range(iterations):
-        col = (points[:, 0] - footprint.origin[0]) / cell - 0.5
-        row = (points[:, 1] - footprint.origin[1]) / cell - 0.5
+        col = (points[:, 0] - footprint.origin[0]) / cell - 0.5 - left
+        row = (points[:, 1] - footprint.origin[1]) / cell - 0.5 - top
         grid = np.float32(col).reshape(-1, 1), np.float32(row).reshape(-1, 1)
         value = cv2.remap(signed, *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
-        gx = cv2.remap(grad_x.astype(np.float32), *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
-        gy = cv2.remap(grad_y.astype(np.float32), *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        gx = cv2.remap(grad_x, *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        gy = cv2.remap(grad_y, *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
         norm2 = gx.astype(np.float64) ** 2 + gy.astype(np.float64) ** 2
         # Along a pointed end's bisector the field rises only as sin(half angle): still a usable slope.
         move = np.where(norm2 > 0.01, (inset_mm - value) / np.maximum(norm2, 1e-9), 0.0)
