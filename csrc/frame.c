@@ -69,12 +69,14 @@ static void census_row_planes(const uint8_t *img, int width, int height, int str
                 bit++;
                 continue;
             }
-            /* bits 2i and 2i+1 share a byte (bit is even) */
+            /* bits 2i and 2i+1 share a byte (bit is even); two loops of the binary loop's shape
+             * vectorise (values <= 17 * 255, + threshold <= 255: no uint16 overflow) */
             const uint8_t mask2 = (uint8_t)(mask << 1);
-            for (int x = 0; x < width; x++) {
-                int c = centre[x], n = nb[x];
-                plane[x] |= (c >= n + threshold ? mask : 0) | (n >= c + threshold ? mask2 : 0);
-            }
+            const uint16_t t = (uint16_t)threshold;
+            for (int x = 0; x < width; x++)
+                plane[x] |= centre[x] >= (uint16_t)(nb[x] + t) ? mask : 0;
+            for (int x = 0; x < width; x++)
+                plane[x] |= nb[x] >= (uint16_t)(centre[x] + t) ? mask2 : 0;
             bit += 2;
         }
     }

@@ -15,9 +15,9 @@ void cc_params_default(cc_params *p)
     p->census_width = 5;
     p->census_height = 5;
     p->census_smooth = 0;
-    p->census_threshold = 0;
+    p->census_threshold = 1;
     p->cost_mode = CC_COST_CENSUS_BT;
-    p->lambda_census = 45.0f;
+    p->lambda_census = 120.0f;
     p->lambda_bt = 20.0f;
     p->bt_prefilter = 31;
     p->cost_scale = 63;

@@ -50,7 +50,8 @@ __all__ = [
 DEFAULT_DEPTH_RANGE_MM = DEPTH_RANGE_MM
 # Only really measured pixels (no fill); the widest census window, because the sole's texture is weak:
 # on simulated soles it halves the matcher's height noise for the same time.
-SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7)}
+# The binary census: the ternary one of the defaults fits windows of at most 32 pixels (64 bits).
+SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7), "census_threshold": 0}
 # The coarse match only has to say where something stands above the table: the default window and no
 # medians (a third of its time; search_region's opening and largest region take out its isolated errors).
 COARSE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "median": 0, "weighted_median": 0}

@@ -38,11 +38,13 @@ COST_CASES = [
     dict(num_disparities=19, min_disparity=-4),
     dict(num_disparities=5, min_disparity=3, cost="census"),
     dict(num_disparities=6, cost="bt", lambda_bt=4.0),
-    dict(num_disparities=16, census_window=(9, 7), lambda_census=9.0, cost_scale=100),
+    dict(num_disparities=16, census_window=(9, 7), census_threshold=0, lambda_census=9.0, cost_scale=100),
     dict(num_disparities=33, min_disparity=-10, census_window=(3, 3)),
     dict(num_disparities=12, bt_prefilter=0, census_smooth=0),  # the raw-intensity BT of the paper
     dict(num_disparities=12, bt_prefilter=5, lambda_bt=3.0),  # the clip bites
-    dict(num_disparities=10, min_disparity=-3, census_smooth=1, census_window=(7, 5), bt_prefilter=63),
+    dict(
+        num_disparities=10, min_disparity=-3, census_smooth=1, census_window=(7, 5), census_threshold=0, bt_prefilter=63
+    ),
     # ternary census: the dead band (1 = ties only, 3 = |diff| <= 2), the largest window (62 bits, 8 planes)
     dict(num_disparities=9, census_threshold=1, lambda_census=90.0),
     dict(num_disparities=14, min_disparity=-2, census_threshold=3, cost="census"),
