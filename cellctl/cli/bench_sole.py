@@ -5,8 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import TYPE_CHECKING
 
 from cellctl.errors import UserError
+
+if TYPE_CHECKING:
+    from cellctl.sim.render_cache import RenderCache
+    from cellctl.sim.scene import SoleScene
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -36,6 +41,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--taught", action="store_true", help="teach each scene's empty table first (as `cellctl teach` at set-up)"
     )
+    parser.add_argument(
+        "--cache",
+        metavar="DIR",
+        help="keep every render in DIR and reuse it (keyed by scene, look, rig and the simulator's source)",
+    )
+    parser.add_argument(
+        "--render-only",
+        action="store_true",
+        help="with --cache: only render the soles (and the empty tables with --taught) into the cache",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of markdown")
     parser.set_defaults(func=run)
 
@@ -43,19 +58,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from cellctl.eval import sole_bench as bench_sole
     from cellctl.sim.rig import default_rig
+    from cellctl.sim.scene import SoleScene
     from cellctl.vision.calibration import Calibration
 
     if args.soles < 1:
         raise UserError(f"--soles must be at least 1, got {args.soles}")
     if args.variations and not args.matrix:
         raise UserError("--variations needs --matrix")
+    if args.render_only and not args.cache:
+        raise UserError("--render-only needs --cache DIR (where the renders go)")
     if args.matrix:
         return _run_matrix(args)
     calib = Calibration.load(args.calib) if args.calib else default_rig()
     # Alternate colours over consecutive seeds, so both colours see every kind of shape and pose.
     soles = [(args.first_seed + i, "white" if i % 2 == 0 else "black") for i in range(args.soles)]
+    cache = _cache(args)
+    if args.render_only:
+        assert cache is not None
+        return _render_only([SoleScene.random(seed, color, calib) for seed, color in soles], cache, args.taught)
     rows = bench_sole.bench_soles(
-        calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught
+        calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught, cache=cache
     )
     if args.json:
         print(json.dumps(bench_sole.as_json(rows), indent=2))
@@ -70,6 +92,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
     from cellctl.eval import sole_matrix
     from cellctl.sim.look import VARIATIONS
     from cellctl.sim.matrix import matrix_soles
+    from cellctl.sim.scene import SoleScene
     from cellctl.vision.calibration import Calibration
 
     if args.variations == "list":
@@ -82,8 +105,15 @@ def _run_matrix(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(str(exc)) from None
     calib = Calibration.load(args.calib) if args.calib else None
+    cache = _cache(args)
+    if args.render_only:
+        from cellctl.sim.rig import rig_for
+
+        assert cache is not None
+        scenes = [SoleScene.random(s.seed, s.color, calib or rig_for(s.look.rig), s.look) for s in soles]
+        return _render_only(scenes, cache, args.taught)
     results = sole_matrix.bench_matrix(
-        soles, calib, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught
+        soles, calib, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught, cache=cache
     )
     if args.json:
         print(json.dumps(sole_matrix.as_json(results), indent=2))
@@ -94,3 +124,26 @@ def _run_matrix(args: argparse.Namespace) -> int:
         command += " --taught" if args.taught else ""
         print(sole_matrix.matrix_markdown(results, command))
     return 0 if sole_matrix.acceptance(results).passed else 1
+
+
+def _cache(args: argparse.Namespace) -> RenderCache | None:
+    from cellctl.sim.render_cache import RenderCache
+
+    if not args.cache:
+        return None
+    try:
+        return RenderCache(args.cache)
+    except OSError as exc:
+        raise UserError(
+            f"cannot use {args.cache} as the render cache ({exc.strerror}): give a writable directory"
+        ) from None
+
+
+def _render_only(scenes: list[SoleScene], cache: RenderCache, taught: bool) -> int:
+    from cellctl.eval.sole_bench import TEACH_SHOTS
+
+    for scene in scenes:
+        shots = list(range(0, TEACH_SHOTS + 1 if taught else 1))  # 0: the scene, 1...: empty-table exposures
+        rendered = cache.prefill(scene, shots)
+        print(f"  sole {scene.seed} {scene.color}: {rendered} of {len(shots)} renders new", file=sys.stderr)
+    return 0

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
+from cellctl.sim.render_cache import RenderCache
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM
@@ -49,17 +50,19 @@ def bench_soles(
     soles: list[tuple[int, str]],
     progress: Callable[[str], None] | None = None,
     taught: bool = False,
+    cache: RenderCache | None = None,
 ) -> list[SoleBenchRow]:
     """Measure each (seed, colour) plain sole once and compare with its truth.
 
     taught: teach each scene's empty table first (not timed), as a cell does once at set-up
-    (cellctl.vision.teach); else measure without a taught table.
+    (cellctl.vision.teach); else measure without a taught table. cache: renders kept on disk.
     """
     reconstructor = SoleReconstructor(calib)
     rows = []
     for seed, color in soles:
         scene = SoleScene.random(seed, color, calib)
-        rows.append(measure_scene(taught_reconstructor(calib, scene) if taught else reconstructor, scene))
+        chosen = taught_reconstructor(calib, scene, cache) if taught else reconstructor
+        rows.append(measure_scene(chosen, scene, cache=cache))
         if progress:
             progress(_row_text(rows[-1]))
     return rows
@@ -68,24 +71,32 @@ def bench_soles(
 TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellctl teach` takes several pairs
 
 
-def taught_reconstructor(calib: Calibration, scene: SoleScene) -> SoleReconstructor:
+def empty_table_pair(scene: SoleScene, cache: RenderCache | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """TEACH_SHOTS exposures of the scene's empty table, averaged per camera (what `cellctl teach` gets)."""
+    numbers = list(range(1, TEACH_SHOTS + 1))
+    shots = cache.render_empties(scene, numbers) if cache else scene.render_empties(numbers)
+    return average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+
+
+def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCache | None = None) -> SoleReconstructor:
     """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise).
 
     If the table cannot be taught (e.g. too noisy to match), the reconstructor is an untaught one, as the
     service runs without a taught table.
     """
-    shots = [scene.render_empty(shot) for shot in range(1, TEACH_SHOTS + 1)]
-    left, right = average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+    left, right = empty_table_pair(scene, cache)
     try:
         return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
     except TeachError:
         return SoleReconstructor(calib)
 
 
-def measure_scene(reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain") -> SoleBenchRow:
+def measure_scene(
+    reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain", cache: RenderCache | None = None
+) -> SoleBenchRow:
     """Render one scene (not timed), measure it like `cellctl measure` (timed) and compare with its truth."""
     assert scene.sole is not None
-    pair = scene.render()
+    pair = cache.render(scene) if cache else scene.render()
     start = time.perf_counter()
     result: MeasurementResult | None
     try:

@@ -23,6 +23,7 @@ import numpy as np
 from cellctl.errors import FailureKind
 from cellctl.eval.sole_bench import CRASHED, SoleBenchRow, measure_scene, taught_reconstructor
 from cellctl.sim.matrix import MatrixSole
+from cellctl.sim.render_cache import RenderCache
 from cellctl.sim.rig import rig_for
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
@@ -74,10 +75,12 @@ def bench_matrix(
     calib: Calibration | None = None,
     progress: Callable[[str], None] | None = None,
     taught: bool = False,
+    cache: RenderCache | None = None,
 ) -> list[MatrixRow]:
     """Render, measure and judge every sole; `calib` replaces the looks' rigs (default: each look's own rig).
 
     taught: teach each scene's empty table first (not timed), as the cell does once at set-up.
+    cache: renders kept on disk (`cellctl.sim.render_cache`).
     """
     reconstructors: dict[str, SoleReconstructor] = {}
     rows = []
@@ -89,8 +92,8 @@ def bench_matrix(
         reconstructor = reconstructors[key]
         scene = SoleScene.random(sole.seed, sole.color, reconstructor.calib, look)
         if taught:
-            reconstructor = taught_reconstructor(reconstructor.calib, scene)
-        result = judge(sole, measure_scene(reconstructor, scene, sole.label))
+            reconstructor = taught_reconstructor(reconstructor.calib, scene, cache)
+        result = judge(sole, measure_scene(reconstructor, scene, sole.label, cache))
         rows.append(result)
         if progress:
             progress(_progress_text(result))

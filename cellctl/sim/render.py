@@ -132,13 +132,27 @@ class SceneRenderer:
 
     def render(self) -> RenderedPair:
         """Render both cameras."""
-        left, depth, sole_mask = self._render_camera("left")
-        right, _, _ = self._render_camera("right")
-        return RenderedPair(left, right, depth, sole_mask)
+        return self.render_shots([None])[0]
+
+    def render_shots(self, noise_seeds: list[int | None]) -> list[RenderedPair]:
+        """The same scene exposed once per noise seed (None: the renderer's own noise).
+
+        Rays and shading are computed once; only the sensor (noise) differs per shot, so each pair is
+        pixel-identical to a renderer made with that noise seed.
+        """
+        left, depth, sole_mask = self._radiance("left")
+        right, _, _ = self._radiance("right")
+        pairs = []
+        for noise_seed in noise_seeds:
+            if noise_seed is not None:
+                self._noise_rng = np.random.default_rng([noise_seed, 11])
+            pairs.append(RenderedPair(self._expose("left", left), self._expose("right", right), depth, sole_mask))
+        return pairs
 
     # ---- one camera ----------------------------------------------------------------------------------
 
-    def _render_camera(self, side: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _radiance(self, side: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One camera's linear radiance image (H x W x 3), true depth and sole mask, before the sensor."""
         width, height = self.calib.image_size
         pose = self.camera_pose if side == "left" else right_pose(self.calib, self.camera_pose)
         K, D = (self.calib.K1, self.calib.D1) if side == "left" else (self.calib.K2, self.calib.D2)
@@ -148,12 +162,15 @@ class SceneRenderer:
         if edges.size:
             pixels = np.column_stack([edges % width, edges // width]).astype(np.float64)
             radiance[edges] = self._supersample(pixels, K, D, pose)
-        image = radiance.reshape(height, width, 3)
-        gain, gamma = (1.0, 1.0) if side == "left" else (self.look.right_gain, self.look.right_gamma)
-        image = self._sensor(image * gain, (width, height), K, gamma)
         depth = np.where(np.isfinite(hits["t"]), hits["t"], np.nan).astype(np.float32).reshape(height, width)
         sole_mask = (hits["geometry"] == SOLE_GEOMETRY).reshape(height, width)
-        return image, depth, sole_mask
+        return radiance.reshape(height, width, 3), depth, sole_mask
+
+    def _expose(self, side: str, radiance: np.ndarray) -> np.ndarray:
+        """The camera's image of a radiance image: its gain, gamma and the sensor (noise from _noise_rng)."""
+        K = self.calib.K1 if side == "left" else self.calib.K2
+        gain, gamma = (1.0, 1.0) if side == "left" else (self.look.right_gain, self.look.right_gamma)
+        return self._sensor(radiance * gain, self.calib.image_size, K, gamma)
 
     def _cast(self, pixels: np.ndarray | None, K: np.ndarray, D: np.ndarray, pose: np.ndarray) -> dict[str, np.ndarray]:
         """Trace the rays of the given pixel positions (all pixel centres when None)."""

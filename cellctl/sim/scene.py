@@ -106,8 +106,13 @@ class SoleScene:
 
     def render_empty(self, shot: int = 1) -> RenderedPair:
         """The same table without the sole, as `cellctl teach` sees it: same textures, new sensor noise (`shot`)."""
-        noise_seed = self.seed + 7919 * shot  # any seed other than the scene's own: another exposure
-        return SceneRenderer(self.calib, self.camera_pose, None, self.color, self.seed, self.look, noise_seed).render()
+        return self.render_empties([shot])[0]
+
+    def render_empties(self, shots: list[int]) -> list[RenderedPair]:
+        """`render_empty` for several shots, ray-cast and shaded once (each pair identical to its own render)."""
+        renderer = SceneRenderer(self.calib, self.camera_pose, None, self.color, self.seed, self.look)
+        # Any seed other than the scene's own: another exposure.
+        return renderer.render_shots([self.seed + 7919 * shot for shot in shots])
 
     def truth(self) -> dict[str, object]:
         """truth.json contents: the three measurements from the model, and everything needed to rebuild it."""

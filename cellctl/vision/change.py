@@ -20,6 +20,10 @@ MIN_TABLE_PIXELS = 2000  # table pixels needed to estimate the gain and the nois
 CONTRAST_WINDOW_PX = 11  # local contrast of the change: ~4 mm, narrower than a sole's rim or logo
 NCC_WINDOW_PX = 7
 TABLE_NCC = 0.5  # table under a shadow correlates with its reference well above this; a covered table near 0
+# A shadow or extra light scales the table's own texture: by less than 1 in a shadow, a little above 1 in
+# extra light. A sole's edge that happens to run along a step of the table's texture correlates with it just
+# as well, but scales it by ten or more: that is not the table.
+MAX_TEXTURE_GAIN = 3.0
 UNANIMOUS = 0.9  # share of the windows covering a pixel that must agree (a sole pixel at the edge: ~half)
 MIN_TEXTURED_SHARE = 0.3  # of the windows covering a pixel: fewer with texture to compare and there is no vote
 FAINT_CONTRAST_SIGMAS = 8.0  # a change fainter than this (local contrast) may be found by texture alone
@@ -87,7 +91,8 @@ class ChangeTest:
         shadow), or it is gone (covered by something of whatever brightness).
 
         Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
-        brightness. Still table: nearly all the textured windows covering the pixel correlate, so a sole
+        brightness; a window only counts as table if its texture is also scaled by a shadow's or a lamp's
+        factor (below MAX_TEXTURE_GAIN), not by the tenfold of a sole's edge lying along a step of the table's. Still table: nearly all the textured windows covering the pixel correlate, so a sole
         pixel next to the table, about half of whose windows lie further inside, is not vetoed. Texture
         gone: nearly none correlates, which finds a sole of the table's own brightness but does not reach
         past its edge. Only windows where the reference has texture to compare vote.
@@ -97,11 +102,14 @@ class ChangeTest:
         mean_c, mean_r = cv2.blur(cur, window), cv2.blur(ref, window)
         var_c = cv2.blur(cur * cur, window) - mean_c * mean_c
         var_r = cv2.blur(ref * ref, window) - mean_r * mean_r
-        ncc = (cv2.blur(cur * ref, window) - mean_c * mean_r) / np.sqrt(np.maximum(var_c * var_r, 1e-6))
+        covariance = cv2.blur(cur * ref, window) - mean_c * mean_r
+        ncc = covariance / np.sqrt(np.maximum(var_c * var_r, 1e-6))
+        texture_gain = covariance / np.maximum(var_r, 1e-6) / max(self.gain, 1e-6)
         textured = var_r > (TEXTURE_SIGMAS * self.sigma) ** 2
         # Votes of the textured windows covering each pixel: nearly all correlate, or nearly none does.
         share = cv2.blur(textured.astype(np.float32), window)
-        agree = cv2.blur((textured & (ncc > TABLE_NCC)).astype(np.float32), window)
+        table_like = (ncc > TABLE_NCC) & (texture_gain < MAX_TEXTURE_GAIN)
+        agree = cv2.blur((textured & table_like).astype(np.float32), window)
         enough = share > MIN_TEXTURED_SHARE
         still = enough & (agree > UNANIMOUS * share)
         gone = enough & (agree < (1.0 - UNANIMOUS) * share)

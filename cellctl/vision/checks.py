@@ -28,8 +28,16 @@ OUTLINE_INSIDE_MM = 2.0  # the sole must rise above the table this far inside it
 OUTLINE_OUTSIDE_MM = 7.0  # ...and not this far outside (stereo edge fattening reaches ~5 mm)
 MIN_OUTLINE_AGREEMENT = 0.9  # of the testable outline points
 MIN_TESTABLE = 0.5  # of the outline points: fewer with evidence and the outline cannot be confirmed
+# Locally: in any stretch of this many outline points (1 mm apart), at most this share may disagree.
+LOCAL_WINDOW_MM = 12
+MAX_LOCAL_DISAGREEMENT = 0.6
 RIGHT_INSIDE_MM = 1.5
 RIGHT_OUTSIDE_MM = 3.0
+# Past the top edge of a wall facing away from the camera, at the edge's height: unchanged if the outline is
+# on the edge. The projection's error from the edge height (~2 mm at a ~10 degree view) is ~0.4 mm.
+RIGHT_EDGE_OUT_MM = 0.75
+HIDDEN_STEP_MM = 1.0  # the ray to the camera is followed in these steps of height...
+HIDDEN_MAX_MM = 60.0  # ...up to the tallest sole
 GLUE_HEIGHT_MARGIN_MM = 1.5  # glue heights beyond the sole's own height range by more than this: not on it
 GLUE_MAX_SLOPE = 0.6  # height change per mm along the path between neighbouring points
 # Smoothed path against its own raw samples (after lone outliers are repaired): a patch's height noise on a
@@ -39,6 +47,21 @@ GLUE_MAX_DEVIATION_MM = 2.5
 # on plain black soles), so the check catches gross faults only; the path normal itself is far better.
 GLUE_MAX_NORMAL_DEG = 30.0
 MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a sole's top surface
+# The surface across the edge: sampled EDGE_OUTER_MM inside the outline and fitted as a line over
+# EDGE_INNER_MM. Next to a sharp top edge the surface runs on as it does further in (the median departure round
+# a sole with a sharp edge: 0.0-0.2 mm, the height noise); a top edge rounded with a few mm of radius falls
+# away before the outline (0.7-0.9 mm where depth ends), and there the edge lies further out than the depth
+# reaches while the glue path sits on the curve (heights and normals from a flat-top fit are wrong).
+# A glue point is measured if the cloud has MIN_CLOUD_POINTS (12, ~4 per mm^2) within GLUE_COVER_RADIUS_MM of
+# it. A patch fit (4 mm) bridges small holes, but a path that runs over unmeasured or thinly measured surface
+# for more than a few per cent of its points (0-2 % on soles with sharp edges seen at 0.39 mm per pixel;
+# 10-50 % over a steep bevelled wall the stereo cannot see, or through a wide-angle rig's coarser pixels)
+# gets its heights from elsewhere: 1-8 mm off on simulated soles.
+GLUE_COVER_RADIUS_MM = 1.0
+MAX_GLUE_UNCOVERED = 0.05
+EDGE_OUTER_MM = 0.75
+EDGE_INNER_MM = (3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+EDGE_MAX_DROP_MM = 0.4
 
 
 @dataclass(frozen=True)
@@ -53,11 +76,14 @@ def check_outline_depth(
     raised: Footprint,
     measured: Footprint,
     footprint: Footprint | None = None,
+    hidden: np.ndarray | None = None,
 ) -> CheckFailure | None:
     """The outline (N x 2, table mm) against the depth step (cells where most points rise above the table).
 
     With the `footprint` the outline bounds, points whose test positions fall on the wrong side of it (past
     a pointed tip, across a narrow waist) are not tested: there the offset along the normal means nothing.
+    `hidden`: outline points whose outside test position the camera cannot see (behind a tall sole's wall
+    facing away): no depth is expected there, so they neither count for nor against the outline.
     """
     inside = outline - OUTLINE_INSIDE_MM * outward
     outside = outline + OUTLINE_OUTSIDE_MM * outward
@@ -68,11 +94,12 @@ def check_outline_depth(
     in_ok = raised.contains(inside)
     out_ok = ~raised.contains(outside)
     testable = in_known & out_known
-    if np.count_nonzero(testable) < MIN_TESTABLE * len(outline):
+    seen = len(outline) if hidden is None else int(np.count_nonzero(~hidden))
+    if np.count_nonzero(testable) < MIN_TESTABLE * seen or seen < MIN_TESTABLE * len(outline) / 2:
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"outline not confirmed by depth: only {np.count_nonzero(testable)} of {len(outline)} outline points "
-            "have measured depth on both sides",
+            f"({seen} in view) have measured depth on both sides",
         )
     agree = float(np.mean((in_ok & out_ok)[testable]))
     if agree < MIN_OUTLINE_AGREEMENT:
@@ -84,6 +111,26 @@ def check_outline_depth(
             f"({100 * high_outside:.0f} % still raised {OUTLINE_OUTSIDE_MM:g} mm outside, {100 * low_inside:.0f} % "
             f"not raised {OUTLINE_INSIDE_MM:g} mm inside): the edge found is not the sole's edge",
         )
+    return _local_disagreement(testable & ~(in_ok & out_ok), testable, "the depth step")
+
+
+def _local_disagreement(bad: np.ndarray, tested: np.ndarray, evidence: str) -> CheckFailure | None:
+    """A stretch of the outline (points 1 mm apart, closed) where most tested points disagree with the evidence.
+
+    The share over the whole outline lets a notch through: a 16 mm deep cut into the sole is a few per cent
+    of the outline. Scattered single disagreements are noise; most of a LOCAL_WINDOW_MM stretch is a defect.
+    """
+    window = np.ones(LOCAL_WINDOW_MM)
+    count = np.convolve(np.concatenate([tested, tested[: LOCAL_WINDOW_MM - 1]]).astype(float), window, "valid")
+    wrong = np.convolve(np.concatenate([bad, bad[: LOCAL_WINDOW_MM - 1]]).astype(float), window, "valid")
+    share = wrong / np.maximum(count, 1.0)
+    worst = int(np.argmax(np.where(count >= LOCAL_WINDOW_MM / 2, share, 0.0)))
+    if count[worst] >= LOCAL_WINDOW_MM / 2 and share[worst] > MAX_LOCAL_DISAGREEMENT:
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the outline disagrees with {evidence} along a {LOCAL_WINDOW_MM} mm stretch ({100 * share[worst]:.0f} % "
+            f"of its points, from outline point {worst}): a notch or a bulge that is not the sole's edge",
+        )
     return None
 
 
@@ -94,22 +141,32 @@ def check_outline_right(
     changed_right: np.ndarray,
     table_to_right_pixel: Callable[[np.ndarray], np.ndarray],
     right_centre: np.ndarray,
-    footprint: Footprint,
+    surface_height: Callable[[np.ndarray], np.ndarray],
+    table_level: Footprint | None = None,
 ) -> CheckFailure | None:
     """The outline placed in the right image: changed just inside (at the sole's height), table just outside.
 
     `table_to_right_pixel(points N x 3) -> N x 2` projects table points into the rectified right image;
-    `right_centre` is the right camera's centre in the table frame. Points outside whose view from the right
-    camera passes over the sole (hidden behind it) are not tested.
+    `right_centre` is the right camera's centre in the table frame; `surface_height(xy N x 2) -> N` the
+    measured sole height there (NaN off the sole). Outside each outline point:
+
+    - where the right camera sees the table there (its ray passes over no part of the sole higher than
+      the ray), the table RIGHT_OUTSIDE_MM out must be unchanged. `table_level`: cells whose measured points
+      lie at the table's height; a changed pixel there is a shadow or a stain on the table, not sole (a sole
+      reaching there would have been measured at its own height), so it does not count against the outline;
+    - where the sole hides that table (the wall facing away from the camera), the point RIGHT_EDGE_OUT_MM
+      out at the edge's height must be unchanged: the camera looks past the top edge there onto the table
+      beyond. If the sole really reaches further out (a rounded or unmeasured edge cut off by the outline),
+      that ray hits the sole. Where the left camera measured the table's height right there, the sole does
+      not reach it, whatever the right pixel shows (a shadow on the table beyond).
     """
     project = table_to_right_pixel
     height, width = changed_right.shape
-    inside = np.column_stack([outline - RIGHT_INSIDE_MM * outward, np.maximum(edge_height, 0.0)])
+    edge = np.maximum(edge_height, 0.0)
+    inside = np.column_stack([outline - RIGHT_INSIDE_MM * outward, edge])
     outside = np.column_stack([outline + RIGHT_OUTSIDE_MM * outward, np.zeros(len(outline))])
-    # Hidden: the ray from the table point to the camera is above the footprint at the edge's height.
-    lift = np.clip(edge_height / right_centre[2], 0.0, 1.0)[:, None]
-    over = outside[:, :2] + lift * (right_centre[:2] - outside[:, :2])
-    visible = ~footprint.contains(over)
+    beyond_edge = np.column_stack([outline + RIGHT_EDGE_OUT_MM * outward, edge])
+    visible = ~_hidden(outside, right_centre, surface_height)
 
     def sample(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         px = np.round(project(points)).astype(np.int64)
@@ -120,15 +177,88 @@ def check_outline_right(
 
     in_changed, in_ok = sample(inside)
     out_changed, out_ok = sample(outside)
+    far_changed, far_ok = sample(beyond_edge)
+    if table_level is not None:
+        out_changed &= ~table_level.contains(outside[:, :2])
+        far_changed &= ~table_level.contains(beyond_edge[:, :2])
+    out_changed = np.where(visible, out_changed, far_changed)
+    out_ok = np.where(visible, out_ok, far_ok)
     inside_agree = float(np.mean(in_changed[in_ok])) if np.any(in_ok) else 0.0
-    tested = out_ok & visible
-    outside_agree = float(np.mean(~out_changed[tested])) if np.count_nonzero(tested) > 0.2 * len(outline) else 1.0
+    outside_agree = float(np.mean(~out_changed[out_ok])) if np.count_nonzero(out_ok) > 0.2 * len(outline) else 1.0
     if inside_agree < MIN_OUTLINE_AGREEMENT or outside_agree < MIN_OUTLINE_AGREEMENT:
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"the outline found in the left image does not fit the right image: {100 * inside_agree:.0f} % "
             f"of the points {RIGHT_INSIDE_MM:g} mm inside show the sole and {100 * outside_agree:.0f} % of those "
-            f"{RIGHT_OUTSIDE_MM:g} mm outside the table (need {100 * MIN_OUTLINE_AGREEMENT:.0f} %)",
+            f"outside the table (need {100 * MIN_OUTLINE_AGREEMENT:.0f} %)",
+        )
+    tested = in_ok & out_ok
+    return _local_disagreement(tested & (~in_changed | out_changed), tested, "the right image")
+
+
+def hidden_from(
+    table_points: np.ndarray, camera: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """Whether the camera (table frame) cannot see each table point (N x 2 or N x 3 at z = 0) past the sole."""
+    return _hidden(np.column_stack([table_points[:, :2], np.zeros(len(table_points))]), camera, surface_height)
+
+
+def _hidden(
+    table_points: np.ndarray, camera: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """Whether the ray from each table point (N x 3, z = 0) to the camera passes below the sole's surface."""
+    hidden = np.zeros(len(table_points), bool)
+    for z in np.arange(HIDDEN_STEP_MM, HIDDEN_MAX_MM, HIDDEN_STEP_MM):
+        fraction = z / camera[2]
+        xy = table_points[:, :2] + fraction * (camera[:2] - table_points[:, :2])
+        hidden |= surface_height(xy) >= z  # NaN (no sole there) compares False
+    return hidden
+
+
+def check_edge_profile(
+    outline: np.ndarray, outward: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> CheckFailure | None:
+    """The surface across the edge: does the top run on flat to the outline, or fall away before it?
+
+    `surface_height(xy N x 2) -> N` is the measured height (NaN where none). Per outline point the height
+    EDGE_OUTER_MM inside is compared with the line through the heights further in; the median over the
+    outline (a rounded edge runs round the sole, a single bad patch does not move the median) must not fall
+    more than EDGE_MAX_DROP_MM below it.
+    """
+    inner = np.array(EDGE_INNER_MM)
+    heights = np.column_stack([surface_height(outline - d * outward) for d in inner])
+    outer = surface_height(outline - EDGE_OUTER_MM * outward)
+    weight = np.isfinite(heights).astype(np.float64)
+    z = np.nan_to_num(heights)
+    # Per-row least-squares line z = a + b d over the finite samples (sums of products).
+    s0, s1, s2 = weight.sum(1), (weight * inner).sum(1), (weight * inner**2).sum(1)
+    t0, t1 = (weight * z).sum(1), (weight * z * inner).sum(1)
+    det = s0 * s2 - s1 * s1
+    usable = (s0 >= 4) & np.isfinite(outer) & (np.abs(det) > 1e-9)
+    if np.count_nonzero(usable) < MIN_TESTABLE * len(outline):
+        return None  # too little surface measured near the edge: the other checks and the glue path speak
+    b = (s0 * t1 - s1 * t0)[usable] / det[usable]
+    a = (t0[usable] - b * s1[usable]) / s0[usable]
+    drop = float(np.median(a + b * EDGE_OUTER_MM - outer[usable]))
+    if drop > EDGE_MAX_DROP_MM:
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the sole's top falls {drop:.1f} mm (median round the outline) over the last few mm before its "
+            "outline: its top edge is rounded or bevelled, so the edge lies beyond where its depth was measured "
+            "and the glue path near it is on a curve, not a flat top",
+        )
+    return None
+
+
+def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:
+    """Glue points with measured surface under them (bool per point, see GLUE_COVER_RADIUS_MM)."""
+    uncovered = 1.0 - float(np.mean(covered))
+    if uncovered > MAX_GLUE_UNCOVERED:
+        return CheckFailure(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"{100 * uncovered:.0f} % of the glue path runs where no surface was measured within "
+            f"{GLUE_COVER_RADIUS_MM:g} mm (a steep or rounded edge the cameras do not see; need at most "
+            f"{100 * MAX_GLUE_UNCOVERED:.0f} %): its heights there would not be measurements",
         )
     return None
 

@@ -100,6 +100,21 @@ class Footprint:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _disc(open_mm / self.cell_mm))
         return Footprint(mask, self.origin, self.cell_mm)
 
+    def filled(self, polygon: np.ndarray) -> Footprint:
+        """A raster on this one's cells marking the cells whose centres lie inside `polygon` (N x 2, table mm)."""
+        shift = 8  # sub-cell vertex positions: 1/256 of a cell
+        cells = (np.asarray(polygon, np.float64) - np.array(self.origin)) / self.cell_mm - 0.5
+        mask = np.zeros_like(self.mask)
+        cv2.fillPoly(mask, [np.round(cells * (1 << shift)).astype(np.int32)], 1, cv2.LINE_8, shift)
+        # fillPoly also marks cells the edge merely touches: test the centres of the boundary cells exactly.
+        rows, cols = np.nonzero((mask > 0) & (cv2.erode(mask, np.ones((3, 3), np.uint8)) == 0))
+        contour = cells.astype(np.float32).reshape(-1, 1, 2)
+        outside = [
+            cv2.pointPolygonTest(contour, (float(c), float(r)), False) < 0 for r, c in zip(rows, cols, strict=True)
+        ]
+        mask[rows[outside], cols[outside]] = 0
+        return Footprint(mask, self.origin, self.cell_mm)
+
     def eroded(self, distance_mm: float) -> Footprint:
         """Cells at least `distance_mm` inside the region's edge."""
         # Only the region's bounding box and the ring of empty cells around it can hold a cell's nearest
@@ -156,3 +171,41 @@ def _offset(contour: np.ndarray, distance: float) -> np.ndarray:
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
     outward = np.column_stack([tangent[:, 1], -tangent[:, 0]])  # right of the direction of travel (CCW)
     return contour + distance * outward
+
+
+def snap_to_inset(footprint: Footprint, xy: np.ndarray, inset_mm: float, iterations: int = 4) -> np.ndarray:
+    """Points (N x 2, table mm) moved onto the line `inset_mm` inside the footprint's edge.
+
+    A glue line taken from the raster and smoothed along its length drifts off its offset where the outline
+    turns sharply (a Gaussian pulls a pointed toe's corner inwards by ~1 mm). Each point is moved along the
+    gradient of the edge's distance field (bilinear on the cell centres) until it lies `inset_mm` inside:
+    the offset then holds exactly, whatever the outline's shape. Points on the field's ridge (the medial
+    axis of a wide part, where the gradient vanishes) are left where they are.
+    """
+    cell = footprint.cell_mm
+    # The region's bounding box with a ring of empty cells: every cell's nearest other-kind cell lies in it
+    # for the distances that matter here (within the box), at a fraction of the raster's cells.
+    x, y, width, height = cv2.boundingRect(footprint.mask)
+    margin = 2 + int(np.ceil(inset_mm / cell))
+    top, left = max(y - margin, 0), max(x - margin, 0)
+    mask = footprint.mask[top : y + height + margin, left : x + width + margin]
+    inside = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    outside = cv2.distanceTransform(1 - mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    # Cell centres lie half a cell from the edge between a marked and an unmarked cell.
+    signed = np.where(mask > 0, inside - 0.5, 0.5 - outside).astype(np.float32) * cell
+    grad_y, grad_x = (g.astype(np.float32) for g in np.gradient(signed, cell))
+    points = np.asarray(xy, np.float64).copy()
+    for _ in range(iterations):
+        col = (points[:, 0] - footprint.origin[0]) / cell - 0.5 - left
+        row = (points[:, 1] - footprint.origin[1]) / cell - 0.5 - top
+        grid = np.float32(col).reshape(-1, 1), np.float32(row).reshape(-1, 1)
+        value = cv2.remap(signed, *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        gx = cv2.remap(grad_x, *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        gy = cv2.remap(grad_y, *grid, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+        norm2 = gx.astype(np.float64) ** 2 + gy.astype(np.float64) ** 2
+        # Along a pointed end's bisector the field rises only as sin(half angle): still a usable slope.
+        move = np.where(norm2 > 0.01, (inset_mm - value) / np.maximum(norm2, 1e-9), 0.0)
+        step = move[:, None] * np.column_stack([gx, gy])
+        length = np.linalg.norm(step, axis=1, keepdims=True)
+        points += step * np.minimum(1.0, 4 * cell / np.maximum(length, 1e-12))  # the field is local: small steps
+    return points

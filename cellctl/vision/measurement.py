@@ -11,13 +11,14 @@ A refusal carries no numbers, only the reason in words and its `FailureKind` (wh
 e.g. the service's PLC error code), and what was found on the way for pictures: the robot must never get
 a silent wrong value.
 
-Over 350 lines (~430): the result types (success and refusal) and the one procedure that fills them,
+Over 350 lines (~490): the result types (success and refusal) and the one procedure that fills them,
 whose steps refuse in order; the issue 11 rework of its internals is under way, the split after it.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,7 +26,17 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.vision.checks import CheckFailure, check_glue_path, check_outline_depth, check_outline_right
+from cellctl.vision.checks import (
+    GLUE_COVER_RADIUS_MM,
+    OUTLINE_OUTSIDE_MM,
+    CheckFailure,
+    check_edge_profile,
+    check_glue_coverage,
+    check_glue_path,
+    check_outline_depth,
+    check_outline_right,
+    hidden_from,
+)
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
@@ -34,7 +45,8 @@ from cellctl.vision.defaults import (
     PLAUSIBLE_HEIGHT_MM,
     PLAUSIBLE_LENGTH_MM,
 )
-from cellctl.vision.footprint import Footprint
+from cellctl.vision.footprint import Footprint, snap_to_inset
+from cellctl.vision.local_fit import local_planes
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 
@@ -45,8 +57,8 @@ MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fractio
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
-GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: Gaussian over arc length
-GLUE_SMOOTHING_MM = 6.0  # heights along the path: Gaussian over arc length, averages neighbouring patches' noise
+GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
+GLUE_SMOOTHING_MM = 6.0  # heights along the path: width of the local plane fit, averages the patches' noise
 # Gaussian along the outline: removes the raster's staircase (0.25 mm cells) and pixel noise; wider would cut
 # the tip of a pointed toe (a 2 mm sigma takes ~1 mm off a 35 degree wedge).
 OUTLINE_SMOOTHING_MM = 0.75
@@ -235,16 +247,25 @@ def measure_sole(
     # The line glue_offset_mm inside the edge, from the footprint's distance transform: exact at pointed
     # and cusped ends too, where moving the outline along its normals would cross itself. Cell centres lie
     # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
-    inset = footprint.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
+    # The offset is taken from the outline reported (smoothed against the edge's pixel noise), rasterised
+    # again on the footprint's cells: the glue path keeps its distance from that outline.
+    edge = footprint.filled(outline)
+    inset = edge.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
     if len(inset) < 3:
         return _invalid(
             FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide", **base
         )
-    glue_line = _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM)
+    # Smoothing takes the raster's staircase out but pulls sharp corners in: back onto the offset line.
+    glue_line = snap_to_inset(edge, _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
     path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
         return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
+    problem = check_glue_coverage(
+        np.isfinite(surface.coarse_heights(path.points[:, :2], _cover_radius(reconstruction)))
+    )
+    if problem is not None:
+        return _invalid(problem.kind, problem.reason, **base)
     sole_z = np.quantile(points[:, 2], [0.01, 0.99])
     raw_z = path.points[:, 2] if path.raw_z is None else path.raw_z
     patch_normals = path.normals if path.surface_normals is None else path.surface_normals
@@ -263,12 +284,20 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surfac
     """The outline's self-checks: against the depth step, and against the right image when a table is taught."""
     ring = _resample_closed(outline, 1.0)
     outward = _outward_normals(ring)
+    heights = _height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
+        hidden = None
+        if reconstruction.camera_to_table is not None:
+            left_centre = reconstruction.camera_to_table[:3, 3]
+            hidden = hidden_from(ring + OUTLINE_OUTSIDE_MM * outward, left_centre, heights)
         problem = check_outline_depth(
-            ring, outward, reconstruction.raised, reconstruction.measured_cells, reconstruction.footprint
+            ring, outward, reconstruction.raised, reconstruction.measured_cells, reconstruction.footprint, hidden
         )
         if problem is not None:
             return problem
+    problem = check_edge_profile(ring, outward, heights)
+    if problem is not None:
+        return problem
     changed_right, calib = reconstruction.changed_right, reconstruction.calibration
     if changed_right is None or calib is None:
         return None
@@ -284,9 +313,47 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surfac
     centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
     edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
     edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
-    return check_outline_right(
-        ring, outward, edge_height, changed_right, right_pixel, centre[:3], reconstruction.footprint
-    )
+    table_level = None
+    if reconstruction.raised is not None and reconstruction.measured_cells is not None:
+        table_level = Footprint(
+            reconstruction.measured_cells.mask & (1 - reconstruction.raised.mask),
+            reconstruction.raised.origin,
+            reconstruction.raised.cell_mm,
+        )
+    return check_outline_right(ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level)
+
+
+HEIGHT_MAP_CELL_MM = 1.0
+
+
+def _height_map(reconstruction: Reconstruction) -> Callable[[np.ndarray], np.ndarray]:
+    """Sole height at table points (NaN off the sole): the median of the sole's points per 1 mm cell."""
+    points = reconstruction.sole_points
+    raster = Footprint.empty_like(points[:, :2], HEIGHT_MAP_CELL_MM)
+    row, col, _ = raster.cells(points[:, :2])
+    flat = row * raster.mask.shape[1] + col
+    order = np.lexsort((points[:, 2], flat))
+    flat, z = flat[order], points[order, 2]
+    starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
+    counts = np.diff(np.r_[starts, len(flat)])
+    grid = np.full(raster.mask.size, np.nan)
+    grid[flat[starts]] = z[starts + counts // 2]  # the median of each cell's sorted heights
+
+    def height(xy: np.ndarray) -> np.ndarray:
+        r, c, inside = raster.cells(xy)
+        return np.where(inside, grid[r * raster.mask.shape[1] + c], np.nan)
+
+    return height
+
+
+def _cover_radius(reconstruction: Reconstruction) -> float:
+    """Radius holding MIN_CLOUD_POINTS where about half the pixels are measured (GLUE_COVER_RADIUS_MM at least):
+    the same density of measurement asked of any rig, also one whose pixels cover more of the table."""
+    calib, to_table = reconstruction.calibration, reconstruction.camera_to_table
+    if calib is None or to_table is None:
+        return GLUE_COVER_RADIUS_MM
+    pixel_mm = abs(float(to_table[2, 3])) / calib.focal_px  # camera height above the table / focal length
+    return max(GLUE_COVER_RADIUS_MM, float(np.sqrt(2.0 * MIN_CLOUD_POINTS / np.pi)) * pixel_mm)
 
 
 def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
@@ -334,8 +401,8 @@ def glue_path(
     Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
     offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
     Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
-    from the slope along the path and the slope between the rings (a patch's own tilt is too noisy on a
-    weakly textured sole: ~10 degrees).
+    from a plane fitted to both around each point (a patch's own tilt is too noisy on a weakly textured
+    sole: ~10 degrees).
     """
     resampled = _resample_closed(outline, 0.25)
     inward = -_outward_normals(resampled)
@@ -352,20 +419,22 @@ def glue_path(
             f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
             f"({missing.size} of {len(path_xy)} path points)"
         )
-    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth along
-    # the path, so a Gaussian along the arc takes the rest (its bias, z'' sigma^2 / 2, is ~0.01 mm here).
+    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth, so a
+    # plane fitted to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
+    # for a sloping surface also where the path turns round a pointed end).
     sigma = GLUE_SMOOTHING_MM / spacing_mm
     raw = _without_single_outliers(samples.z[: len(path_xy)])
-    z = _smooth_along(raw, sigma)
+    z, _ = local_planes(path_xy, path_xy, raw, GLUE_SMOOTHING_MM)
     inner = _without_single_outliers(samples.z[len(path_xy) :])
-    inner = np.where(np.isfinite(inner), inner, raw)  # no inner sample: flat across
-    # The normal turns slowly along a sole's edge but its slopes are differences of noisy heights: they are
-    # smoothed over a longer stretch than the heights themselves.
-    wide = GLUE_NORMAL_SMOOTHING_MM / spacing_mm
-    across = _smooth_along(inner - raw, wide)
+    # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
+    # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).
+    _, gradient = local_planes(
+        path_xy, np.vstack([path_xy, inner_xy]), np.concatenate([raw, inner]), GLUE_NORMAL_SMOOTHING_MM
+    )
+    normals = np.column_stack([-gradient, np.ones(len(path_xy))])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     patch_normals = _smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    normals = _path_normals(path_xy, _smooth_along(raw, wide), path_inward, across)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
 
 
@@ -381,17 +450,6 @@ def _without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -
     bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
     lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
     return np.where(lone, median, z)
-
-
-def _path_normals(path_xy: np.ndarray, z: np.ndarray, inward: np.ndarray, across_rise: np.ndarray) -> np.ndarray:
-    """Unit surface normals from the slope along a closed path and the rise over GLUE_NORMAL_BASE_MM inward."""
-    step = np.roll(path_xy, -1, axis=0) - np.roll(path_xy, 1, axis=0)
-    run = np.maximum(np.linalg.norm(step, axis=1), 1e-9)
-    tangent = step / run[:, None]
-    along = (np.roll(z, -1) - np.roll(z, 1)) / run
-    gradient = along[:, None] * tangent + (across_rise / GLUE_NORMAL_BASE_MM)[:, None] * inward
-    normals = np.column_stack([-gradient, np.ones(len(z))])
-    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
 def _smooth_along(values: np.ndarray, sigma_samples: float) -> np.ndarray:

@@ -107,11 +107,12 @@ class Cell:
         )
         (recipes / "deep.toml").write_text('number = 3\nname = "Platform"\ndepth_range_mm = [430.0, 670.0]\n')
         path = directory / "cell.toml"
-        # liveness_timeout_s 30: a full-size cycle can pass the default 5 s on the shared, loaded test machine,
-        # and the heartbeat would then stop by design; this test is about recipes, frames and OPC UA.
+        # liveness_timeout_s 30 and cycle_timeout_s 15 (below the simulated PLC's 20 s wait): a full-size cycle
+        # can pass the defaults (5 s, 4 s) on the shared, loaded test machine, and the heartbeat would stop or
+        # the cycle be answered CYCLE_TIMEOUT by design; this test is about recipes, frames and OPC UA.
         path.write_text(
             f'[cameras]\nbackend = "simulated"\n[cameras.simulated]\nseeds = [{SEED}]\n'
-            f'[calibration]\npath = "{calib_path}"\n[plc]\nport = 0\nmap_version = 2\nliveness_timeout_s = 30\n'
+            f'[calibration]\npath = "{calib_path}"\n[plc]\nport = 0\nmap_version = 2\nliveness_timeout_s = 30\ncycle_timeout_s = 15\n'
             f'[recipes]\ndir = "{recipes}"\n[robot]\npublish_frame = "robot"\n'
             f'[opcua]\nenabled = true\nendpoint = "opc.tcp://127.0.0.1:0/cellctl/"\ncell_name = "cell-3"\n'
             f"allow_anonymous = true\n"

@@ -86,3 +86,45 @@ def test_outline_on_the_depth_step_passes_one_inside_it_is_refused() -> None:
     problem = check_outline_depth(inner, inner_out, raised, measured)
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert "still raised" in problem.reason
+
+
+def test_table_hidden_behind_a_tall_sole_does_not_count_against_its_outline() -> None:
+    raised = _disc_footprint(60.0)
+    outline, outward = _ring(57.0)
+    # The camera sees no table beyond the half of the edge facing away from it: no depth there.
+    measured = Footprint(_disc_footprint(75.0).mask.copy(), raised.origin, raised.cell_mm)
+    centres = measured.centres()
+    far = centres[(centres[:, 0] < 0) & (np.hypot(*centres.T) > 60.0)]
+    row, col, _ = measured.cells(far)
+    measured.mask[row, col] = 0
+    assert check_outline_depth(outline, outward, raised, measured) is not None  # "not confirmed by depth"
+    hidden = outline[:, 0] < 0
+    assert check_outline_depth(outline, outward, raised, measured, hidden=hidden) is None
+    # Hidden or not, an outline inside the edge still disagrees where the table is seen.
+    inner, inner_out = _ring(49.0)
+    assert check_outline_depth(inner, inner_out, raised, measured, hidden=inner[:, 0] < 0) is not None
+
+
+def test_a_glue_path_over_unmeasured_surface_is_refused() -> None:
+    from cellctl.vision.checks import MAX_GLUE_UNCOVERED, check_glue_coverage
+
+    covered = np.ones(300, bool)
+    covered[::50] = False  # isolated holes a patch bridges
+    assert check_glue_coverage(covered) is None
+    covered[100 : 100 + int(0.1 * 300)] = False  # a tenth of the path over a wall the cameras do not see
+    problem = check_glue_coverage(covered)
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert 1.0 - covered.mean() > MAX_GLUE_UNCOVERED
+
+
+def test_a_notch_cut_into_the_outline_is_refused_though_most_of_the_outline_agrees() -> None:
+    raised = _disc_footprint(60.0)
+    measured = _disc_footprint(75.0)
+    outline, outward = _ring(57.0, 360)  # ~1 mm apart
+    assert check_outline_depth(outline, outward, raised, measured) is None
+    # 14 mm of the outline run 16 mm inside the sole (a part of it lost): 4 % of the outline.
+    notched = outline.copy()
+    notched[100:114] -= 16.0 * outward[100:114]
+    problem = check_outline_depth(notched, outward, raised, measured)
+    assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
+    assert "stretch" in problem.reason

@@ -1,0 +1,66 @@
+"""The glue line's offset: points snapped onto the line a given distance inside a footprint's edge, also at
+a sharp pointed end where a smoothed raster line is pulled inwards."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from cellctl.vision.footprint import Footprint, snap_to_inset
+from cellctl.vision.measurement import _smooth_closed
+
+CELL = 0.25
+
+
+def wedge_polygon() -> np.ndarray:
+    """A 35 degree pointed end (tip at x = 100 mm) on a 60 mm wide body, table mm, counter-clockwise."""
+    half = np.radians(17.5)
+    run = 30.0 / np.tan(half)
+    return np.array([[100.0, 0.0], [100.0 - run, 30.0], [-60.0, 30.0], [-60.0, -30.0], [100.0 - run, -30.0]])
+
+
+def raster(polygon: np.ndarray) -> Footprint:
+    """Cells whose centres lie inside the (convex, counter-clockwise) polygon."""
+    origin = (-70.0, -40.0)
+    rows, cols = np.mgrid[0 : int(80 / CELL), 0 : int(180 / CELL)]
+    x, y = origin[0] + (cols + 0.5) * CELL, origin[1] + (rows + 0.5) * CELL
+    inside = np.ones(x.shape, bool)
+    for (x0, y0), (x1, y1) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        inside &= (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0) >= 0
+    return Footprint(inside.astype(np.uint8), origin, CELL)
+
+
+def true_inset(polygon: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    contour = polygon.astype(np.float32).reshape(-1, 1, 2)
+    return np.array([cv2.pointPolygonTest(contour, (float(x), float(y)), True) for x, y in xy])
+
+
+def test_a_smoothed_glue_line_is_snapped_back_onto_its_offset_at_a_pointed_tip() -> None:
+    polygon = wedge_polygon()
+    footprint = raster(polygon)
+    line = _smooth_closed(footprint.eroded(2.0 + 0.5 * CELL).outline(), 2.0)
+    before = np.abs(true_inset(polygon, line) - 2.0)
+    assert before.max() > 0.5  # the smoothing rounds the corner inwards: what the snapping is for
+    snapped = snap_to_inset(footprint, line, 2.0)
+    after = np.abs(true_inset(polygon, snapped) - 2.0)
+    assert after.max() < 0.2, after.max()
+    # Points that were on the offset stay there (along the straight sides).
+    straight = before < 0.05
+    assert np.abs(snapped[straight] - line[straight]).max() < 0.15
+
+
+def test_points_on_the_medial_axis_are_left_alone() -> None:
+    footprint = raster(np.array([[-20.0, -10.0], [20.0, -10.0], [20.0, 10.0], [-20.0, 10.0]]))
+    ridge = np.array([[0.0, 0.0], [5.0, 0.0]])  # 10 mm inside, on the ridge of the distance field
+    np.testing.assert_allclose(snap_to_inset(footprint, ridge, 2.0), ridge, atol=1e-9)
+
+
+def test_a_polygon_filled_on_the_cells_marks_exactly_the_cells_whose_centres_it_holds() -> None:
+    polygon = wedge_polygon()
+    exact = raster(polygon)
+    filled = Footprint(np.zeros_like(exact.mask), exact.origin, CELL).filled(polygon)
+    rows, cols = np.nonzero(filled.mask != exact.mask)
+    centres = np.column_stack([exact.origin[0] + (cols + 0.5) * CELL, exact.origin[1] + (rows + 0.5) * CELL])
+    assert np.abs(true_inset(polygon, centres)).max(initial=0.0) < 0.02  # only ties on the edge differ
+    shifted = Footprint(np.zeros_like(exact.mask), exact.origin, CELL).filled(polygon + np.array([CELL, 0.0]))
+    assert np.count_nonzero(shifted.mask != exact.mask) > 100
