@@ -36,6 +36,9 @@ typedef struct cc_params {
     int census_width;       /* odd, 1..9 */
     int census_height;      /* odd, 1..7 */
     int census_smooth;      /* 0: census of the pixels; 1: of their 3x3 sums (robust in flat regions) */
+    int census_threshold;   /* 0: binary census (centre >= neighbour); t > 0: ternary census, 2 bits per
+                               neighbour, a pair differing by fewer than t levels counts as similar
+                               (window of at most 32 pixels) */
     int cost_mode;          /* enum cc_cost_mode */
     float lambda_census;    /* rho scale of the Hamming distance (bits), > 0 */
     float lambda_bt;        /* rho scale of the BT cost (levels of the BT image), > 0 */

@@ -32,13 +32,18 @@ static void census_values(const uint8_t *img, int width, int height, int stride,
 }
 
 /* Census of row y as byte planes (plane b holds bits 8b..8b+7), borders
- * replicated; bit i is set when the centre is >= the i-th neighbour of the
- * window in raster order (the paper's Eq. 7).  Each neighbour row is prepared
- * with its border padding first so the inner loop has no clamping and
- * vectorises.  `work` holds CENSUS_WORK(width) values. */
+ * replicated.  Binary (threshold 0): bit i is set when the centre is >= the
+ * i-th neighbour of the window in raster order (the paper's Eq. 7).  Ternary
+ * (threshold t > 0): neighbour i gives bit 2i (centre >= neighbour + t) and bit
+ * 2i+1 (neighbour >= centre + t); a pair closer than t levels sets neither, so
+ * the Hamming distance counts 1 between similar and ordered and 2 between
+ * opposite orders.  In flat regions the binary bits are decided by ties and
+ * +-1 noise that a gain between the cameras re-rolls; the dead band keeps them
+ * out.  Each neighbour row is prepared with its border padding first so the
+ * inner loop has no clamping and vectorises.  `work` holds CENSUS_WORK(width) values. */
 #define CENSUS_WORK(width) (2 * (size_t)(width) + 8)
 static void census_row_planes(const uint8_t *img, int width, int height, int stride, int cw, int ch, int smooth,
-                              int y, uint8_t *const *planes, int nbytes, uint16_t *work)
+                              int threshold, int y, uint8_t *const *planes, int nbytes, uint16_t *work)
 {
     int rx = cw / 2, ry = ch / 2;
     uint16_t *centre = work, *padded = work + width;
@@ -58,9 +63,21 @@ static void census_row_planes(const uint8_t *img, int width, int height, int str
             const uint16_t *nb = padded + rx + dx;
             uint8_t *plane = planes[bit >> 3];
             const uint8_t mask = (uint8_t)(1u << (bit & 7));
+            if (!threshold) {
+                for (int x = 0; x < width; x++)
+                    plane[x] |= centre[x] >= nb[x] ? mask : 0;
+                bit++;
+                continue;
+            }
+            /* bits 2i and 2i+1 share a byte (bit is even); two loops of the binary loop's shape
+             * vectorise (values <= 17 * 255, + threshold <= 255: no uint16 overflow) */
+            const uint8_t mask2 = (uint8_t)(mask << 1);
+            const uint16_t t = (uint16_t)threshold;
             for (int x = 0; x < width; x++)
-                plane[x] |= centre[x] >= nb[x] ? mask : 0;
-            bit++;
+                plane[x] |= centre[x] >= (uint16_t)(nb[x] + t) ? mask : 0;
+            for (int x = 0; x < width; x++)
+                plane[x] |= nb[x] >= (uint16_t)(centre[x] + t) ? mask2 : 0;
+            bit += 2;
         }
     }
 }
@@ -75,7 +92,7 @@ void cc_census_row(const uint8_t *img, int width, int height, int stride, int cw
     uint8_t *planes[8];
     for (int b = 0; b < nbytes; b++)
         planes[b] = scratch + (size_t)b * width;
-    census_row_planes(img, width, height, stride, cw, ch, 0, y, planes, nbytes,
+    census_row_planes(img, width, height, stride, cw, ch, 0, 0, y, planes, nbytes,
                       (uint16_t *)(scratch + (size_t)8 * width));
     for (int x = 0; x < width; x++) {
         uint64_t v = 0;
@@ -122,7 +139,10 @@ static void bt_bounds_row(const uint8_t *row, int width, uint8_t *lo, uint8_t *h
     }
 }
 
-static int census_bits(const cc_params *p) { return p->census_width * p->census_height - 1; }
+static int census_bits(const cc_params *p)
+{
+    return (p->census_width * p->census_height - 1) * (p->census_threshold ? 2 : 1);
+}
 
 static void frame_geometry(const cc_setup *s, int width, int *nbytes, int *pad, int *rstride)
 {
@@ -189,8 +209,8 @@ static void prepare_row(cc_frame *f, const cc_setup *s, const uint8_t *img, int 
     for (int b = 0; b < nb; b++) /* the left image's planes go straight into the frame */
         planes[b] = mirrored ? mine + (size_t)b * w : f->lcen + ((size_t)b * h + y) * w;
     if (s->p.cost_mode != CC_COST_BT)
-        census_row_planes(img, w, h, stride, s->p.census_width, s->p.census_height, s->p.census_smooth, y,
-                          planes, nb, work);
+        census_row_planes(img, w, h, stride, s->p.census_width, s->p.census_height, s->p.census_smooth,
+                          s->p.census_threshold, y, planes, nb, work);
     else
         for (int b = 0; b < nb; b++)
             memset(planes[b], 0, (size_t)w);

@@ -15,8 +15,9 @@ void cc_params_default(cc_params *p)
     p->census_width = 5;
     p->census_height = 5;
     p->census_smooth = 0;
+    p->census_threshold = 1;
     p->cost_mode = CC_COST_CENSUS_BT;
-    p->lambda_census = 45.0f;
+    p->lambda_census = 120.0f;
     p->lambda_bt = 20.0f;
     p->bt_prefilter = 31;
     p->cost_scale = 63;
@@ -61,7 +62,12 @@ int cc_params_check(const cc_params *p, const char **message)
     if (p->census_height < 1 || p->census_height > 7 || p->census_height % 2 == 0)
         REJECT("census_height must be odd and between 1 and 7");
     if (p->census_smooth < 0 || p->census_smooth > 2)
-        REJECT("census_smooth must be 0 (pixels) or 1 (3x3 sums)");
+        REJECT("census_smooth must be 0 (pixels), 1 (3x3 sums) or 2 (centre-weighted 3x3 sums)");
+    if (p->census_threshold < 0 || p->census_threshold > 255)
+        REJECT("census_threshold must be between 0 (binary census) and 255 (levels)");
+    if (p->census_threshold > 0 && p->census_width * p->census_height > 32)
+        REJECT("census_threshold > 0 (ternary census, 2 bits per neighbour) needs a census window of at most "
+               "32 pixels, e.g. 5x5");
     if (p->cost_mode < CC_COST_CENSUS_BT || p->cost_mode > CC_COST_BT)
         REJECT("cost_mode must be census_bt, census or bt");
     if (p->cost_mode != CC_COST_BT && p->census_width * p->census_height < 2)

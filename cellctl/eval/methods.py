@@ -192,7 +192,8 @@ METHODS: dict[str, Method] = {
         Method(
             "census-8path",
             "Census cost + 8-path semi-global aggregation (StereoMatcher)",
-            stereo_matcher(cost="census", paths=8),
+            # the paper's binary census, at the rho scale it had before the ternary default
+            stereo_matcher(cost="census", paths=8, census_threshold=0, lambda_census=45.0),
             paper_column="Census + 8-path",
             requires="cellctl.stereo.matcher",
         ),

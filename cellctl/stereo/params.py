@@ -31,6 +31,7 @@ class MatcherParams:
     num_disparities: int
     census_window: tuple[int, int]  # (width, height), odd, up to 9x7
     census_smooth: int  # 0: census of the pixels, 1: of their 3x3 sums (robust in flat regions)
+    census_threshold: int  # 0: binary census; t > 0: ternary, pairs closer than t levels are "similar"
     cost: str  # "census_bt" (the paper), "census" or "bt"
     lambda_census: float  # rho scale of the Hamming distance, bits
     lambda_bt: float  # rho scale of the BT cost, levels of the BT image

@@ -50,10 +50,13 @@ __all__ = [
 DEFAULT_DEPTH_RANGE_MM = DEPTH_RANGE_MM
 # Only really measured pixels (no fill); the widest census window, because the sole's texture is weak:
 # on simulated soles it halves the matcher's height noise for the same time.
-SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7)}
+# The binary census at its rho scale (the defaults before the ternary census): a ternary census fits windows
+# of at most 32 pixels (64 bits), and the sole benchmark was validated with this one.
+BINARY_CENSUS: dict[str, object] = {"census_threshold": 0, "lambda_census": 45.0}
+SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7), **BINARY_CENSUS}
 # The coarse match only has to say where something stands above the table: the default window and no
 # medians (a third of its time; search_region's opening and largest region take out its isolated errors).
-COARSE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "median": 0, "weighted_median": 0}
+COARSE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "median": 0, "weighted_median": 0, **BINARY_CENSUS}
 REGION_CUT_MM = 15.0  # a sole this close to a side of the search region may go on beyond it: match the whole pair
 
 

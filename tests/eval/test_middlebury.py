@@ -224,7 +224,13 @@ def test_method_selection_names_unknown_and_unavailable_methods(monkeypatch: pyt
         disparity_methods.select_methods(["needs-core"])
 
 
-@pytest.mark.parametrize("name, options", [("proposed", {}), ("census-8path", {"cost": "census", "paths": 8})])
+@pytest.mark.parametrize(
+    "name, options",
+    [
+        ("proposed", {}),
+        ("census-8path", {"cost": "census", "paths": 8, "census_threshold": 0, "lambda_census": 45.0}),
+    ],
+)
 def test_our_methods_build_stereo_matcher_with_their_options(
     monkeypatch: pytest.MonkeyPatch, name: str, options: dict[str, object]
 ) -> None:

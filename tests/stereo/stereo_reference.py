@@ -20,12 +20,13 @@ def box3_sum(img: np.ndarray) -> np.ndarray:
     return sum(pad[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
 
 
-def census(img: np.ndarray, cw: int, ch: int, smooth: int = 0) -> np.ndarray:
+def census(img: np.ndarray, cw: int, ch: int, smooth: int = 0, threshold: int = 0) -> np.ndarray:
     """Bit i set when the centre >= the i-th neighbour (raster order), borders replicated;
-    with smooth = 1 the compared values are the pixels' 3x3 sums."""
+    with smooth = 1 the compared values are the pixels' 3x3 sums.  Ternary with threshold t > 0:
+    neighbour i sets bit 2i when centre - neighbour >= t and bit 2i+1 when neighbour - centre >= t."""
     h, w = img.shape
     rx, ry = cw // 2, ch // 2
-    img = box3_sum(img) if smooth else img
+    img = box3_sum(img) if smooth else img.astype(np.int64)
     pad = np.pad(img, ((ry, ry), (rx, rx)), mode="edge")
     out = np.zeros((h, w), np.uint64)
     bit = 0
@@ -34,8 +35,13 @@ def census(img: np.ndarray, cw: int, ch: int, smooth: int = 0) -> np.ndarray:
             if dx == 0 and dy == 0:
                 continue
             neighbour = pad[ry + dy : ry + dy + h, rx + dx : rx + dx + w]
-            out |= (img >= neighbour).astype(np.uint64) << np.uint64(bit)
-            bit += 1
+            if threshold == 0:
+                out |= (img >= neighbour).astype(np.uint64) << np.uint64(bit)
+                bit += 1
+                continue
+            out |= (img - neighbour >= threshold).astype(np.uint64) << np.uint64(bit)
+            out |= (neighbour - img >= threshold).astype(np.uint64) << np.uint64(bit + 1)
+            bit += 2
     return out
 
 
@@ -72,8 +78,9 @@ def cost_volume(left, right, p) -> np.ndarray:
     tb = rho_table(p["lambda_bt"], p["cost_scale"]) if p["cost"] != "census" else np.zeros(LUT, np.int64)
     cmax = tc[-1] + tb[-1]
     smooth = p["census_smooth"]
-    cl = census(left, cw, ch, smooth) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
-    cr = census(right, cw, ch, smooth) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
+    t = p["census_threshold"]
+    cl = census(left, cw, ch, smooth, t) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
+    cr = census(right, cw, ch, smooth, t) if p["cost"] != "bt" else np.zeros((h, w), np.uint64)
     left, right = bt_image(left, p["bt_prefilter"]), bt_image(right, p["bt_prefilter"])
     il, ir = left.astype(np.int64), right.astype(np.int64)
     lmin, lmax = bt_bounds(left)

@@ -38,11 +38,17 @@ COST_CASES = [
     dict(num_disparities=19, min_disparity=-4),
     dict(num_disparities=5, min_disparity=3, cost="census"),
     dict(num_disparities=6, cost="bt", lambda_bt=4.0),
-    dict(num_disparities=16, census_window=(9, 7), lambda_census=9.0, cost_scale=100),
+    dict(num_disparities=16, census_window=(9, 7), census_threshold=0, lambda_census=9.0, cost_scale=100),
     dict(num_disparities=33, min_disparity=-10, census_window=(3, 3)),
     dict(num_disparities=12, bt_prefilter=0, census_smooth=0),  # the raw-intensity BT of the paper
     dict(num_disparities=12, bt_prefilter=5, lambda_bt=3.0),  # the clip bites
-    dict(num_disparities=10, min_disparity=-3, census_smooth=1, census_window=(7, 5), bt_prefilter=63),
+    dict(
+        num_disparities=10, min_disparity=-3, census_smooth=1, census_window=(7, 5), census_threshold=0, bt_prefilter=63
+    ),
+    # ternary census: the dead band (1 = ties only, 3 = |diff| <= 2), the largest window (62 bits, 8 planes)
+    dict(num_disparities=9, census_threshold=1, lambda_census=90.0),
+    dict(num_disparities=14, min_disparity=-2, census_threshold=3, cost="census"),
+    dict(num_disparities=8, census_threshold=2, census_window=(9, 3), census_smooth=1, lambda_census=20.0),
 ]
 
 
@@ -54,6 +60,19 @@ def test_cost_volume_matches_reference(case, simd):
     np.testing.assert_array_equal(got, ref.cost_volume(left, right, _params(**case)))
 
 
+@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("threshold", [0, 1, 2, 4])
+def test_ternary_census_cost_on_a_low_contrast_pair_matches_reference(threshold, simd):
+    """Levels 100..104 only: most pairs fall in the dead band, ties and +-1 steps decide the binary bits."""
+    left, right = _pair(7, 10, 33)
+    left, right = (100 + left // 52).astype(np.uint8), (100 + right // 52).astype(np.uint8)
+    case = dict(num_disparities=11, census_threshold=threshold, lambda_census=90.0)
+    got = stereo.cost_volume(left, right, simd=simd, **case)
+    np.testing.assert_array_equal(got, ref.cost_volume(left, right, _params(**case)))
+    if threshold:  # the dead band changes the cost: a test of the band, not of the binary census again
+        assert not np.array_equal(got, stereo.cost_volume(left, right, simd=simd, **(case | {"census_threshold": 0})))
+
+
 AGG_CASES = [
     dict(num_disparities=7, paths=4),
     dict(num_disparities=9, paths=8, min_disparity=-2),
@@ -61,6 +80,7 @@ AGG_CASES = [
     dict(num_disparities=17, paths=8, p2_gamma=5, cost="census", p1=3, p2=31),
     dict(num_disparities=5, paths=4, cost="bt"),
     dict(num_disparities=11, paths=4, census_smooth=1, bt_prefilter=9, p2_gamma=30),
+    dict(num_disparities=10, paths=4, census_threshold=2, lambda_census=90.0),
 ]
 
 
@@ -272,6 +292,9 @@ def test_fill_interpolates_holes_on_one_surface_and_takes_the_background_across_
         (dict(bt_prefilter=-1), "bt_prefilter"),
         (dict(bt_prefilter=64), "bt_prefilter"),
         (dict(census_smooth=3), "census_smooth"),
+        (dict(census_threshold=-1), "census_threshold"),
+        (dict(census_threshold=256), "census_threshold"),
+        (dict(census_threshold=1, census_window=(7, 5)), "at most 32 pixels"),
         (dict(fill_interpolate=-1), "fill_interpolate"),
         (dict(fill_interpolate=65), "fill_interpolate"),
     ],
