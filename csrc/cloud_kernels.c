@@ -2,6 +2,7 @@
 #include "cloud_kernels.h"
 
 #include <math.h>
+#include <omp.h>
 #include <stddef.h>
 
 #define CK_NEAR 36
@@ -15,11 +16,17 @@ static inline float max_f(float a, float b) { return a > b ? a : b; }
 static inline double min_d(double a, double b) { return a < b ? a : b; }
 static inline double max_d(double a, double b) { return a > b ? a : b; }
 
+/* Threads a call runs on: `threads`, or all OpenMP offers when 0 (as the matcher's cc_thread_count). */
+static int thread_count(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+
+/* Below this many points or pixels a call stays on one thread: waking the others costs more. */
+#define CK_PARALLEL_MIN 4096
+
 int ck_neighbour_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
-                       const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact) {
+                       const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact, int threads) {
     if (!grid || !at || !spacing || !offsets || !mean || !exact)
         return CK_ERR_NULL;
-    if (height <= 2 * CK_REACH || width <= 2 * CK_REACH || count < 0)
+    if (height <= 2 * CK_REACH || width <= 2 * CK_REACH || count < 0 || threads < 0)
         return CK_ERR_SIZE;
     for (int j = 0; j < CK_NEAR; ++j)
         if (offsets[2 * j] < -CK_REACH || offsets[2 * j] > CK_REACH || offsets[2 * j + 1] < -CK_REACH ||
@@ -34,6 +41,10 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
     int64_t shift[CK_NEAR];
     for (int j = 0; j < CK_NEAR; ++j)
         shift[j] = (int64_t)offsets[2 * j + 1] * width + offsets[2 * j];
+    /* Each point's mean is computed whole by one thread in a fixed order: identical for any thread count.
+     * Dynamic chunks because the edge points (the slow case) lie together in pixel order. */
+#pragma omp parallel for schedule(dynamic, 1024) num_threads(thread_count(threads)) \
+    if (count >= CK_PARALLEL_MIN)
     for (int64_t i = 0; i < count; ++i) {
         const int64_t c = at[i];
         float near[CK_NEAR];
@@ -133,12 +144,16 @@ static int check_starts(int64_t patches, const int64_t *starts) {
 }
 
 int ck_patch_shift(int64_t patches, const int64_t *starts, const double *params, const float *x,
-                   const double *dx, const double *dy, float *out) {
+                   const double *dx, const double *dy, float *out, int threads) {
     if (!starts || !params || !x || !dx || !dy || !out)
         return CK_ERR_NULL;
+    if (threads < 0)
+        return CK_ERR_SIZE;
     int rc = check_starts(patches, starts);
     if (rc != CK_OK)
         return rc;
+#pragma omp parallel for schedule(static) num_threads(thread_count(threads)) \
+    if (starts[patches] >= CK_PARALLEL_MIN)
     for (int64_t k = 0; k < patches; ++k) {
         const double a = params[3 * k], b = params[3 * k + 1], c = params[3 * k + 2];
         for (int64_t i = starts[k]; i < starts[k + 1]; ++i)
@@ -148,12 +163,17 @@ int ck_patch_shift(int64_t patches, const int64_t *starts, const double *params,
 }
 
 int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, const double *l_energy,
-                  const float *right, const double *dx, const double *dy, double *step) {
+                  const float *right, const double *dx, const double *dy, double *step, int threads) {
     if (!starts || !l_dev || !l_energy || !right || !dx || !dy || !step)
         return CK_ERR_NULL;
+    if (threads < 0)
+        return CK_ERR_SIZE;
     int rc = check_starts(patches, starts);
     if (rc != CK_OK)
         return rc;
+    /* One thread sums each patch, in pixel order: the step is identical for any thread count. */
+#pragma omp parallel for schedule(dynamic, 16) num_threads(thread_count(threads)) \
+    if (starts[patches] >= CK_PARALLEL_MIN)
     for (int64_t k = 0; k < patches; ++k) {
         const int64_t lo = starts[k], hi = starts[k + 1];
         const double size = (double)(hi - lo > 1 ? hi - lo : 1);

@@ -1,8 +1,9 @@
 /*
  * Hot loops of the measurement after the match (cellctl.vision.outliers, cellctl.vision.subpixel):
  * per-point and per-patch arithmetic that numpy can only do in many full passes over ~10^5 elements.
- * Each entry point checks its arguments and returns a CK_* status; nothing is allocated. Single-threaded
- * on purpose: a few ms each, and OpenMP's barriers cost more than that on a loaded 2-core PC.
+ * Each entry point checks its arguments and returns a CK_* status; nothing is allocated. `threads`: the
+ * OpenMP threads to use (0: all OpenMP offers; small calls stay on one). Every output element is computed
+ * whole by one thread in a fixed arithmetic order, so the results are bit-identical for any thread count.
  */
 #ifndef CELLCTL_CLOUD_KERNELS_H
 #define CELLCTL_CLOUD_KERNELS_H
@@ -12,7 +13,7 @@
 enum ck_status {
     CK_OK = 0,
     CK_ERR_NULL = 1,  /* a required pointer is NULL */
-    CK_ERR_SIZE = 2,  /* a count or image size out of range */
+    CK_ERR_SIZE = 2,  /* a count, image size or thread count out of range */
     CK_ERR_RANGE = 3  /* an index outside its array (a point too near the grid's edge, unsorted patches) */
 };
 
@@ -29,7 +30,7 @@ enum ck_status {
  * spacings (else a wider window must decide).
  */
 int ck_neighbour_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
-                       const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact);
+                       const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact, int threads);
 
 /*
  * One Gauss-Newton step of affine disparity patches (cellctl.vision.subpixel._gauss_newton_step):
@@ -39,13 +40,13 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
  * per patch l_energy (sum of l_dev^2). Out: step (patches x 3, a b c); 0 for an empty patch.
  */
 int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, const double *l_energy,
-                  const float *right, const double *dx, const double *dy, double *step);
+                  const float *right, const double *dx, const double *dy, double *step, int threads);
 
 /*
  * Where each pixel's patch plane puts it in the right image: out[i] = x[i] - (a + b dx[i] + c dy[i]) with
  * (a, b, c) = params[3 k] of its patch, computed in double and stored as float32 (a remap's map).
  */
 int ck_patch_shift(int64_t patches, const int64_t *starts, const double *params, const float *x,
-                   const double *dx, const double *dy, float *out);
+                   const double *dx, const double *dy, float *out, int threads);
 
 #endif

@@ -17,6 +17,17 @@ _ERRORS = {
 }
 
 
+# Every kernel runs on all the threads OpenMP offers (the matcher's default too); results are bit-identical for
+# any thread count because each output element is computed whole by one thread (csrc/cloud_kernels.h).
+ALL_THREADS = 0
+
+
+def _threads(threads: int) -> int:
+    if not 0 <= threads <= 256:
+        raise ValueError(f"threads must be between 0 (all) and 256, got {threads}")
+    return threads
+
+
 def _check(rc: int, what: str) -> None:
     if rc != lib.CK_OK:
         raise ValueError(f"{what}: {_ERRORS.get(rc, f'error {rc}')}")
@@ -27,13 +38,14 @@ def _ptr(kind: str, array: np.ndarray):  # noqa: ANN202 - a cffi pointer
 
 
 def neighbour_means(
-    grid: np.ndarray, at: np.ndarray, spacing_mm: np.ndarray, offsets: np.ndarray
+    grid: np.ndarray, at: np.ndarray, spacing_mm: np.ndarray, offsets: np.ndarray, threads: int = ALL_THREADS
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per point: mean distance to its 19 nearest block neighbours (float32) and whether that is exact (bool).
 
     grid: 3 x H x W float32 points (NaN where none); at: flat index of each point in one plane, at least 3 px
     inside the grid; spacing_mm: mm between pixels at each point; offsets: 36 x 2 (dx, dy), the 20 within
-    2.3 px first (cellctl.vision.outliers defines the rule).
+    2.3 px first (cellctl.vision.outliers defines the rule); threads: OpenMP threads (0: all), the same
+    result on any number.
     """
     if grid.ndim != 3 or grid.shape[0] != 3:
         raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
@@ -56,6 +68,7 @@ def neighbour_means(
         _ptr("const int32_t *", offsets),
         _ptr("float *", mean),
         _ptr("uint8_t *", exact),
+        _threads(threads),
     )
     _check(rc, "neighbour means")
     return mean, exact.astype(bool)
@@ -75,7 +88,14 @@ def _per_pixel(pixels: int, *arrays: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def patch_shift(starts: np.ndarray, params: np.ndarray, x: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+def patch_shift(
+    starts: np.ndarray,
+    params: np.ndarray,
+    x: np.ndarray,
+    dx: np.ndarray,
+    dy: np.ndarray,
+    threads: int = ALL_THREADS,
+) -> np.ndarray:
     """x - (a + b dx + c dy) per pixel (float32), (a, b, c) = params (K x 3) of its patch; pixels stored patch
     after patch, patch k's are [starts[k], starts[k + 1])."""
     starts, count, pixels = _starts(starts)
@@ -95,13 +115,20 @@ def patch_shift(starts: np.ndarray, params: np.ndarray, x: np.ndarray, dx: np.nd
         _ptr("const double *", dx),
         _ptr("const double *", dy),
         _ptr("float *", out),
+        _threads(threads),
     )
     _check(rc, "patch shift")
     return out
 
 
 def patch_step(
-    starts: np.ndarray, l_dev: np.ndarray, l_energy: np.ndarray, right: np.ndarray, dx: np.ndarray, dy: np.ndarray
+    starts: np.ndarray,
+    l_dev: np.ndarray,
+    l_energy: np.ndarray,
+    right: np.ndarray,
+    dx: np.ndarray,
+    dy: np.ndarray,
+    threads: int = ALL_THREADS,
 ) -> np.ndarray:
     """One Gauss-Newton step (K x 3) of affine disparity patches (cellctl.vision.subpixel).
 
@@ -127,6 +154,7 @@ def patch_step(
         _ptr("const double *", dx),
         _ptr("const double *", dy),
         _ptr("double *", step),
+        _threads(threads),
     )
     _check(rc, "patch step")
     return step

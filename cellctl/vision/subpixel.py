@@ -24,6 +24,9 @@ from cellctl.stereo.kernels import patch_shift, patch_step
 BLUR_LEVELS: tuple[tuple[float, int], ...] = ((2.0, 4), (1.0, 3), (0.0, 3))  # (Gaussian sigma px, iterations)
 MIN_PATCH_PIXELS = 40
 MAX_STEP_PX = 0.5  # per iteration: larger updates mean the linearisation does not hold
+# The step kernels run on one thread: ~2 ms per call, and measured on 2 cores a second thread gained nothing
+# (the remaps and blurs between them already use both cores through OpenCV's own threads).
+KERNEL_THREADS = 1
 
 
 @dataclass
@@ -142,8 +145,8 @@ def fit_disparity_planes(
             # Where each patch's plane puts its pixels (x - d), the right image there, and the step with its
             # per-patch sums and 3 x 3 solves, in C (csrc/cloud_kernels.c); the numpy formulation the step
             # follows is _gauss_newton_step, the tests' reference.
-            samples = right_at(r_both, patch_shift(starts, params, x, dx, dy))
-            step = patch_step(starts, l_dev, l_energy, samples, dx, dy)
+            samples = right_at(r_both, patch_shift(starts, params, x, dx, dy, KERNEL_THREADS))
+            step = patch_step(starts, l_dev, l_energy, samples, dx, dy, KERNEL_THREADS)
             params += np.clip(step, -MAX_STEP_PX, MAX_STEP_PX)
             last_step = np.abs(step[:, 0])
     ok = (sizes >= MIN_PATCH_PIXELS) & (last_step < 0.02) & np.all(np.isfinite(params), axis=1)

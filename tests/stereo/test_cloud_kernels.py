@@ -58,9 +58,9 @@ def test_neighbour_means_refuse_points_at_the_grid_edge() -> None:
         neighbour_means(grid[:2], rows * grid.shape[2] + cols, spacing, outliers._NEAR_OFFSETS)
 
 
-def _patches(seed: int) -> dict[str, np.ndarray]:
+def _patches(seed: int, count: int = 40) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
-    sizes = np.where(rng.random(40) < 0.2, 0, rng.integers(12, 60, 40))  # empty patches too
+    sizes = np.where(rng.random(count) < 0.2, 0, rng.integers(12, 60, count))  # empty patches too
     count, pixels = len(sizes), int(sizes.sum())
     ids = np.repeat(np.arange(count), sizes)
     return {
@@ -96,6 +96,26 @@ def test_patch_shift_is_x_minus_the_patch_plane() -> None:
     a, b, c = p["params"][p["ids"]].T
     expected = (p["x"] - (a + b * p["dx"] + c * p["dy"])).astype(np.float32)
     np.testing.assert_array_equal(patch_shift(p["starts"], p["params"], p["x"], p["dx"], p["dy"]), expected)
+
+
+def test_kernels_give_identical_results_on_one_and_two_threads() -> None:
+    """Each output element is computed whole by one thread: the thread count must not change a bit."""
+    pixels, points, spacing = _stereo_cloud(1)
+    grid, rows, cols = outliers._point_grid(pixels, points, margin=3)
+    at = rows * grid.shape[2] + cols
+    assert len(at) >= 4096  # above the kernels' threshold for more than one thread
+    one = neighbour_means(grid, at, spacing, outliers._NEAR_OFFSETS, threads=1)
+    two = neighbour_means(grid, at, spacing, outliers._NEAR_OFFSETS, threads=2)
+    for a, b in zip(one, two, strict=True):
+        np.testing.assert_array_equal(a, b)
+    p = _patches(4, count=2000)
+    assert p["starts"][-1] >= 4096
+    args = (p["starts"], p["l_dev"], np.abs(p["l_dev"][: len(p["starts"]) - 1]) + 1.0, p["right"], p["dx"], p["dy"])
+    np.testing.assert_array_equal(patch_step(*args, threads=1), patch_step(*args, threads=2))
+    shift = (p["starts"], p["params"], p["x"], p["dx"], p["dy"])
+    np.testing.assert_array_equal(patch_shift(*shift, threads=1), patch_shift(*shift, threads=2))
+    with pytest.raises(ValueError, match="threads"):
+        patch_shift(*shift, threads=-1)
 
 
 def test_patch_kernels_refuse_inconsistent_input() -> None:
