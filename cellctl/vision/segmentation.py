@@ -12,8 +12,8 @@ are none (docs/measurements.md).
 4. statistical outlier removal (cellctl.vision.outliers) on the sole's points, and a mask of the sole's
    pixels so that heights can be refined on the images (cellctl.vision.surface, cellctl.vision.subpixel).
 
-Over 350 lines (~430): the result types and one run's steps, which share its state (Segmentation, a class
-over 150 lines for that reason); the issue 11 rework of these steps is under way, the split after it.
+The filters and checks one run applies (colour, change against the taught table, border, sole mask) are
+in cellctl.vision.sole_region; this module keeps the result types and the run's order.
 """
 
 from __future__ import annotations
@@ -22,32 +22,34 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
 import open3d as o3d
 
 from cellctl.errors import FailureKind
 from cellctl.vision.calibration import Calibration
-from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.outliers import statistical_inliers
-from cellctl.vision.table import TABLE_INLIER_MM, TablePlane, find_table, refine_table
+from cellctl.vision.sole_region import (
+    MIN_COLOUR_SEPARATION,
+    MIN_SOLE_AREA_MM2,
+    change_split,
+    colour_split,
+    cut_by_border,
+    depth_step,
+    sole_mask,
+    unmeasured_fraction,
+    why_no_sole,
+    without_outliers,
+)
+from cellctl.vision.table import TablePlane, find_and_refine_table, not_the_table
 from cellctl.vision.teach import TaughtTable, check_drift
 
 MIN_HEIGHT_MM = 3.0  # points lower than this belong to the table (its height noise is well below 1 mm)
 MAX_HEIGHT_MM = 150.0  # anything higher is not a sole lying on the table (a hand, the robot)
 MIN_VALID_FRACTION = 0.15  # fewer measured pixels than this: the pair cannot be trusted
-MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
-BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
 FOOTPRINT_CELL_MM = 0.25  # below the pixel spacing (0.39 mm): the outline is not quantised to a coarse grid
-SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
 FOOTPRINT_OPEN_MM = 1.0  # specks thinner than this go; a pointed toe's tip (radius >= 0.5 mm) stays
 COLOUR_OPEN_MM = 2.0  # the same without a taught table: the colour edge's noise needs the wider opening
-WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
-EDGE_BAND_MM = 6.0
-UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare  # low points this close to the raised footprint may be sole (a leaning wall's foot)
-MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 
 
 class _SolePoints:
@@ -148,35 +150,28 @@ class Segmentation:
 
     def run(self) -> ReconstructionResult:
         if self.fraction < MIN_VALID_FRACTION:
-            return self._fail(
+            return self._refused(
                 FailureKind.TOO_FEW_POINTS,
                 f"too few measured points: {self.measured} ({100 * self.fraction:.1f} % of the image, need "
                 f"{100 * MIN_VALID_FRACTION:.0f} %); check lighting, focus, the calibration and the depth range",
             )
         start = time.perf_counter()
         if self.plane is None:
-            self.plane = find_table(self.cloud.points)
-            if self.plane is not None and self.cloud.rectified is not None:
-                self.plane = refine_table(self.cloud, self.plane)
+            self.plane = find_and_refine_table(self.cloud)
         self.timings["table_plane"] = time.perf_counter() - start
         if self.plane is None:
-            return self._fail(
+            return self._refused(
                 FailureKind.NO_TABLE, "no table plane found: the table must fill most of the view, below the sole"
             )
         if self.taught is not None:
             drift = check_drift(self.taught, self.cloud.points)
             self.timings["table_drift"] = time.perf_counter() - start
             if drift.problem is not None:
-                return self._fail(FailureKind.TABLE_MOVED, drift.problem)
+                return self._refused(FailureKind.TABLE_MOVED, drift.problem)
         transform = self.plane.camera_to_table()
         points = self.cloud.points @ transform[:3, :3].T + transform[:3, 3]
-        # The table frame's z is the height above the plane: no second pass over the ~10^6 points for it.
-        below = float(np.mean(points[:, 2] < -5.0 * TABLE_INLIER_MM))
-        if below > 0.05:
-            return self._fail(
-                FailureKind.NO_TABLE,
-                f"{100 * below:.0f} % of the points lie below the table plane: the plane found is not the table",
-            )
+        if problem := not_the_table(points):
+            return self._refused(FailureKind.NO_TABLE, problem)
         self.transform = transform
         return self._sole(points)
 
@@ -195,25 +190,21 @@ class Segmentation:
         footprint = _footprint(raster, every, xy[high])
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._no_sole(points, no_sole)
-        high_counts = raster.counts(xy[high])
-        # The raster is finer than the pixels: cells between measured ones are filled from their neighbours.
-        self.raised = Footprint(
-            ((high_counts > 0) & (2 * high_counts >= every)).astype(np.uint8), raster.origin, raster.cell_mm
-        ).morphology(close_mm=1.5, open_mm=0.0)
-        self.measured_cells = Footprint((every > 0).astype(np.uint8), raster.origin, raster.cell_mm).dilated(0.75)
+        self.raised, self.measured_cells = depth_step(raster, every, raster.counts(xy[high]))
         if self.taught is not None:
-            changed = self._change_filter(points, footprint, high)
-            if changed is None:
-                return self._fail(
+            change = change_split(self.cloud, self.taught, points, footprint, high, self.min_height)
+            if change is None:
+                return self._refused(
                     FailureKind.TABLE_MOVED,
                     "too little of the taught table is visible around the sole to compare with: clear the table",
                 )
-            keep = changed
+            keep, self._changed_left, self.changed_right = change.sole, change.changed_left, change.changed_right
         else:
-            keep = high[self._colour_filter(points, footprint, high)]
+            colour = colour_split(self.cloud.colors, points, footprint, high)
+            keep, self.colour_filter, self.separation = high[colour.sole], colour.applied, colour.separation
         if self.taught is None and not self.colour_filter:
             # Without the colour edge, matching halos widen the sole by 1-5 mm (simulated soles): no length.
-            return self._fail(
+            return self._refused(
                 FailureKind.COLOURS_TOO_SIMILAR,
                 f"sole and table colours too similar to find the sole's edge (they differ by "
                 f"{self.separation:.1f} standard deviations, need {MIN_COLOUR_SEPARATION:g}): use a table "
@@ -223,13 +214,15 @@ class Segmentation:
         # opening it was tuned with; the change edge keeps a pointed toe's tip.
         footprint = _footprint(raster, every, xy[keep], FOOTPRINT_OPEN_MM if self.taught else COLOUR_OPEN_MM)
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
-            return self._fail(FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour")
+            return self._refused(
+                FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour"
+            )
         index = keep[footprint.contains(xy[keep]) & (z[keep] > self.min_height)]  # the foot of a wall: outline only
         self.timings["background"] = time.perf_counter() - start
         start = time.perf_counter()
-        index = self._without_outliers(index, points)
+        index = without_outliers(self.cloud, index, points)
         self.timings["outliers"] = time.perf_counter() - start
-        failure, reason = self._cut_by_border(index)
+        failure, reason = cut_by_border(self.cloud, index)
         return self._result(
             failure,
             reason,
@@ -238,153 +231,12 @@ class Segmentation:
             sole_pixels=self.cloud.pixels[index],
             footprint=footprint,
             rectified=self.cloud.rectified,
-            sole_mask=self._sole_mask(index),
-            unmeasured_fraction=self._unmeasured_fraction(index),
+            sole_mask=sole_mask(self.cloud, index),
+            unmeasured_fraction=unmeasured_fraction(self.cloud, self._changed_left, index),
         )
 
-    def _without_outliers(self, index: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """The points (indices) that statistical outlier removal keeps."""
-        calib = self.cloud.calibration
-        if calib is None:  # not a stereo cloud, so not one point per rectified pixel (e.g. a true depth map)
-            cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[index]))
-            _, inliers = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
-            return index[np.asarray(inliers, dtype=np.int64)]
-        spacing = calib.baseline_mm / self.cloud.disparity[index]  # between pixels at the point: Z / f = B / d
-        return index[statistical_inliers(self.cloud.pixels[index], points[index], spacing)]
-
-    def _sole_mask(self, index: np.ndarray) -> np.ndarray | None:
-        """Rectified left pixels on the sole: measured ones, small holes closed, the edge pixel dropped."""
-        if self.cloud.rectified is None:
-            return None
-        width, height = self.cloud.image_size
-        mask = np.zeros((height, width), np.uint8)
-        x, y = np.round(self.cloud.pixels[index]).astype(int).T
-        mask[y, x] = 1
-        closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-        return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
-
-    def _no_sole(self, points: np.ndarray, reason: str) -> ReconstructionResult:
-        """NO_SOLE, unless the taught table shows a sole-sized change that depth did not measure.
-
-        Heavy sensor noise or glare on a dark sole can leave too few matched points to raise a sole-sized
-        footprint: the sole is there, and "no sole in view" would send the operator looking for nothing.
-        """
-        if self.taught is None or self.cloud.rectified is None or self.plane is None:
-            return self._fail(FailureKind.NO_SOLE, reason)
-        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
-        current = self.cloud.rectified[0]
-        test = ChangeTest.fit(current, self.taught.left, np.round(self.cloud.pixels[table]).astype(np.int64))
-        if test is None:
-            return self._fail(FailureKind.NO_SOLE, reason)
-        changed = test.changed(current, self.taught.left).astype(np.uint8)
-        count, _, stats, _ = cv2.connectedComponentsWithStats(changed, connectivity=8)
-        largest = int(stats[1:, cv2.CC_STAT_AREA].max()) if count > 1 else 0
-        pixel_mm = self.plane.offset / self.cloud.calibration.focal_px if self.cloud.calibration else 0.0
-        area = largest * pixel_mm**2
-        if area < MIN_SOLE_AREA_MM2:
-            return self._fail(FailureKind.NO_SOLE, reason)
-        return self._fail(
-            FailureKind.TOO_FEW_POINTS,
-            f"something sole-sized lies on the table ({area:.0f} mm^2 changed against the taught table) but too "
-            "little of it was measured in depth (sensor noise, glare or no texture): check lighting and exposure",
-        )
-
-    def _unmeasured_fraction(self, index: np.ndarray) -> float:
-        """Share of the sole's changed pixels (taught table only) without a measured point: glare, no texture.
-
-        The sole's image region is its measured pixels closed over UNMEASURED_CLOSE_PX; where that holds
-        many changed pixels without depth, an outline that disagrees with the depth step has lost part of
-        the sole to unmeasured pixels, and that is the reason to give (cellctl.vision.measurement).
-        """
-        if self._changed_left is None or index.size == 0:
-            return 0.0
-        width, height = self.cloud.image_size
-        sole = np.zeros((height, width), np.uint8)
-        x, y = np.round(self.cloud.pixels[index]).astype(int).T
-        sole[y, x] = 1
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (UNMEASURED_CLOSE_PX, UNMEASURED_CLOSE_PX))
-        region = cv2.morphologyEx(sole, cv2.MORPH_CLOSE, kernel) > 0
-        measured = np.zeros((height, width), bool)
-        mx, my = np.round(self.cloud.pixels).astype(int).T
-        measured[my, mx] = True
-        lost = region & self._changed_left & ~measured
-        return float(np.count_nonzero(lost)) / max(float(np.count_nonzero(region)), 1.0)
-
-    def _change_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray | None:
-        """The sole's points (indices): changed against the taught table (cellctl.vision.change), and either
-        high or within EDGE_BAND_MM of the raised footprint; None if the table around is not seen.
-
-        Stereo edge fattening drags the sole's height onto table pixels next to it, but those pixels still
-        show the table's own texture: unchanged, so dropped. The foot of a wall that leans out lies lower
-        than MIN_HEIGHT_MM but has changed: kept, so the outline is the footprint on the table.
-        """
-        assert self.taught is not None and self.cloud.rectified is not None
-        current, reference = self.cloud.rectified[0], self.taught.left
-        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
-        outside = table[~footprint.dilated(15.0).contains(points[table, :2])]
-        test = ChangeTest.fit(current, reference, np.round(self.cloud.pixels[outside]).astype(np.int64))
-        if test is None:
-            return None
-        changed = test.changed(current, reference)
-        self._changed_left = changed
-        # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
-        right_table = self.cloud.pixels[outside] - np.column_stack(
-            [self.cloud.disparity[outside], np.zeros(len(outside))]
-        )
-        right_test = ChangeTest.fit(self.cloud.rectified[1], self.taught.right, np.round(right_table).astype(np.int64))
-        if right_test is not None:
-            self.changed_right = right_test.changed(self.cloud.rectified[1], self.taught.right)
-        # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
-        near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= self.min_height))
-        near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
-        candidates = np.concatenate([high, near])
-        x, y = np.round(self.cloud.pixels[candidates]).astype(np.int64).T
-        return np.sort(candidates[changed[y, x]])
-
-    def _colour_filter(self, points: np.ndarray, footprint: Footprint, high: np.ndarray) -> np.ndarray:
-        """Which of the `high` points (indices) are sole-coloured (all when the colours do not separate).
-
-        Linear discriminant between the table's colour (plane inliers outside the sole) and the sole's
-        (points well inside the footprint), thresholded half way between the two means, which is where a
-        pixel half covered by the sole lies: the edge stays where it is.
-        """
-        colours = self.cloud.colors
-        # The table's colour statistics from every 4th table point (~150000): as exact, at a quarter the time.
-        table = np.flatnonzero(np.abs(points[:, 2]) < TABLE_INLIER_MM)[::4]
-        interior = high[footprint.eroded(5.0).contains(points[high, :2])]
-        outside = table[~footprint.dilated(10.0).contains(points[table, :2])]
-        if interior.size < 100 or outside.size < 100:
-            return np.ones(len(high), bool)
-        sole_c, table_c = colours[interior].astype(np.float64), colours[outside].astype(np.float64)
-        pooled = 0.5 * (np.cov(sole_c.T) + np.cov(table_c.T)) + np.eye(3) * 1e-3
-        difference = sole_c.mean(axis=0) - table_c.mean(axis=0)
-        direction = np.linalg.solve(pooled, difference)
-        self.separation = float(np.sqrt(direction @ difference))
-        if self.separation < MIN_COLOUR_SEPARATION:
-            return np.ones(len(high), bool)
-        self.colour_filter = True
-        threshold = direction @ (0.5 * (sole_c.mean(axis=0) + table_c.mean(axis=0)))
-        return colours[high].astype(np.float64) @ direction > threshold
-
-    def _cut_by_border(self, index: np.ndarray) -> tuple[FailureKind | None, str | None]:
-        """Failure kind and reason if the sole reaches the edge of what both cameras see (else None, None)."""
-        if index.size == 0:
-            return FailureKind.NO_SOLE, "no sole in view: no sole points left after outlier removal"
-        width, height = self.cloud.image_size
-        x, y = self.cloud.pixels[index].T
-        d = self.cloud.disparity[index]
-        m = BORDER_MARGIN_PX
-        # x - d < m: the right camera does not see the point (it left the right image on the left).
-        at_edge = (x < m) | (x > width - 1 - m) | (y < m) | (y > height - 1 - m) | (x - d < m)
-        if np.any(at_edge):
-            return FailureKind.SOLE_AT_BORDER, (
-                "sole cut by the image border: move the sole towards the middle of the table "
-                f"({int(at_edge.sum())} sole points within {m} px of the edge of the common view)"
-            )
-        return None, None
-
-    def _fail(self, failure: FailureKind, reason: str) -> ReconstructionRefused:
-        return self._refused(failure, reason)
+    def _no_sole(self, points: np.ndarray, reason: str) -> ReconstructionRefused:
+        return self._refused(*why_no_sole(self.cloud, self.taught, self.plane, points, reason))
 
     def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
         """A refusal with what this run found about the table and the cloud, plus the sole's points if any."""
