@@ -131,9 +131,9 @@ static void solve3(double a[3][3], double b[3], double x[3]) {
     }
 }
 
-/* CK_OK when starts[0..patches] run from 0 without decreasing. */
-static int check_starts(int64_t patches, const int64_t *starts) {
-    if (patches < 0)
+/* CK_OK when the thread count is valid and starts[0..patches] run from 0 without decreasing. */
+static int check_patches(int64_t patches, const int64_t *starts, int threads) {
+    if (patches < 0 || threads < 0)
         return CK_ERR_SIZE;
     if (starts[0] != 0)
         return CK_ERR_RANGE;
@@ -147,9 +147,7 @@ int ck_patch_shift(int64_t patches, const int64_t *starts, const double *params,
                    const double *dx, const double *dy, float *out, int threads) {
     if (!starts || !params || !x || !dx || !dy || !out)
         return CK_ERR_NULL;
-    if (threads < 0)
-        return CK_ERR_SIZE;
-    int rc = check_starts(patches, starts);
+    int rc = check_patches(patches, starts, threads);
     if (rc != CK_OK)
         return rc;
 #pragma omp parallel for schedule(static) num_threads(thread_count(threads)) \
@@ -166,9 +164,7 @@ int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, c
                   const float *right, const double *dx, const double *dy, double *step, int threads) {
     if (!starts || !l_dev || !l_energy || !right || !dx || !dy || !step)
         return CK_ERR_NULL;
-    if (threads < 0)
-        return CK_ERR_SIZE;
-    int rc = check_starts(patches, starts);
+    int rc = check_patches(patches, starts, threads);
     if (rc != CK_OK)
         return rc;
     /* One thread sums each patch, in pixel order: the step is identical for any thread count. */
