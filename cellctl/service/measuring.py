@@ -62,15 +62,14 @@ class CellMeasurer:
             plane = self.reconstructor.learn_table(frame.left, frame.right)
             log.info("table plane %s", "learnt from the warm-up pair" if plane is not None else "NOT found")
         measure = self.config.measure
-        result = measure_frame(
-            frame, self.reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
-        )
+        settings = MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
+        result = measure_frame(frame, self.reconstructor, settings)
         outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
         log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
         for depth_range in sorted({r.depth_range_mm for r in recipes} - {measure.depth_range_mm}):
             start = time.monotonic()
             reconstructor = self._reconstructor_for(depth_range)
-            measure_frame(frame, reconstructor, MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm))
+            measure_frame(frame, reconstructor, settings)
             log.info("warmed up depth range %g..%g mm in %.1f s", *depth_range, time.monotonic() - start)
         self.warmed_up = True
 
@@ -116,10 +115,13 @@ class CellMeasurer:
         if held is not None and held.depth_range_mm == depth_range_mm:
             return held
         self._recipe_reconstructor = None  # release the old buffers before allocating new ones
-        own = self.reconstructor
-        taught = None if own is None else own.taught
-        plane = None if own is None or taught is not None else own.table_plane
-        self._recipe_reconstructor = SoleReconstructor(self.calib, depth_range_mm, table_plane=plane, taught=taught)
+        own = self.reconstructor  # its taught table, or else the plane it learnt (None: found per cycle)
+        self._recipe_reconstructor = SoleReconstructor(
+            self.calib,
+            depth_range_mm,
+            table_plane=None if own is None else own.table_plane,
+            taught=None if own is None else own.taught,
+        )
         return self._recipe_reconstructor
 
 
