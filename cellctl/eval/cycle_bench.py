@@ -23,13 +23,8 @@ import numpy as np
 from cellctl.eval.methods import opencv_sgbm
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
-from cellctl.vision.measurement import (
-    GLUE_OFFSET_MM,
-    GLUE_SPACING_MM,
-    MeasurementResult,
-    SoleMeasurement,
-    measure_sole,
-)
+from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
+from cellctl.vision.measurement import MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
 
 DEFAULT_SOLES: tuple[tuple[int, str], ...] = ((1, "white"), (2, "black"), (3, "white"), (4, "black"))

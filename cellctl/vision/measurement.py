@@ -11,15 +11,15 @@ A refusal carries no numbers, only the reason in words and its `FailureKind` (wh
 e.g. the service's PLC error code), and what was found on the way for pictures: the robot must never get
 a silent wrong value.
 
-Over 350 lines (~490): the result types (success and refusal) and the one procedure that fills them,
-whose steps refuse in order; the issue 11 rework of its internals is under way, the split after it.
+The result types live in cellctl.vision.sole_result, the glue path's construction in cellctl.vision.glue_path
+and the closed-path helpers in cellctl.vision.closed_path; this module is the procedure whose steps refuse in
+order.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
@@ -37,6 +37,7 @@ from cellctl.vision.checks import (
     check_outline_right,
     hidden_from,
 )
+from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_closed
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
@@ -46,19 +47,24 @@ from cellctl.vision.defaults import (
     PLAUSIBLE_LENGTH_MM,
 )
 from cellctl.vision.footprint import Footprint, snap_to_inset
-from cellctl.vision.local_fit import local_planes
+from cellctl.vision.glue_path import glue_path
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
+from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
+
+__all__ = [
+    "GluePath",
+    "MeasurementRefused",
+    "MeasurementResult",
+    "SoleMeasurement",
+    "check_glue_settings",
+    "measure_sole",
+]
 
 MAX_UNMEASURED_FRACTION = 0.05  # of the sole's changed pixels without depth: beyond, blame the lost pixels
 HEIGHT_POINT_FRACTION = 0.10  # heights 10 % of the length in from each end
 HEIGHT_RADIUS_MM = 10.0  # patch for the heel and toe heights: on weak texture the noise falls with the radius
 MIN_HALF_AREA_DIFFERENCE = 0.04  # toe and heel halves closer than this (fraction of area): too close to call
-GLUE_FIT_RADIUS_MM = 4.0
-GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
-GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
-GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
-GLUE_SMOOTHING_MM = 6.0  # heights along the path: width of the local plane fit, averages the patches' noise
 # Gaussian along the outline: removes the raster's staircase (0.25 mm cells) and pixel noise; wider would cut
 # the tip of a pointed toe (a 2 mm sigma takes ~1 mm off a 35 degree wedge).
 OUTLINE_SMOOTHING_MM = 0.75
@@ -66,112 +72,6 @@ OUTLINE_SMOOTHING_MM = 0.75
 # projections (the length) outward by 0.3-0.5 mm at 0.75 mm: the 2 mm it was tuned with.
 COLOUR_OUTLINE_SMOOTHING_MM = 2.0
 GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
-
-
-@dataclass
-class GluePath:
-    """Closed path on the sole's top surface, table frame, ordered from the heel end (first point not repeated)."""
-
-    points: np.ndarray  # N x 3, mm
-    normals: np.ndarray  # N x 3, unit, nz > 0
-    closed: bool = True
-    # What the path was made from, for its self-check (cellctl.vision.checks): per point, the height of the
-    # surface patch before smoothing along the path, and the patches' own normals smoothed along it.
-    raw_z: np.ndarray | None = None
-    surface_normals: np.ndarray | None = None
-
-    @property
-    def length_mm(self) -> float:
-        steps = np.diff(np.vstack([self.points, self.points[:1]]) if self.closed else self.points, axis=0)
-        return float(np.linalg.norm(steps, axis=1).sum())
-
-
-@dataclass
-class SoleMeasurement:
-    """The measurements of one sole (the success of `MeasurementResult`)."""
-
-    length_mm: float
-    heel_height_mm: float
-    toe_height_mm: float
-    glue_path: GluePath
-    points: int  # sole points the measurement rests on
-    # Where the numbers come from (table frame), for drawings and diagnostics.
-    axis: np.ndarray  # unit heel->toe direction (x, y)
-    heel_point: np.ndarray  # (x, y, z) where heel_height_mm is taken
-    toe_point: np.ndarray
-    outline: np.ndarray  # footprint outline, N x 2
-    half_area_difference: float  # (toe half - heel half) / area
-    camera_to_table: np.ndarray  # 4 x 4, rectified left camera -> table
-    timings: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def valid(self) -> bool:
-        return True
-
-    def to_dict(self) -> dict[str, object]:
-        """JSON-ready summary (keys of the `cellctl measure --json` output)."""
-        path = self.glue_path
-        return {
-            "length_mm": _round(self.length_mm),
-            "heel_height_mm": _round(self.heel_height_mm),
-            "toe_height_mm": _round(self.toe_height_mm),
-            "glue_path": np.round(path.points, 3).tolist(),
-            "glue_normals": np.round(path.normals, 4).tolist(),
-            "points": int(self.points),
-            "valid": True,
-            "reason": None,
-            "failure": None,
-            "heel_point": np.round(self.heel_point, 3).tolist(),
-            "toe_point": np.round(self.toe_point, 3).tolist(),
-            "camera_to_table": np.round(self.camera_to_table, 6).tolist(),
-            "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
-        }
-
-
-@dataclass
-class MeasurementRefused:
-    """No measurements: why (kind for programs, reason for people) and what was found before the refusal
-    (None where the measurement did not get that far), for pictures and diagnostics."""
-
-    failure: FailureKind
-    reason: str
-    points: int  # sole points found
-    timings: dict[str, float] = field(default_factory=dict)
-    axis: np.ndarray | None = None
-    heel_point: np.ndarray | None = None
-    toe_point: np.ndarray | None = None
-    outline: np.ndarray | None = None
-    half_area_difference: float | None = None
-    camera_to_table: np.ndarray | None = None
-
-    @property
-    def valid(self) -> bool:
-        return False
-
-    def to_dict(self) -> dict[str, object]:
-        """JSON-ready summary: the keys of SoleMeasurement.to_dict, without numbers."""
-        return {
-            "length_mm": None,
-            "heel_height_mm": None,
-            "toe_height_mm": None,
-            "glue_path": [],
-            "glue_normals": [],
-            "points": int(self.points),
-            "valid": False,
-            "reason": self.reason,
-            "failure": self.failure.value,
-            "heel_point": None if self.heel_point is None else np.round(self.heel_point, 3).tolist(),
-            "toe_point": None if self.toe_point is None else np.round(self.toe_point, 3).tolist(),
-            "camera_to_table": None if self.camera_to_table is None else np.round(self.camera_to_table, 6).tolist(),
-            "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
-        }
-
-
-MeasurementResult = SoleMeasurement | MeasurementRefused
-
-
-def _round(value: float) -> float:
-    return round(float(value), 3)
 
 
 def check_glue_settings(glue_offset_mm: float, glue_spacing_mm: float) -> None:
@@ -200,7 +100,7 @@ def measure_sole(
     start = time.perf_counter()
     footprint = reconstruction.footprint
     smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
-    outline = _smooth_closed(footprint.outline(), smoothing)
+    outline = smooth_closed(footprint.outline(), smoothing)
     centroid, axis = _principal_axis(outline)
     proj = (outline - centroid) @ axis
     lo, hi = float(proj.min()), float(proj.max())
@@ -256,7 +156,7 @@ def measure_sole(
             FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide", **base
         )
     # Smoothing takes the raster's staircase out but pulls sharp corners in: back onto the offset line.
-    glue_line = snap_to_inset(edge, _smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
+    glue_line = snap_to_inset(edge, smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
     path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     timings["glue_path"] = time.perf_counter() - start
     if path is None:
@@ -282,8 +182,8 @@ def measure_sole(
 
 def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> CheckFailure | None:
     """The outline's self-checks: against the depth step, and against the right image when a table is taught."""
-    ring = _resample_closed(outline, 1.0)
-    outward = _outward_normals(ring)
+    ring = resample_closed(outline, 1.0)
+    outward = outward_normals(ring)
     heights = _height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
         hidden = None
@@ -386,108 +286,3 @@ def _half_area_difference(footprint: Footprint, centroid: np.ndarray, axis: np.n
     proj = (footprint.centres() - centroid) @ axis
     upper = np.count_nonzero(proj > middle)
     return (2.0 * upper - len(proj)) / max(len(proj), 1)
-
-
-def glue_path(
-    surface: SoleSurface,
-    outline: np.ndarray,
-    centroid: np.ndarray,
-    axis: np.ndarray,
-    offset_mm: float = GLUE_OFFSET_MM,
-    spacing_mm: float = GLUE_SPACING_MM,
-) -> tuple[GluePath | None, str | None]:
-    """The outline moved `offset_mm` inward, resampled every `spacing_mm`, lifted onto the top surface.
-
-    Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
-    offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
-    Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
-    from a plane fitted to both around each point (a patch's own tilt is too noisy on a weakly textured
-    sole: ~10 degrees).
-    """
-    resampled = _resample_closed(outline, 0.25)
-    inward = -_outward_normals(resampled)
-    path_xy = _resample_closed(resampled + offset_mm * inward, spacing_mm)
-    start = int(np.argmin((path_xy - centroid) @ axis))  # the heel end
-    path_xy = np.roll(path_xy, -start, axis=0)
-    path_inward = -_outward_normals(path_xy)
-    inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
-    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM)
-    missing = np.flatnonzero(~np.isfinite(samples.z[: len(path_xy)]))
-    if missing.size:
-        x, y = path_xy[missing[0]]
-        return None, (
-            f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
-            f"({missing.size} of {len(path_xy)} path points)"
-        )
-    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth, so a
-    # plane fitted to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
-    # for a sloping surface also where the path turns round a pointed end).
-    sigma = GLUE_SMOOTHING_MM / spacing_mm
-    raw = _without_single_outliers(samples.z[: len(path_xy)])
-    z, _ = local_planes(path_xy, path_xy, raw, GLUE_SMOOTHING_MM)
-    inner = _without_single_outliers(samples.z[len(path_xy) :])
-    # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
-    # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).
-    _, gradient = local_planes(
-        path_xy, np.vstack([path_xy, inner_xy]), np.concatenate([raw, inner]), GLUE_NORMAL_SMOOTHING_MM
-    )
-    normals = np.column_stack([-gradient, np.ones(len(path_xy))])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    patch_normals = _smooth_along(samples.normals[: len(path_xy)], sigma)
-    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
-
-
-def _without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -> np.ndarray:
-    """Heights along a closed path with isolated bad patch fits replaced by their neighbours' median.
-
-    One patch fit can fail (a highlight, a mismatch) and smoothing would spread it over its neighbours;
-    a lone value that departs from the median of the five around it is replaced. Two or more in a row are
-    kept: that is the surface, or a fault the self-check must see (cellctl.vision.checks).
-    """
-    window = np.stack([np.roll(z, k) for k in (-2, -1, 0, 1, 2)])
-    median = np.nanmedian(window, axis=0)
-    bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
-    lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
-    return np.where(lone, median, z)
-
-
-def _smooth_along(values: np.ndarray, sigma_samples: float) -> np.ndarray:
-    """Gaussian smoothing of per-point values (N or N x k) along a closed path."""
-    radius = min(int(np.ceil(3 * sigma_samples)), len(values) // 2)
-    if radius < 1:
-        return values
-    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma_samples).ravel()
-    padded = np.concatenate([values[-radius:], values, values[:radius]])
-    if padded.ndim == 1:
-        return np.convolve(padded, kernel, mode="valid")
-    return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(padded.shape[1])])
-
-
-def _resample_closed(poly: np.ndarray, spacing: float) -> np.ndarray:
-    """Points every `spacing` mm of arc length along a closed polygon (first point kept, not repeated)."""
-    ring = np.vstack([poly, poly[:1]])
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ring, axis=0), axis=1))])
-    count = max(3, int(round(arc[-1] / spacing)))
-    s = np.linspace(0.0, arc[-1], count, endpoint=False)
-    return np.column_stack([np.interp(s, arc, ring[:, 0]), np.interp(s, arc, ring[:, 1])])
-
-
-def _smooth_closed(poly: np.ndarray, sigma_mm: float) -> np.ndarray:
-    """Gaussian smoothing along a closed polygon resampled at 0.25 mm (wrap-around at the ends)."""
-    if len(poly) < 3:
-        return poly
-    step = 0.25
-    ring = _resample_closed(poly, step)
-    sigma = sigma_mm / step
-    radius = int(np.ceil(3 * sigma))
-    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma).ravel()
-    padded = np.vstack([ring[-radius:], ring, ring[:radius]])
-    return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)])
-
-
-def _outward_normals(poly: np.ndarray) -> np.ndarray:
-    """Unit outward normals of a counter-clockwise closed polygon."""
-    tangent = np.roll(poly, -1, axis=0) - np.roll(poly, 1, axis=0)
-    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
-    return np.column_stack([tangent[:, 1], -tangent[:, 0]])

@@ -7,7 +7,7 @@ import numpy as np
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import check_glue_path, check_outline_depth
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.measurement import _without_single_outliers
+from cellctl.vision.glue_path import without_single_outliers
 
 
 def _ring(radius: float, count: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -64,7 +64,7 @@ def test_a_lone_failed_patch_fit_is_repaired_two_in_a_row_are_kept() -> None:
     z = np.full(50, 20.0)
     z[10] = 200.0
     z[30:32] = 40.0
-    repaired = _without_single_outliers(z)
+    repaired = without_single_outliers(z)
     assert repaired[10] == 20.0 and np.all(repaired[30:32] == 40.0)
 
 

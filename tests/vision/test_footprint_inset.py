@@ -6,8 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from cellctl.vision.closed_path import smooth_closed
 from cellctl.vision.footprint import Footprint, snap_to_inset
-from cellctl.vision.measurement import _smooth_closed
 
 CELL = 0.25
 
@@ -38,7 +38,7 @@ def true_inset(polygon: np.ndarray, xy: np.ndarray) -> np.ndarray:
 def test_a_smoothed_glue_line_is_snapped_back_onto_its_offset_at_a_pointed_tip() -> None:
     polygon = wedge_polygon()
     footprint = raster(polygon)
-    line = _smooth_closed(footprint.eroded(2.0 + 0.5 * CELL).outline(), 2.0)
+    line = smooth_closed(footprint.eroded(2.0 + 0.5 * CELL).outline(), 2.0)
     before = np.abs(true_inset(polygon, line) - 2.0)
     assert before.max() > 0.5  # the smoothing rounds the corner inwards: what the snapping is for
     snapped = snap_to_inset(footprint, line, 2.0)

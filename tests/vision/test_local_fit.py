@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from cellctl.vision.closed_path import smooth_along
 from cellctl.vision.local_fit import local_planes
-from cellctl.vision.measurement import _smooth_along
 
 
 def test_a_rising_pointed_end_keeps_its_tip_height_and_slope() -> None:
@@ -19,7 +19,7 @@ def test_a_rising_pointed_end_keeps_its_tip_height_and_slope() -> None:
     assert abs(height[tip] - 20.0) < 0.2  # the ridge shrinks the slope a little
     np.testing.assert_allclose(gradient[tip], [0.3, 0.0], atol=0.03)
     # Smoothing along the arc, as before, lowers the peak: what the plane fit is for.
-    assert _smooth_along(z, 6.0)[tip] < 19.0
+    assert smooth_along(z, 6.0)[tip] < 19.0
 
 
 def test_samples_on_one_line_give_the_lines_height_and_missing_samples_are_skipped() -> None:

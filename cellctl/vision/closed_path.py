@@ -1,0 +1,51 @@
+"""Closed paths in the table plane (outlines, glue lines): resampling, smoothing along the path, normals.
+
+The measurement's outline and glue path are closed polygons sampled in mm; these helpers keep them closed
+(wrap-around at the ends) where numpy's and OpenCV's 1-D filters would not.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def smooth_along(values: np.ndarray, sigma_samples: float) -> np.ndarray:
+    """Gaussian smoothing of per-point values (N or N x k) along a closed path."""
+    radius = min(int(np.ceil(3 * sigma_samples)), len(values) // 2)
+    if radius < 1:
+        return values
+    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma_samples).ravel()
+    padded = np.concatenate([values[-radius:], values, values[:radius]])
+    if padded.ndim == 1:
+        return np.convolve(padded, kernel, mode="valid")
+    return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(padded.shape[1])])
+
+
+def resample_closed(poly: np.ndarray, spacing: float) -> np.ndarray:
+    """Points every `spacing` mm of arc length along a closed polygon (first point kept, not repeated)."""
+    ring = np.vstack([poly, poly[:1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ring, axis=0), axis=1))])
+    count = max(3, int(round(arc[-1] / spacing)))
+    s = np.linspace(0.0, arc[-1], count, endpoint=False)
+    return np.column_stack([np.interp(s, arc, ring[:, 0]), np.interp(s, arc, ring[:, 1])])
+
+
+def smooth_closed(poly: np.ndarray, sigma_mm: float) -> np.ndarray:
+    """Gaussian smoothing along a closed polygon resampled at 0.25 mm (wrap-around at the ends)."""
+    if len(poly) < 3:
+        return poly
+    step = 0.25
+    ring = resample_closed(poly, step)
+    sigma = sigma_mm / step
+    radius = int(np.ceil(3 * sigma))
+    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma).ravel()
+    padded = np.vstack([ring[-radius:], ring, ring[:radius]])
+    return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)])
+
+
+def outward_normals(poly: np.ndarray) -> np.ndarray:
+    """Unit outward normals of a counter-clockwise closed polygon."""
+    tangent = np.roll(poly, -1, axis=0) - np.roll(poly, 1, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
+    return np.column_stack([tangent[:, 1], -tangent[:, 0]])

@@ -1,0 +1,81 @@
+"""The glue path: a closed line inside the sole's edge, lifted onto its top surface, with its normals."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
+from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
+from cellctl.vision.local_fit import local_planes
+from cellctl.vision.sole_result import GluePath
+from cellctl.vision.surface import SoleSurface
+
+GLUE_FIT_RADIUS_MM = 4.0
+GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
+GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
+GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
+GLUE_SMOOTHING_MM = 6.0  # heights along the path: width of the local plane fit, averages the patches' noise
+
+
+def glue_path(
+    surface: SoleSurface,
+    outline: np.ndarray,
+    centroid: np.ndarray,
+    axis: np.ndarray,
+    offset_mm: float = GLUE_OFFSET_MM,
+    spacing_mm: float = GLUE_SPACING_MM,
+) -> tuple[GluePath | None, str | None]:
+    """The outline moved `offset_mm` inward, resampled every `spacing_mm`, lifted onto the top surface.
+
+    Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
+    offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
+    Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
+    from a plane fitted to both around each point (a patch's own tilt is too noisy on a weakly textured
+    sole: ~10 degrees).
+    """
+    resampled = resample_closed(outline, 0.25)
+    inward = -outward_normals(resampled)
+    path_xy = resample_closed(resampled + offset_mm * inward, spacing_mm)
+    start = int(np.argmin((path_xy - centroid) @ axis))  # the heel end
+    path_xy = np.roll(path_xy, -start, axis=0)
+    path_inward = -outward_normals(path_xy)
+    inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
+    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM)
+    missing = np.flatnonzero(~np.isfinite(samples.z[: len(path_xy)]))
+    if missing.size:
+        x, y = path_xy[missing[0]]
+        return None, (
+            f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
+            f"({missing.size} of {len(path_xy)} path points)"
+        )
+    # Neighbouring patches overlap but their noise does not all average out; the surface is smooth, so a
+    # plane fitted to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
+    # for a sloping surface also where the path turns round a pointed end).
+    sigma = GLUE_SMOOTHING_MM / spacing_mm
+    raw = without_single_outliers(samples.z[: len(path_xy)])
+    z, _ = local_planes(path_xy, path_xy, raw, GLUE_SMOOTHING_MM)
+    inner = without_single_outliers(samples.z[len(path_xy) :])
+    # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
+    # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).
+    _, gradient = local_planes(
+        path_xy, np.vstack([path_xy, inner_xy]), np.concatenate([raw, inner]), GLUE_NORMAL_SMOOTHING_MM
+    )
+    normals = np.column_stack([-gradient, np.ones(len(path_xy))])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
+    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
+    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+
+
+def without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -> np.ndarray:
+    """Heights along a closed path with isolated bad patch fits replaced by their neighbours' median.
+
+    One patch fit can fail (a highlight, a mismatch) and smoothing would spread it over its neighbours;
+    a lone value that departs from the median of the five around it is replaced. Two or more in a row are
+    kept: that is the surface, or a fault the self-check must see (cellctl.vision.checks).
+    """
+    window = np.stack([np.roll(z, k) for k in (-2, -1, 0, 1, 2)])
+    median = np.nanmedian(window, axis=0)
+    bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
+    lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
+    return np.where(lone, median, z)
