@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cellctl.stereo.kernels import neighbour_means, patch_shift, patch_step
+from cellctl.stereo.kernels import PointGrid, neighbour_means, patch_shift, patch_step
 from cellctl.vision import outliers, subpixel
 
 from ..vision.test_outliers import _stereo_cloud
@@ -143,3 +143,67 @@ def test_patch_fits_through_the_kernels_find_a_known_shift() -> None:
     assert fit.ok.all()
     np.testing.assert_allclose(fit.params[:, 0], 3.0, atol=0.01)
     np.testing.assert_allclose(fit.params[:, 1:], 0.0, atol=0.005)
+
+
+def _plane_points(seed: int, count: int = 20000) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    points = np.column_stack([rng.uniform(-80, 120, count), rng.uniform(-30, 50, count), rng.normal(20, 3, count)])
+    points[:50, :2] = np.round(points[:50, :2])  # points on cell corners and edges too
+    return points
+
+
+@pytest.mark.parametrize("cell", [1.0, 2.0, 3.7])
+def test_point_grid_finds_what_a_kd_tree_finds(cell: float) -> None:
+    """Radius counts, medians and neighbours (in the tree's order) as Open3D's k-d tree over (x, y, 0) gives
+    them (cellctl.vision.surface used the tree before the grid)."""
+    import open3d as o3d
+
+    points = _plane_points(0)
+    grid = PointGrid(points[:, :2], cell, points[:, 2])
+    flat = np.column_stack([points[:, :2], np.zeros(len(points))])
+    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(flat)))
+    rng = np.random.default_rng(1)
+    queries = np.column_stack([rng.uniform(-95, 135, 150), rng.uniform(-45, 65, 150)])
+    queries[:10] = points[:10, :2] + np.array([cell, 0.0])  # a neighbour exactly at the radius (1 mm)
+    for radius in (1.0, 4.0, 10.0):
+        counts, medians = grid.radius_medians(queries, radius)
+        found = grid.radius_indices(queries, radius)
+        np.testing.assert_array_equal(grid.radius_counts(queries, radius), counts)
+        for k, (x, y) in enumerate(queries):
+            index = np.asarray(tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius)[1], np.int64)
+            np.testing.assert_array_equal(found[k], index)
+            assert counts[k] == len(index)
+            if len(index):
+                assert medians[k] == np.median(points[index, 2])
+            else:
+                assert np.isnan(medians[k])
+
+
+def test_point_grid_cell_medians_and_threads() -> None:
+    points = _plane_points(2)
+    grid = PointGrid(points[:, :2], 1.0, points[:, 2], origin=(-81.0, -31.0), shape=(82, 202))
+    medians = grid.cell_upper_medians()
+    col = np.floor(points[:, 0] + 81.0).astype(int)
+    row = np.floor(points[:, 1] + 31.0).astype(int)
+    for r, c in [(row[0], col[0]), (row[7], col[7]), (40, 100)]:
+        z = np.sort(points[(row == r) & (col == c), 2])
+        assert medians[r, c] == z[len(z) // 2]
+    assert np.isnan(medians[0, 0])  # no point there
+    queries = points[:5000, :2]  # enough queries and cells for two threads
+    one, two = (PointGrid(points[:, :2], 1.0, points[:, 2], threads=t) for t in (1, 2))
+    np.testing.assert_array_equal(one.radius_medians(queries, 4.0), two.radius_medians(queries, 4.0))
+    np.testing.assert_array_equal(one.cell_upper_medians(), two.cell_upper_medians())
+
+
+def test_point_grid_refuses_bad_input() -> None:
+    points = _plane_points(3, 100)
+    with pytest.raises(ValueError, match="positive"):
+        PointGrid(points[:, :2], 0.0)
+    with pytest.raises(ValueError, match="finite"):
+        PointGrid(np.array([[0.0, np.nan]]), 1.0)
+    with pytest.raises(ValueError, match="outside its array"):  # a given raster that does not hold the points
+        PointGrid(points[:, :2], 1.0, origin=(0.0, 0.0), shape=(5, 5))
+    with pytest.raises(ValueError, match="without values"):
+        PointGrid(points[:, :2], 1.0).radius_medians(points[:3, :2], 2.0)
+    with pytest.raises(ValueError, match="negative"):
+        PointGrid(points[:, :2], 1.0, points[:, 2]).radius_medians(points[:3, :2], -1.0)
