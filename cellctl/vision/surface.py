@@ -11,14 +11,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 
+from cellctl.stereo.kernels import PointGrid
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
 
 MIN_CLOUD_POINTS = 12
 MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
 TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
+GRID_CELL_MM = 2.0  # the neighbour grid's cells: a 4 mm query reads 5 x 5 of them
 
 
 @dataclass
@@ -35,16 +36,17 @@ class SoleSurface:
 
     def __init__(self, reconstruction: Reconstruction) -> None:
         self.rec = reconstruction
-        self._tree: o3d.geometry.KDTreeFlann | None = None
+        self._grid: PointGrid | None = None
 
     @property
-    def tree(self) -> o3d.geometry.KDTreeFlann:
-        """Neighbours in the table plane: built at the first query (~10^5 points), then kept."""
-        if self._tree is None:
+    def grid(self) -> PointGrid:
+        """Neighbours in the table plane, a cell grid searched in C (cellctl.stereo.kernels.PointGrid: the
+        neighbours and order a k-d tree's radius search gives, without a Python call per query): built at the
+        first query (~10^5 points, a few ms), then kept."""
+        if self._grid is None:
             points = self.rec.sole_points
-            flat = np.column_stack([points[:, :2], np.zeros(len(points))])
-            self._tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(flat)))
-        return self._tree
+            self._grid = PointGrid(points[:, :2], GRID_CELL_MM, points[:, 2])
+        return self._grid
 
     def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
         """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
@@ -65,35 +67,17 @@ class SoleSurface:
 
     def coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
         """Median height of the cloud's points within the radius (NaN where too few): the refinement's start."""
-        points = self.rec.sole_points
-        found = [np.asarray(self.tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)[1]) for x, y in xy]
-        counts = np.array([len(index) for index in found], np.int64)
-        z = np.full(len(xy), np.nan)
-        enough = np.flatnonzero(counts >= MIN_CLOUD_POINTS)
-        if enough.size == 0:
-            return z
-        # All medians at once: each query's heights as a row (padded with inf), sorted along the rows; the
-        # median is the mean of the two middle values (one for odd counts), as np.median takes it.
-        rows = np.full((enough.size, int(counts[enough].max())), np.inf)
-        row = np.repeat(np.arange(enough.size), counts[enough])
-        column = np.arange(len(row)) - np.repeat(np.cumsum(counts[enough]) - counts[enough], counts[enough])
-        rows[row, column] = points[np.concatenate([found[k] for k in enough]), 2]
-        rows.sort(axis=1)
-        n = counts[enough]
-        lower, upper = rows[np.arange(enough.size), (n - 1) // 2], rows[np.arange(enough.size), n // 2]
-        z[enough] = (lower + upper) / 2
-        return z
+        counts, medians = self.grid.radius_medians(xy, radius_mm)
+        return np.where(counts >= MIN_CLOUD_POINTS, medians, np.nan)
 
     def _from_cloud(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
         points = self.rec.sole_points
         z = np.full(len(xy), np.nan)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
-        for k, (x, y) in enumerate(xy):
-            count, index, _ = self.tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
-            if count < MIN_CLOUD_POINTS:
+        for k, (index, (x, y)) in enumerate(zip(self.grid.radius_indices(xy, radius_mm), xy, strict=True)):
+            if len(index) < MIN_CLOUD_POINTS:
                 continue
-            near = points[np.asarray(index)]
-            z[k], normals[k] = _robust_plane(near, np.array([x, y]))
+            z[k], normals[k] = _robust_plane(points[index], np.array([x, y]))
         return z, normals
 
     def _refine(
