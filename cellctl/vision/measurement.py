@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.stereo.kernels import PointGrid
 from cellctl.vision.checks import (
     GLUE_COVER_RADIUS_MM,
     OUTLINE_OUTSIDE_MM,
@@ -116,7 +117,7 @@ def measure_sole(
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
         )
-    surface = SoleSurface(reconstruction)  # one per reconstruction: its k-d tree serves every query below
+    surface = SoleSurface(reconstruction)  # one per reconstruction: its neighbour grid serves every query below
     problem = _outline_problem(reconstruction, outline, surface)
     if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
         # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
@@ -230,14 +231,9 @@ def _height_map(reconstruction: Reconstruction) -> Callable[[np.ndarray], np.nda
     """Sole height at table points (NaN off the sole): the median of the sole's points per 1 mm cell."""
     points = reconstruction.sole_points
     raster = Footprint.empty_like(points[:, :2], HEIGHT_MAP_CELL_MM)
-    row, col, _ = raster.cells(points[:, :2])
-    flat = row * raster.mask.shape[1] + col
-    order = np.lexsort((points[:, 2], flat))
-    flat, z = flat[order], points[order, 2]
-    starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
-    counts = np.diff(np.r_[starts, len(flat)])
-    grid = np.full(raster.mask.size, np.nan)
-    grid[flat[starts]] = z[starts + counts // 2]  # the median of each cell's sorted heights
+    # The median of each cell's sorted heights (the upper middle one for an even count), per cell in C.
+    cells = PointGrid(points[:, :2], HEIGHT_MAP_CELL_MM, points[:, 2], raster.origin, raster.mask.shape)
+    grid = cells.cell_upper_medians().ravel()
 
     def height(xy: np.ndarray) -> np.ndarray:
         r, c, inside = raster.cells(xy)
