@@ -444,3 +444,62 @@ int ck_cell_upper_medians(const double *gz, const int64_t *starts, int64_t cells
     }
     return CK_OK;
 }
+
+/* ---- points against a polygon (cellctl.vision.footprint) ---- */
+
+/* The first of the m sorted values ys[2 i] (stride 2) not below y (ge) or above it (!ge). */
+static int64_t first_index(const float *ys, int64_t m, float y, int ge) {
+    int64_t lo = 0, hi = m;
+    while (lo < hi) {
+        const int64_t mid = lo + (hi - lo) / 2;
+        if (ge ? ys[2 * mid] < y : ys[2 * mid] <= y)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+int ck_points_in_polygon(const float *polygon, int64_t n, const float *points, int64_t m, int8_t *out) {
+    if (!polygon || !points || !out)
+        return CK_ERR_NULL;
+    if (n < 0 || m < 0)
+        return CK_ERR_SIZE;
+    for (int64_t j = 1; j < m; ++j)
+        if (!(points[2 * j + 1] >= points[2 * j - 1]))
+            return CK_ERR_RANGE;
+    /* out holds the crossing count's parity (1 odd, 2 even) while the edges are applied, 0 once on an edge */
+    for (int64_t j = 0; j < m; ++j)
+        out[j] = n > 0 ? 2 : -1;
+    for (int64_t i = 0; i < n; ++i) {
+        const float *v0 = polygon + 2 * (i == 0 ? n - 1 : i - 1), *v = polygon + 2 * i;
+        const float low = v0[1] < v[1] ? v0[1] : v[1], high = v0[1] < v[1] ? v[1] : v0[1];
+        /* Points whose y lies outside the edge's closed y span: the edge neither crosses their ray nor holds
+         * them, whatever its x. */
+        const int64_t end = first_index(points + 1, m, high, 0);
+        for (int64_t j = first_index(points + 1, m, low, 1); j < end; ++j) {
+            if (out[j] == 0)
+                continue;
+            const float px = points[2 * j], py = points[2 * j + 1];
+            if ((v0[1] <= py && v[1] <= py) || (v0[1] > py && v[1] > py) || (v0[0] < px && v[0] < px)) {
+                if (py == v[1] && (px == v[0] || (py == v0[1] && ((v0[0] <= px && px <= v[0]) ||
+                                                                  (v[0] <= px && px <= v0[0])))))
+                    out[j] = 0;
+                continue;
+            }
+            double dist = (double)(py - v0[1]) * (v[0] - v0[0]) - (double)(px - v0[0]) * (v[1] - v0[1]);
+            if (dist == 0) {
+                out[j] = 0;
+                continue;
+            }
+            if (v[1] < v0[1])
+                dist = -dist;
+            if (dist > 0)
+                out[j] = (int8_t)(3 - out[j]); /* one more crossing: parity flips */
+        }
+    }
+    for (int64_t j = 0; j < m; ++j)
+        if (out[j] > 0)
+            out[j] = out[j] == 1 ? 1 : -1;
+    return CK_OK;
+}

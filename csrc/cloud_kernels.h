@@ -94,4 +94,13 @@ int ck_grid_radius_medians(const double *gx, const double *gy, const double *gz,
 int ck_cell_upper_medians(const double *gz, const int64_t *starts, int64_t cells, double *scratch, double *out,
                           int threads);
 
+/*
+ * Where each point lies against a closed polygon, as OpenCV's pointPolygonTest (measureDist false, float32
+ * contour) answers for it: 1 inside, -1 outside, 0 on an edge or vertex (the same crossing rule and the
+ * same float32 differences and double products). polygon: n vertices (x, y float32); points: m (x, y
+ * float32), sorted by y; out: m. Each point meets only the edges whose y span holds it (one thread: every
+ * edge updates the points of its rows).
+ */
+int ck_points_in_polygon(const float *polygon, int64_t n, const float *points, int64_t m, int8_t *out);
+
 #endif

@@ -320,3 +320,16 @@ class PointGrid:
         )
         _check(rc, "cell medians")
         return out.reshape(self.rows, self.cols)
+
+
+def points_in_polygon(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """cv2.pointPolygonTest(polygon as float32, point, False) for each point (M x 2, sorted by y): 1 inside,
+    -1 outside, 0 on the boundary (int8, M), in one call."""
+    polygon = np.ascontiguousarray(np.asarray(polygon).reshape(-1, 2), np.float32)
+    points = np.ascontiguousarray(np.asarray(points).reshape(-1, 2), np.float32)
+    out = np.empty(len(points), np.int8)
+    rc = lib.ck_points_in_polygon(
+        _ptr("const float *", polygon), len(polygon), _ptr("const float *", points), len(points), _ptr("int8_t *", out)
+    )
+    _check(rc, "points in polygon (points sorted by y)")
+    return out

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cellctl.stereo.kernels import PointGrid, neighbour_means, patch_shift, patch_step
+from cellctl.stereo.kernels import PointGrid, neighbour_means, patch_shift, patch_step, points_in_polygon
 from cellctl.vision import outliers, subpixel
 
 from ..vision.test_outliers import _stereo_cloud
@@ -207,3 +207,24 @@ def test_point_grid_refuses_bad_input() -> None:
         PointGrid(points[:, :2], 1.0).radius_medians(points[:3, :2], 2.0)
     with pytest.raises(ValueError, match="negative"):
         PointGrid(points[:, :2], 1.0, points[:, 2]).radius_medians(points[:3, :2], -1.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_points_in_polygon_is_opencvs_point_polygon_test(seed: int) -> None:
+    """Inside, outside and on the boundary exactly as cv2.pointPolygonTest (Footprint.filled used it point by
+    point): vertices on the integer and half-integer grid put many points on edges and vertices, and a
+    polygon from random vertices crosses itself."""
+    rng = np.random.default_rng(seed)
+    if seed % 2:
+        polygon = np.round(rng.uniform(0, 30, (40, 2)) * 2) / 2
+    else:
+        angle = np.sort(rng.uniform(0, 2 * np.pi, 150))
+        polygon = np.round(15 + rng.uniform(4, 14, 150)[:, None] * np.column_stack([np.cos(angle), np.sin(angle)]))
+    polygon = polygon.astype(np.float32)
+    ys, xs = np.mgrid[0:31, 0:31]
+    points = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float32)
+    expected = [cv2.pointPolygonTest(polygon.reshape(-1, 1, 2), (float(x), float(y)), False) for x, y in points]
+    assert 0 in expected and 1 in expected and -1 in expected
+    np.testing.assert_array_equal(points_in_polygon(polygon, points), expected)
+    with pytest.raises(ValueError, match="sorted by y"):
+        points_in_polygon(polygon, points[::-1])
