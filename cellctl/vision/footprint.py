@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cellctl.stereo.kernels import points_in_polygon
+
 DEFAULT_CELL_MM = 0.5  # ~ the stereo pixel footprint at 550 mm (0.39 mm): most cells receive a point
 
 
@@ -109,10 +111,8 @@ class Footprint:
         cv2.fillPoly(mask, [np.round(cells * (1 << shift)).astype(np.int32)], 1, cv2.LINE_8, shift)
         # fillPoly also marks cells the edge merely touches: test the centres of the boundary cells exactly.
         rows, cols = np.nonzero((mask > 0) & (cv2.erode(mask, np.ones((3, 3), np.uint8)) == 0))
-        contour = cells.astype(np.float32).reshape(-1, 1, 2)
-        outside = [
-            cv2.pointPolygonTest(contour, (float(c), float(r)), False) < 0 for r, c in zip(rows, cols, strict=True)
-        ]
+        # cv2.pointPolygonTest's answer for all of them in one C call (np.nonzero gives them sorted by row).
+        outside = points_in_polygon(cells, np.column_stack([cols, rows])) < 0
         mask[rows[outside], cols[outside]] = 0
         return Footprint(mask, self.origin, self.cell_mm)
 
