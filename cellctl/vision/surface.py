@@ -36,17 +36,11 @@ class SoleSurface:
 
     def __init__(self, reconstruction: Reconstruction) -> None:
         self.rec = reconstruction
-        self._grid: PointGrid | None = None
-
-    @property
-    def grid(self) -> PointGrid:
-        """Neighbours in the table plane, a cell grid searched in C (cellctl.stereo.kernels.PointGrid: the
-        neighbours and order a k-d tree's radius search gives, without a Python call per query): built at the
-        first query (~10^5 points, a few ms), then kept."""
-        if self._grid is None:
-            points = self.rec.sole_points
-            self._grid = PointGrid(points[:, :2], GRID_CELL_MM, points[:, 2])
-        return self._grid
+        points = reconstruction.sole_points
+        # Neighbours in the table plane, a cell grid searched in C (cellctl.stereo.kernels.PointGrid: the
+        # neighbours and order a k-d tree's radius search gives, without a Python call per query); built here
+        # (~10^5 points, a few ms), so that threads may query it at once.
+        self.grid = PointGrid(points[:, :2], GRID_CELL_MM, points[:, 2])
 
     def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
         """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
