@@ -503,3 +503,48 @@ int ck_points_in_polygon(const float *polygon, int64_t n, const float *points, i
             out[j] = out[j] == 1 ? 1 : -1;
     return CK_OK;
 }
+
+/* ---- bicubic samples on image rows (cellctl.vision.subpixel) ---- */
+
+int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params, const float *x, const double *dx,
+                    const double *dy, const int32_t *rows, const float *image, int height, int width, float *out,
+                    int threads) {
+    if (!starts || !params || !x || !dx || !dy || !rows || !image || !out)
+        return CK_ERR_NULL;
+    if (height < 1 || width < 1)
+        return CK_ERR_SIZE;
+    int rc = check_patches(patches, starts, threads);
+    if (rc != CK_OK)
+        return rc;
+    for (int64_t i = 0; i < starts[patches]; ++i)
+        if (rows[i] < 0 || rows[i] >= height)
+            return CK_ERR_RANGE;
+    const float a = -0.75f, limit = (float)width + 4.0f;
+#pragma omp parallel for schedule(static) num_threads(thread_count(threads)) \
+    if (starts[patches] >= CK_PARALLEL_MIN)
+    for (int64_t k = 0; k < patches; ++k) {
+        const double pa = params[3 * k], pb = params[3 * k + 1], pc = params[3 * k + 2];
+        for (int64_t i = starts[k]; i < starts[k + 1]; ++i) {
+            float at = (float)((double)x[i] - (pa + pb * dx[i] + pc * dy[i])); /* as ck_patch_shift */
+            at = at >= -4.0f ? (at <= limit ? at : limit) : -4.0f;            /* NaN: -4, column 0 */
+            const int whole = (int)(at + 4.0f) - 4;                             /* floor: at + 4 >= 0 */
+            const float t = at - (float)whole, t1 = t + 1.0f, u = 1.0f - t;
+            const float w0 = ((a * t1 - 5.0f * a) * t1 + 8.0f * a) * t1 - 4.0f * a;
+            const float w1 = ((a + 2.0f) * t - (a + 3.0f)) * t * t + 1.0f;
+            const float w2 = ((a + 2.0f) * u - (a + 3.0f)) * u * u + 1.0f;
+            const float w3 = 1.0f - w0 - w1 - w2;
+            const float *row = image + (int64_t)rows[i] * width * 2;
+            int c0 = whole - 1, c1 = whole, c2 = whole + 1, c3 = whole + 2;
+            if (c0 < 0 || c3 >= width) {
+                c0 = c0 < 0 ? 0 : (c0 >= width ? width - 1 : c0);
+                c1 = c1 < 0 ? 0 : (c1 >= width ? width - 1 : c1);
+                c2 = c2 < 0 ? 0 : (c2 >= width ? width - 1 : c2);
+                c3 = c3 < 0 ? 0 : (c3 >= width ? width - 1 : c3);
+            }
+            for (int ch = 0; ch < 2; ++ch)
+                out[2 * i + ch] = row[2 * c0 + ch] * w0 + row[2 * c1 + ch] * w1 + row[2 * c2 + ch] * w2 +
+                                  row[2 * c3 + ch] * w3;
+        }
+    }
+    return CK_OK;
+}

@@ -103,4 +103,16 @@ int ck_cell_upper_medians(const double *gz, const int64_t *starts, int64_t cells
  */
 int ck_points_in_polygon(const float *polygon, int64_t n, const float *points, int64_t m, int8_t *out);
 
+/*
+ * Bicubic samples of a two-channel image on whole rows, where each patch pixel's plane puts it (x - (a + b dx
+ * + c dy), as ck_patch_shift rounds it to float32): Keys' cubic convolution with a = -0.75 (OpenCV's
+ * INTER_CUBIC weights, here from the exact fraction of x in float32), border columns replicated
+ * (BORDER_REPLICATE). It agrees with cv2.remap at an integer y to ~2e-6 of the value: OpenCV quantises and
+ * orders its arithmetic differently. A NaN position samples column 0. image: height x width x 2 float32
+ * (value, x gradient); rows[i] in 0..height-1; out: pixels x 2.
+ */
+int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params, const float *x, const double *dx,
+                    const double *dy, const int32_t *rows, const float *image, int height, int width, float *out,
+                    int threads);
+
 #endif

@@ -6,7 +6,14 @@ import cv2
 import numpy as np
 import pytest
 
-from cellctl.stereo.kernels import PointGrid, neighbour_means, patch_shift, patch_step, points_in_polygon
+from cellctl.stereo.kernels import (
+    PointGrid,
+    neighbour_means,
+    patch_sample,
+    patch_shift,
+    patch_step,
+    points_in_polygon,
+)
 from cellctl.vision import outliers, subpixel
 
 from ..vision.test_outliers import _stereo_cloud
@@ -228,3 +235,31 @@ def test_points_in_polygon_is_opencvs_point_polygon_test(seed: int) -> None:
     np.testing.assert_array_equal(points_in_polygon(polygon, points), expected)
     with pytest.raises(ValueError, match="sorted by y"):
         points_in_polygon(polygon, points[::-1])
+
+
+def test_patch_sample_is_remap_of_patch_shift() -> None:
+    """Bicubic samples on whole rows where the patch planes put the pixels: what cv2.remap (INTER_CUBIC,
+    BORDER_REPLICATE) gives at patch_shift's positions, to ~1e-6 of the value (OpenCV's arithmetic differs in
+    its order), also past both sides of the image; the same on one and two threads."""
+    p = _patches(5, count=300)
+    rng = np.random.default_rng(6)
+    image = cv2.GaussianBlur(rng.normal(100, 40, (50, 300, 2)).astype(np.float32), (0, 0), 1.0)
+    pixels = len(p["x"])
+    rows = rng.integers(0, 50, pixels)
+    x = rng.uniform(-10, 310, pixels).astype(np.float32)
+    shifted = patch_shift(p["starts"], p["params"], x, p["dx"], p["dy"])
+    expected = cv2.remap(
+        image,
+        shifted.reshape(1, -1),
+        rows.astype(np.float32).reshape(1, -1),
+        cv2.INTER_CUBIC,
+        borderMode=cv2.BORDER_REPLICATE,
+    ).reshape(-1, 2)
+    args = (p["starts"], p["params"], x, p["dx"], p["dy"], rows, image)
+    one, two = patch_sample(*args, threads=1), patch_sample(*args, threads=2)
+    np.testing.assert_allclose(one, expected, rtol=0, atol=1e-5 * np.abs(image).max())
+    np.testing.assert_array_equal(one, two)
+    with pytest.raises(ValueError, match="H x W x 2"):
+        patch_sample(*args[:-1], image[..., 0])
+    with pytest.raises(ValueError, match="outside its array"):
+        patch_sample(*args[:-2], np.full(pixels, 50), image)
