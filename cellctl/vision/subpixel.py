@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cellctl.stereo.kernels import patch_shift, patch_step
+from cellctl.stereo.kernels import patch_sample, patch_shift, patch_step
 
 BLUR_LEVELS: tuple[tuple[float, int], ...] = ((2.0, 4), (1.0, 3), (0.0, 3))  # (Gaussian sigma px, iterations)
 MIN_PATCH_PIXELS = 40
@@ -133,6 +133,8 @@ def fit_disparity_planes(
     last_step = np.full(count, np.inf)
     starts = np.concatenate([[0], np.cumsum(sizes)])
     right_at = _Sampler(y)
+    # Patches of image pixels lie on whole rows: there the right image is sampled in C (ck_patch_sample).
+    rows = y.astype(np.int32) if np.array_equal(y, np.round(y)) and len(y) else None
     for sigma, iterations in BLUR_LEVELS:
         l_img = cv2.GaussianBlur(left, (0, 0), sigma) if sigma > 0 else left
         r_img = cv2.GaussianBlur(right, (0, 0), sigma) if sigma > 0 else right
@@ -145,7 +147,10 @@ def fit_disparity_planes(
             # Where each patch's plane puts its pixels (x - d), the right image there, and the step with its
             # per-patch sums and 3 x 3 solves, in C (csrc/cloud_kernels.c); the numpy formulation the step
             # follows is _gauss_newton_step, the tests' reference.
-            samples = right_at(r_both, patch_shift(starts, params, x, dx, dy, KERNEL_THREADS))
+            if rows is None:
+                samples = right_at(r_both, patch_shift(starts, params, x, dx, dy, KERNEL_THREADS))
+            else:  # on whole rows: shift and bicubic sample in one C pass (cv2.remap's values to ~1e-6)
+                samples = patch_sample(starts, params, x, dx, dy, rows, r_both, KERNEL_THREADS)
             step = patch_step(starts, l_dev, l_energy, samples, dx, dy, KERNEL_THREADS)
             params += np.clip(step, -MAX_STEP_PX, MAX_STEP_PX)
             last_step = np.abs(step[:, 0])
