@@ -135,12 +135,14 @@ def fit_disparity_planes(
     right_at = _Sampler(y)
     # Patches of image pixels lie on whole rows: there the right image is sampled in C (ck_patch_sample).
     rows = y.astype(np.int32) if np.array_equal(y, np.round(y)) and len(y) else None
+    # The left image is sampled where its pixels are: at whole pixels the bicubic sample is the pixel itself.
+    columns = x.astype(np.int64) if rows is not None and np.array_equal(x, np.round(x)) else None
     for sigma, iterations in BLUR_LEVELS:
         l_img = cv2.GaussianBlur(left, (0, 0), sigma) if sigma > 0 else left
         r_img = cv2.GaussianBlur(right, (0, 0), sigma) if sigma > 0 else right
         # The right image and its x gradient as two channels: one remap samples both at the same points.
         r_both = cv2.merge([r_img, cv2.Sobel(r_img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)])
-        l_val = _sample(l_img, x, y)
+        l_val = _sample(l_img, x, y) if columns is None else l_img[rows, columns].astype(np.float64)
         l_dev = l_val - sums.means_at_pixels(l_val)  # the left patch does not move: its statistics are fixed per level
         l_energy = sums(l_dev**2)
         for _ in range(iterations):
