@@ -174,12 +174,13 @@ class PointGrid:
         values: np.ndarray | None = None,
         origin: tuple[float, float] | None = None,
         shape: tuple[int, int] | None = None,
-        threads: int = ALL_THREADS,
+        threads: int = 1,
     ) -> None:
         """values: one number per point (N, finite) whose medians `radius_medians` takes. origin (x, y of cell
         (0, 0)'s corner) and shape (rows, cols): a given raster's cells, which must hold every point (default:
         from the points' smallest x and y, just covering them). threads: for the queries (the same result on
-        any number)."""
+        any number); one by default: a cycle's queries take a few ms and run beside the measurement's other
+        threads, where an OpenMP team would wait for a core at its barrier."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
         if not cell_mm > 0:
             raise ValueError(f"cell size must be positive, got {cell_mm}")
