@@ -87,7 +87,38 @@ def refine_patches(
     ids, pixels = disc_pixels(mask, centres, radius_px)
     start = np.asarray(start, np.float64)
     params = start.reshape(-1, 3) if start.ndim == 2 else np.column_stack([start, np.zeros((len(start), 2))])
-    return fit_disparity_planes(left, right, ids, pixels, centres, params)
+    centres = np.asarray(centres, np.float64).reshape(-1, 2)
+    groups = _row_groups(centres[:, 1], radius_px)
+    if len(groups) == 1:
+        return fit_disparity_planes(left, right, ids, pixels, centres, params)
+    # Patches in rows far apart (a heel and a toe): each group filters only its own rows. Every patch is
+    # fitted on its own, so the fits are those of one call over all of them.
+    parts = []
+    for group in groups:
+        chosen = np.flatnonzero(np.isin(ids, group))
+        local = np.searchsorted(group, ids[chosen])
+        parts.append((group, fit_disparity_planes(left, right, local, pixels[chosen], centres[group], params[group])))
+    return _merged(parts, len(centres))
+
+
+def _row_groups(rows: np.ndarray, radius_px: float) -> list[np.ndarray]:
+    """Patches (indices, ascending) in groups whose filtered rows (radius and the filters' reach) do not meet."""
+    order = np.argsort(rows, kind="stable")
+    gap = 2.0 * (radius_px + _ROW_MARGIN_PX) + 2.0
+    cuts = np.flatnonzero(np.diff(rows[order]) > gap) + 1
+    return [np.sort(part) for part in np.split(order, cuts)]
+
+
+def _merged(parts: list[tuple[np.ndarray, PatchFit]], count: int) -> PatchFit:
+    """One PatchFit of `count` patches from fits of groups of them (global indices, ascending, per group)."""
+    params, ok = np.empty((count, 3)), np.zeros(count, bool)
+    for group, fit in parts:
+        params[group], ok[group] = fit.params, fit.ok
+    ids = np.concatenate([group[fit.ids] for group, fit in parts])
+    order = np.argsort(ids, kind="stable")  # patch after patch, each patch's pixels in their order
+    ids, xy = ids[order], np.concatenate([fit.xy for _, fit in parts])[order]
+    sizes = np.bincount(ids, minlength=count)
+    return PatchFit(params, ok, np.split(xy, np.cumsum(sizes)[:-1]), ids, xy)
 
 
 def disc_pixels(mask: np.ndarray, centres: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:

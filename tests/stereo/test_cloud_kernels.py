@@ -263,3 +263,25 @@ def test_patch_sample_is_remap_of_patch_shift() -> None:
         patch_sample(*args[:-1], image[..., 0])
     with pytest.raises(ValueError, match="outside its array"):
         patch_sample(*args[:-2], np.full(pixels, 50), image)
+
+
+def test_patch_fits_in_row_groups_are_the_fits_of_one_call() -> None:
+    """refine_patches fits patches whose rows lie far apart (a heel and a toe) group by group, each filtering
+    only its own rows: the same parameters, flags and pixels, bit for bit, as one call over all patches."""
+    rng = np.random.default_rng(7)
+    left = cv2.GaussianBlur(rng.normal(100, 30, (400, 200)).astype(np.float32), (0, 0), 1.2)
+    right = np.roll(left, -3, axis=1)
+    centres = np.array([[60.0, 40.0], [100.0, 350.0], [80.0, 55.0], [140.0, 330.0], [100.0, 200.0]])
+    mask = np.ones(left.shape, bool)
+    start = np.full(len(centres), 2.7)
+    assert len(subpixel._row_groups(centres[:, 1], 10.0)) == 3
+    grouped = subpixel.refine_patches(left, right, mask, centres, 10.0, start)
+    ids, pixels = subpixel.disc_pixels(mask, centres, 10.0)
+    params = np.column_stack([start, np.zeros((len(start), 2))])
+    whole = subpixel.fit_disparity_planes(left, right, ids, pixels, centres, params)
+    np.testing.assert_array_equal(grouped.params, whole.params)
+    np.testing.assert_array_equal(grouped.ok, whole.ok)
+    np.testing.assert_array_equal(grouped.ids, whole.ids)
+    np.testing.assert_array_equal(grouped.xy, whole.xy)
+    for a, b in zip(grouped.pixels, whole.pixels, strict=True):
+        np.testing.assert_array_equal(a, b)
