@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-from concurrent import futures
-
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.local_fit import local_planes
 from cellctl.vision.sole_result import GluePath
-from cellctl.vision.surface import SoleSurface, SurfaceSamples
+from cellctl.vision.surface import SoleSurface
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 10.0  # second ring of height samples this far inside the path, for the normals
@@ -42,7 +40,8 @@ def glue_path(
     path_xy = np.roll(path_xy, -start, axis=0)
     path_inward = -outward_normals(path_xy)
     inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
-    samples = _sample_rings(surface, path_xy, inner_xy)
+    # The patch fits on two threads (SoleSurface.sample(parallel=True)): the same samples as on one.
+    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM, parallel=True)
     missing = np.flatnonzero(~np.isfinite(samples.z[: len(path_xy)]))
     if missing.size:
         x, y = path_xy[missing[0]]
@@ -81,33 +80,3 @@ def without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) ->
     bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
     lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
     return np.where(lone, median, z)
-
-
-def _sample_rings(surface: SoleSurface, path_xy: np.ndarray, inner_xy: np.ndarray) -> SurfaceSamples:
-    """surface.sample of the path and the inner ring (GLUE_FIT_RADIUS_MM), the inner ring on a second thread.
-
-    Every query is fitted on its own (its patch's pixels, its own Gauss-Newton steps; the images are filtered
-    over the rows the patches cover plus the filters' reach), so the two halves give exactly what one call
-    over both gives; the patch fits run in C and OpenCV, which release the GIL.
-    """
-    inner = _ring_worker().submit(surface.sample, inner_xy, GLUE_FIT_RADIUS_MM)
-    try:
-        path = surface.sample(path_xy, GLUE_FIT_RADIUS_MM)
-    finally:
-        futures.wait([inner])
-    ring = inner.result()
-    return SurfaceSamples(
-        np.concatenate([path.z, ring.z]),
-        np.vstack([path.normals, ring.normals]),
-        np.concatenate([path.refined, ring.refined]),
-    )
-
-
-_RING_WORKER: list[futures.ThreadPoolExecutor] = []
-
-
-def _ring_worker() -> futures.ThreadPoolExecutor:
-    """The thread the inner ring is fitted on (one, started at the first glue path)."""
-    if not _RING_WORKER:
-        _RING_WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="glue-ring"))
-    return _RING_WORKER[0]

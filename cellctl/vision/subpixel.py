@@ -98,7 +98,7 @@ def refine_patches(
         chosen = np.flatnonzero(np.isin(ids, group))
         local = np.searchsorted(group, ids[chosen])
         parts.append((group, fit_disparity_planes(left, right, local, pixels[chosen], centres[group], params[group])))
-    return _merged(parts, len(centres))
+    return merged_fits(parts, len(centres))
 
 
 def _row_groups(rows: np.ndarray, radius_px: float) -> list[np.ndarray]:
@@ -109,8 +109,9 @@ def _row_groups(rows: np.ndarray, radius_px: float) -> list[np.ndarray]:
     return [np.sort(part) for part in np.split(order, cuts)]
 
 
-def _merged(parts: list[tuple[np.ndarray, PatchFit]], count: int) -> PatchFit:
-    """One PatchFit of `count` patches from fits of groups of them (global indices, ascending, per group)."""
+def merged_fits(parts: list[tuple[np.ndarray, PatchFit]], count: int) -> PatchFit:
+    """One PatchFit of `count` patches from fits of groups of them (global indices, ascending, per group):
+    every patch is fitted on its own, so this is the fit of one call over all of them."""
     params, ok = np.empty((count, 3)), np.zeros(count, bool)
     for group, fit in parts:
         params[group], ok[group] = fit.params, fit.ok

@@ -8,13 +8,14 @@ the same plane is fitted to the cloud's points near the query.
 
 from __future__ import annotations
 
+from concurrent import futures
 from dataclasses import dataclass
 
 import numpy as np
 
 from cellctl.stereo.kernels import PointGrid
 from cellctl.vision.reconstruction import Reconstruction
-from cellctl.vision.subpixel import PatchSums, refine_patches
+from cellctl.vision.subpixel import PatchFit, PatchSums, merged_fits, refine_patches
 
 MIN_CLOUD_POINTS = 12
 MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
@@ -42,8 +43,11 @@ class SoleSurface:
         # (~10^5 points, a few ms), so that threads may query it at once.
         self.grid = PointGrid(points[:, :2], GRID_CELL_MM, points[:, 2])
 
-    def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
-        """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
+    def sample(self, xy: np.ndarray, radius_mm: float, parallel: bool = False) -> SurfaceSamples:
+        """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each.
+
+        parallel: the image fits of the first and second half of the queries on two threads (the same
+        result: every patch is fitted on its own, with the patch radius of all the queries)."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
         refined = np.zeros(len(xy), bool)
         if self.rec.rectified is None:
@@ -52,7 +56,7 @@ class SoleSurface:
         z = self.coarse_heights(xy, radius_mm)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
         if np.any(np.isfinite(z)):
-            self._refine(xy, z, normals, refined, radius_mm)
+            self._refine(xy, z, normals, refined, radius_mm, parallel)
         # Where the images gave no fit (too few pixels, no convergence), fall back to the cloud.
         rest = np.flatnonzero(~refined)
         if rest.size:
@@ -75,7 +79,13 @@ class SoleSurface:
         return z, normals
 
     def _refine(
-        self, xy: np.ndarray, z: np.ndarray, normals: np.ndarray, refined: np.ndarray, radius_mm: float
+        self,
+        xy: np.ndarray,
+        z: np.ndarray,
+        normals: np.ndarray,
+        refined: np.ndarray,
+        radius_mm: float,
+        parallel: bool = False,
     ) -> None:
         rec = self.rec
         calib, rectified, to_table, mask = rec.calibration, rec.rectified, rec.camera_to_table, rec.sole_mask
@@ -89,7 +99,7 @@ class SoleSurface:
         centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
         start = focal * calib.baseline_mm / guess[:, 2]
         radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
-        fit = refine_patches(left, right, mask, centres, radius_px, start)
+        fit = _fits(left, right, mask, centres, radius_px, start, parallel)
         homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
         camera = homogeneous[:, :3] / homogeneous[:, 3:4]
         table = camera @ to_table[:3, :3].T + to_table[:3, 3]
@@ -98,6 +108,39 @@ class SoleSurface:
         # plane takes over there.
         done = fit.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known]) < MAX_REFINE_SHIFT_MM)
         z[known[done]], normals[known[done]], refined[known[done]] = patch_z[done], patch_normals[done], True
+
+
+def _fits(
+    left: np.ndarray,
+    right: np.ndarray,
+    mask: np.ndarray,
+    centres: np.ndarray,
+    radius_px: float,
+    start: np.ndarray,
+    parallel: bool,
+) -> PatchFit:
+    """refine_patches, with the second half of the patches on a worker thread when `parallel` (the patch
+    fits run in C and OpenCV, which release the GIL)."""
+    half = len(centres) // 2
+    if not parallel or half == 0:
+        return refine_patches(left, right, mask, centres, radius_px, start)
+    second = _fit_worker().submit(refine_patches, left, right, mask, centres[half:], radius_px, start[half:])
+    try:
+        first = refine_patches(left, right, mask, centres[:half], radius_px, start[:half])
+    finally:
+        futures.wait([second])
+    parts = [(np.arange(half), first), (np.arange(half, len(centres)), second.result())]
+    return merged_fits(parts, len(centres))
+
+
+_FIT_WORKER: list[futures.ThreadPoolExecutor] = []
+
+
+def _fit_worker() -> futures.ThreadPoolExecutor:
+    """The thread half of a parallel sample's patches are fitted on (one, started at the first use)."""
+    if not _FIT_WORKER:
+        _FIT_WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="patch-fits"))
+    return _FIT_WORKER[0]
 
 
 def _planes_at(points: np.ndarray, ids: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
