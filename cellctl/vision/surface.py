@@ -15,7 +15,7 @@ import numpy as np
 
 from cellctl.stereo.kernels import PointGrid
 from cellctl.vision.reconstruction import Reconstruction
-from cellctl.vision.subpixel import PatchFit, PatchSums, merged_fits, refine_patches
+from cellctl.vision.subpixel import PatchSums, refine_patches
 
 MIN_CLOUD_POINTS = 12
 MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
@@ -99,45 +99,43 @@ class SoleSurface:
         centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
         start = focal * calib.baseline_mm / guess[:, 2]
         radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
-        fit = _fits(left, right, mask, centres, radius_px, start, parallel)
-        homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
-        camera = homogeneous[:, :3] / homogeneous[:, 3:4]
-        table = camera @ to_table[:3, :3].T + to_table[:3, 3]
-        patch_z, patch_normals = _planes_at(table, fit.ids, xy[known])
-        # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the cloud's
-        # plane takes over there.
-        done = fit.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known]) < MAX_REFINE_SHIFT_MM)
-        z[known[done]], normals[known[done]], refined[known[done]] = patch_z[done], patch_normals[done], True
 
+        def fit(part: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """Image fits of the known queries `part`: which succeeded, their heights and normals."""
+            patches = refine_patches(left, right, mask, centres[part], radius_px, start[part])
+            pixel_disparity = np.column_stack(
+                [patches.xy, patches.disparities(centres[part]), np.ones(len(patches.ids))]
+            )
+            homogeneous = pixel_disparity @ calib.Q.T
+            camera = homogeneous[:, :3] / homogeneous[:, 3:4]
+            table = camera @ to_table[:3, :3].T + to_table[:3, 3]
+            patch_z, patch_normals = _planes_at(table, patches.ids, xy[known[part]])
+            # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the
+            # cloud's plane takes over there.
+            done = patches.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known[part]]) < MAX_REFINE_SHIFT_MM)
+            return part[done], patch_z[done], patch_normals[done]
 
-def _fits(
-    left: np.ndarray,
-    right: np.ndarray,
-    mask: np.ndarray,
-    centres: np.ndarray,
-    radius_px: float,
-    start: np.ndarray,
-    parallel: bool,
-) -> PatchFit:
-    """refine_patches, with the second half of the patches on a worker thread when `parallel` (the patch
-    fits run in C and OpenCV, which release the GIL)."""
-    half = len(centres) // 2
-    if not parallel or half == 0:
-        return refine_patches(left, right, mask, centres, radius_px, start)
-    second = _fit_worker().submit(refine_patches, left, right, mask, centres[half:], radius_px, start[half:])
-    try:
-        first = refine_patches(left, right, mask, centres[:half], radius_px, start[:half])
-    finally:
-        futures.wait([second])
-    parts = [(np.arange(half), first), (np.arange(half, len(centres)), second.result())]
-    return merged_fits(parts, len(centres))
+        # parallel: the second half of the queries on a worker thread (numpy, OpenCV and the C kernels release
+        # the GIL). Every query is fitted on its own with the radius of all of them: the same result.
+        half = len(known) // 2
+        if parallel and half > 0:
+            second = _fit_worker().submit(fit, np.arange(half, len(known)))
+            try:
+                results = [fit(np.arange(half))]
+            finally:
+                futures.wait([second])
+            results.append(second.result())
+        else:
+            results = [fit(np.arange(len(known)))]
+        for part, part_z, part_normals in results:
+            z[known[part]], normals[known[part]], refined[known[part]] = part_z, part_normals, True
 
 
 _FIT_WORKER: list[futures.ThreadPoolExecutor] = []
 
 
 def _fit_worker() -> futures.ThreadPoolExecutor:
-    """The thread half of a parallel sample's patches are fitted on (one, started at the first use)."""
+    """The thread half of a parallel sample's queries are fitted on (one, started at the first use)."""
     if not _FIT_WORKER:
         _FIT_WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="patch-fits"))
     return _FIT_WORKER[0]
