@@ -60,34 +60,55 @@ static inline uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, 
 #if CC_HAVE_X86
 #define AVX2 __attribute__((target("avx2")))
 
+/* One vector of 16 disparities k..k+15 of a path step; `tail` masks the lanes past the last disparity
+ * (they never win). */
+AVX2 static inline __m256i path_lanes_avx2(const uint8_t *cost, const uint16_t *prev, int k, __m256i vp1,
+                                           __m256i vpm, __m256i vlim, __m256i tail)
+{
+    __m256i l = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i *)(cost + k)));
+    if (prev) {
+        __m256i m = _mm256_load_si256((const __m256i *)(prev + k));
+        __m256i lo = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k - 1)), vp1);
+        __m256i hi = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k + 1)), vp1);
+        m = _mm256_min_epu16(_mm256_min_epu16(m, lo), _mm256_min_epu16(hi, vlim));
+        l = _mm256_add_epi16(l, _mm256_sub_epi16(m, vpm));
+    }
+    return _mm256_or_si256(l, tail);
+}
+
+AVX2 static inline void path_store_avx2(uint16_t *out, const uint16_t *acc_in, uint16_t *acc_out, int k,
+                                        __m256i l, int stream)
+{
+    _mm256_store_si256((__m256i *)(out + k), l);
+    __m256i a = acc_in ? _mm256_add_epi16(_mm256_load_si256((const __m256i *)(acc_in + k)), l) : l;
+    if (stream)
+        _mm256_stream_si256((__m256i *)(acc_out + k), a);
+    else
+        _mm256_store_si256((__m256i *)(acc_out + k), a);
+}
+
+/* The full vectors first, without any lane test; then the last, partial one (only when D is not a
+ * multiple of 16), with its lanes past D - 1 set to CC_PATH_INF. */
 AVX2 static inline uint16_t path_step_avx2_nt(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
                                        uint16_t prev_min, int p2, uint16_t *out,
                                        const uint16_t *acc_in, uint16_t *acc_out, int stream)
 {
-    int D = s->D, Dp = s->Dp;
+    const int D = s->D, full = D & ~(CC_LANES - 1);
     const __m256i vp1 = _mm256_set1_epi16((short)s->p.p1);
     const __m256i vpm = _mm256_set1_epi16((short)prev_min);
     const __m256i vlim = _mm256_set1_epi16((short)(prev_min + p2));
-    const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const __m256i none = _mm256_setzero_si256();
     __m256i best = _mm256_set1_epi16((short)CC_PATH_INF);
-    for (int k = 0; k < Dp; k += CC_LANES) {
-        __m256i l = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i *)(cost + k)));
-        if (prev) {
-            __m256i m = _mm256_load_si256((const __m256i *)(prev + k));
-            __m256i lo = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k - 1)), vp1);
-            __m256i hi = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k + 1)), vp1);
-            m = _mm256_min_epu16(_mm256_min_epu16(m, lo), _mm256_min_epu16(hi, vlim));
-            l = _mm256_add_epi16(l, _mm256_sub_epi16(m, vpm));
-        }
-        if (k + CC_LANES > D) /* lanes past the last disparity never win */
-            l = _mm256_or_si256(l, _mm256_cmpgt_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((short)k)),
-                                                      _mm256_set1_epi16((short)(D - 1))));
-        _mm256_store_si256((__m256i *)(out + k), l);
-        __m256i a = acc_in ? _mm256_add_epi16(_mm256_load_si256((const __m256i *)(acc_in + k)), l) : l;
-        if (stream)
-            _mm256_stream_si256((__m256i *)(acc_out + k), a);
-        else
-            _mm256_store_si256((__m256i *)(acc_out + k), a);
+    for (int k = 0; k < full; k += CC_LANES) {
+        __m256i l = path_lanes_avx2(cost, prev, k, vp1, vpm, vlim, none);
+        path_store_avx2(out, acc_in, acc_out, k, l, stream);
+        best = _mm256_min_epu16(best, l);
+    }
+    if (full < D) {
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        __m256i tail = _mm256_cmpgt_epi16(lane, _mm256_set1_epi16((short)(D - 1 - full)));
+        __m256i l = path_lanes_avx2(cost, prev, full, vp1, vpm, vlim, tail);
+        path_store_avx2(out, acc_in, acc_out, full, l, stream);
         best = _mm256_min_epu16(best, l);
     }
     __m128i b = _mm_min_epu16(_mm256_castsi256_si128(best), _mm256_extracti128_si256(best, 1));

@@ -233,21 +233,28 @@ static void median_row(const int16_t *in, int width, int height, int y, int size
 }
 
 
+/* The post-processing's scratch, in this order: a map; the levels (32 entries of slack for the vector
+ * loads); the packed guide (8 px of slack); the level runs; the guide's planes (3, each with 32 bytes of
+ * slack); the no-level bytes (32 of slack); a histogram per thread. */
+#define LEVEL_SLACK 32
+static size_t plane_bytes(size_t n) { return cc_round_up(n + 32, 64); }
+
 size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, int threads)
 {
     size_t n = (size_t)width * height;
-    /* map, levels and packed guide, each with 8 pixels of slack for the vector loads; level runs */
-    return cc_round_up(n * sizeof(int16_t), 64) + cc_round_up((n + 8) * sizeof(uint16_t), 64) +
-           cc_round_up(n * sizeof(uint16_t), 64) +
-           cc_round_up((n + 8) * sizeof(uint32_t), 64) +
-           cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64) * (size_t)threads;
+    return cc_round_up(n * sizeof(int16_t), 64) + cc_round_up((n + LEVEL_SLACK) * sizeof(uint16_t), 64) +
+           cc_round_up((n + 8) * sizeof(uint32_t), 64) + cc_round_up(n * sizeof(uint16_t), 64) +
+           4 * plane_bytes(n) + cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64) * (size_t)threads;
 }
 
-/* Levels of a row for the weighted medians, and their runs (cc_wm_pixel). */
-static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out, uint16_t *run)
+/* Levels of a row for the weighted medians, their runs (cc_wm_pixel), and 0xFF where a pixel has none. */
+static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out, uint16_t *run,
+                       uint8_t *invalid)
 {
     for (int x = 0; x < width; x++)
         out[x] = (uint16_t)cc_wm_level(in[x], p->min_disparity, p->num_disparities);
+    for (int x = 0; x < width; x++)
+        invalid[x] = out[x] == CC_WM_NO_LEVEL ? 0xFF : 0;
     run[width - 1] = 1;
     for (int x = width - 2; x >= 0; x--)
         run[x] = out[x] == out[x + 1] && run[x + 1] < UINT16_MAX ? (uint16_t)(run[x + 1] + 1) : 1;
@@ -267,20 +274,34 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
     const size_t hist_stride = cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64);
     int16_t *tmp = scratch;
     uint16_t *level = (uint16_t *)((uint8_t *)scratch + map_bytes);
-    uint32_t *packed = (uint32_t *)((uint8_t *)level + cc_round_up((n + 8) * sizeof(uint16_t), 64));
+    uint32_t *packed = (uint32_t *)((uint8_t *)level + cc_round_up((n + LEVEL_SLACK) * sizeof(uint16_t), 64));
     uint16_t *run = (uint16_t *)((uint8_t *)packed + cc_round_up((n + 8) * sizeof(uint32_t), 64));
-    uint8_t *hist_base = (uint8_t *)run + cc_round_up(n * sizeof(uint16_t), 64);
-    cc_wm_image g = *guide;
-    g.packed = packed;
-    g.use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();
-    memset(level + n, 0xFF, 8 * sizeof(uint16_t));
-    memset(packed + n, 0, 8 * sizeof(uint32_t));
+    uint8_t *planes[3], *invalid;
+    planes[0] = (uint8_t *)run + cc_round_up(n * sizeof(uint16_t), 64);
+    planes[1] = planes[0] + plane_bytes(n);
+    planes[2] = planes[1] + plane_bytes(n);
+    invalid = planes[2] + plane_bytes(n);
+    uint8_t *hist_base = invalid + plane_bytes(n);
     cc_wm_tables tables;
     if (weighted_fill || wmedian)
         cc_wm_tables_init(&tables, p->wm_sigma_colour, p->wm_sigma_space);
+    cc_wm_image g = *guide;
+    g.use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();
+    /* the planar kernel when it can run (AVX2, colour weights ending early), else the packed one */
+    const int planar = (weighted_fill || wmedian) && cc_wm_planar_usable(&tables, g.use_avx2);
+    g.packed = planar ? NULL : packed;
+    for (int c = 0; c < 3; c++)
+        g.planes[c] = planar && c < (g.channels == 3 ? 3 : 1) ? planes[c] : NULL;
+    memset(level + n, 0xFF, LEVEL_SLACK * sizeof(uint16_t));
+    memset(packed + n, 0, 8 * sizeof(uint32_t));
+    for (int c = 0; c < 3; c++)
+        memset(planes[c] + n, 0, 32);
+    memset(invalid + n, 0xFF, 32);
     int16_t *fill_out = weighted_fill ? tmp : filled;
     int16_t *median_out = wmedian ? tmp : disp;
     const int16_t *wm_in = p->median ? tmp : filled;
+    const cc_wm_map fill_map = {.value = tmp, .level = level, .run = run, .invalid = planar ? invalid : NULL};
+    const cc_wm_map wm_map = {.value = wm_in, .level = level, .run = run, .invalid = planar ? invalid : NULL};
 #pragma omp parallel num_threads(threads)
     {
         cc_wm_hist h = cc_wm_hist_at(hist_base + hist_stride * (size_t)omp_get_thread_num(), p->num_disparities);
@@ -297,8 +318,10 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             else
                 memcpy(fill_out + o, checked + o, sizeof(int16_t) * width);
             if (weighted_fill)
-                levels_row(p, tmp + o, width, level + o, run + o);
-            if (weighted_fill || wmedian)
+                levels_row(p, tmp + o, width, level + o, run + o, invalid + o);
+            if (planar)
+                cc_wm_planes_row(&g, y, planes);
+            else if (weighted_fill || wmedian)
                 cc_wm_pack_row(&g, y, packed + o);
         }
         if (p->fill_mode != CC_FILL_NONE) { /* border strips, then (weighted) the rejected pixels */
@@ -311,7 +334,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                 for (int x = left_end; x < right_begin; x++) {
                     size_t o = (size_t)y * width + x;
                     filled[o] = checked[o] == CC_INVALID
-                                    ? cc_wm_pixel(&tables, &g, tmp, level, run, x, y, p->fill_radius, &h)
+                                    ? cc_wm_pixel(&tables, &g, &fill_map, x, y, p->fill_radius, &h)
                                     : tmp[o];
                 }
             }
@@ -324,14 +347,13 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             else if (!wmedian)
                 memcpy(disp + o, filled + o, sizeof(int16_t) * width);
             if (wmedian) /* levels of the weighted median's input, complete for this row */
-                levels_row(p, p->median ? median_out + o : filled + o, width, level + o, run + o);
+                levels_row(p, p->median ? median_out + o : filled + o, width, level + o, run + o, invalid + o);
         }
         if (wmedian) {
 #pragma omp for schedule(dynamic, 4)
             for (int y = 0; y < height; y++)
                 for (int x = 0; x < width; x++)
-                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, &g, wm_in, level, run, x, y,
-                                                              p->weighted_median, &h);
+                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, &g, &wm_map, x, y, p->weighted_median, &h);
         }
     }
 }

@@ -31,9 +31,27 @@ void cc_wm_tables_init(cc_wm_tables *t, float sigma_colour, float sigma_space)
         t->space[d2] = (uint16_t)rounded_weight(sqrt((double)d2), sigma_space);
     t->gather_pad[0] = t->gather_pad[1] = 0;
     memset(t->space_win, 0, sizeof t->space_win);
+    memset(t->space_row, 0, sizeof t->space_row);
     for (int dy = -CC_MAX_WM_RADIUS; dy <= CC_MAX_WM_RADIUS; dy++)
-        for (int dx = -CC_MAX_WM_RADIUS; dx <= CC_MAX_WM_RADIUS; dx++)
+        for (int dx = -CC_MAX_WM_RADIUS; dx <= CC_MAX_WM_RADIUS; dx++) {
             t->space_win[dy + CC_MAX_WM_RADIUS][dx + CC_MAX_WM_RADIUS] = t->space[dy * dy + dx * dx];
+            t->space_row[dy + CC_MAX_WM_RADIUS][dx + CC_MAX_WM_RADIUS] = t->space[dy * dy + dx * dx];
+        }
+    /* The colour weights fall with the difference: the first zero ends them.  The planar kernel looks
+     * indices up to 16 * tables - 1, which must hold a zero (every larger difference maps there). */
+    int zero = 0;
+    while (zero < CC_WM_COLOURS && t->colour[zero] != 0)
+        zero++;
+    t->colour_tables = zero / 16 + 1 <= 8 ? zero / 16 + 1 : 0;
+    memset(t->colour_bytes, 0, sizeof t->colour_bytes);
+    for (int c = 1; c < 128 && c < zero; c++)
+        t->colour_bytes[c] = (uint8_t)t->colour[c]; /* colour[c] < 256 for c >= 1 */
+}
+
+int cc_wm_planar_usable(const cc_wm_tables *t, int use_avx2)
+{
+    /* colour[1] < 256 is what the byte table needs (sigma_colour not absurdly large) */
+    return use_avx2 && t->colour_tables > 0 && t->colour[0] == 256 && t->colour[1] < 256;
 }
 
 /* The histogram, then the window buffers (32-byte aligned for the vector loads). */
@@ -119,6 +137,19 @@ void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out)
         uint32_t b = q[0], gr = g->channels == 3 ? q[1] : q[0], r = g->channels == 3 ? q[2] : q[0];
         out[x] = b | gr << 8 | r << 16;
     }
+}
+
+void cc_wm_planes_row(const cc_wm_image *g, int y, uint8_t *const planes[3])
+{
+    const uint8_t *row = g->data + (size_t)y * g->stride;
+    const size_t o = (size_t)y * g->width;
+    if (g->channels == 1) {
+        memcpy(planes[0] + o, row, (size_t)g->width);
+        return;
+    }
+    for (int x = 0; x < g->width; x++)
+        for (int c = 0; c < 3; c++)
+            planes[c][o + x] = row[3 * x + c];
 }
 
 #if CC_HAVE_X86
@@ -298,6 +329,209 @@ AVX2 static int16_t wm_pixel_avx2(const cc_wm_tables *t, const cc_wm_image *g, c
     }
     return level_mean(g, map, wb, lb, lo, x0, x1, y0, y1);
 }
+
+/* ---- The planar kernel: no gather. ----
+ * The colour weights of one window row (at most 31 pixels) are looked up 32 at a time in 8-bit
+ * lanes from the guide's planes: the summed channel difference saturates at 255 (every weight from
+ * index 16 * N - 1 on is 0, so it is clamped there) and indexes N 16-entry byte tables (pshufb).
+ * colour[0] = 256 does not fit a byte: it is the byte table's 0 plus a high byte of 1.  The 16-bit
+ * colour weights then multiply the row's 16-bit space weights and sum in pairs (madd: both <= 256,
+ * so every product and pair sum is exact), into the window's total, the weight below the centre's
+ * level and the weight on it.  The weights are the scalar code's, integer for integer. */
+
+/* The byte permutation that makes unpacklo/unpackhi of a 32-lane vector give lanes 0..15 and 16..31. */
+#define PLANAR_ORDER 0xD8
+
+AVX2 static inline __m256i absdiff_u8(__m256i a, __m256i b)
+{
+    return _mm256_or_si256(_mm256_subs_epu8(a, b), _mm256_subs_epu8(b, a));
+}
+
+AVX2 static inline __m256i hsum_epi32x(__m256i v) /* the 8 lanes' sum in every lane */
+{
+    v = _mm256_add_epi32(v, _mm256_shuffle_epi32(v, 0x4E));
+    v = _mm256_add_epi32(v, _mm256_shuffle_epi32(v, 0xB1));
+    return _mm256_add_epi32(v, _mm256_permute2x128_si256(v, v, 0x01));
+}
+
+/* The 16-bit colour weights of one window row, lanes 0..15 in lo and 16..31 in hi: `cen` the centre's
+ * channels, `outside` 0xFF on the lanes past the window, `inval` 0xFF where the pixel has no level. */
+AVX2 static inline __attribute__((always_inline)) void planar_colour_row(
+    const uint8_t *const planes[3], int channels, size_t r, const __m256i cen[3], __m256i outside, __m256i inval,
+    const __m256i *tabs, int ntab, __m256i *lo, __m256i *hi)
+{
+    __m256i cd;
+    if (channels == 3) {
+        __m256i d0 = absdiff_u8(_mm256_loadu_si256((const __m256i *)(planes[0] + r)), cen[0]);
+        __m256i d1 = absdiff_u8(_mm256_loadu_si256((const __m256i *)(planes[1] + r)), cen[1]);
+        __m256i d2 = absdiff_u8(_mm256_loadu_si256((const __m256i *)(planes[2] + r)), cen[2]);
+        cd = _mm256_adds_epu8(_mm256_adds_epu8(d0, d1), d2);
+    } else { /* grey counts as three equal channels */
+        __m256i d = absdiff_u8(_mm256_loadu_si256((const __m256i *)(planes[0] + r)), cen[0]);
+        cd = _mm256_adds_epu8(_mm256_adds_epu8(d, d), d);
+    }
+    __m256i idx = _mm256_min_epu8(_mm256_or_si256(_mm256_or_si256(cd, inval), outside),
+                                  _mm256_set1_epi8((char)(16 * ntab - 1)));
+    idx = _mm256_permute4x64_epi64(idx, PLANAR_ORDER);
+    __m256i cw = _mm256_shuffle_epi8(tabs[0], idx);
+    for (int i = 1; i < ntab; i++)
+        cw = _mm256_blendv_epi8(cw, _mm256_shuffle_epi8(tabs[i], idx),
+                                _mm256_cmpgt_epi8(idx, _mm256_set1_epi8((char)(16 * i - 1))));
+    __m256i high = _mm256_and_si256(_mm256_cmpeq_epi8(idx, _mm256_setzero_si256()), _mm256_set1_epi8(1));
+    *lo = _mm256_unpacklo_epi8(cw, high);
+    *hi = _mm256_unpackhi_epi8(cw, high);
+}
+
+/* Weight of the kept votes on levels <= b (the stored colour weights times the space weights). */
+AVX2 static uint64_t planar_weight_up_to(const cc_wm_tables *t, const uint16_t *cwb, const uint16_t *level, int w,
+                                         int x, int y, int x0, int y0, int y1, int b)
+{
+    const __m256i vb = _mm256_set1_epi16((short)b);
+    __m256i s = _mm256_setzero_si256();
+    for (int yy = y0, n = 0; yy <= y1; yy++, n += 32) {
+        const uint16_t *srow = t->space_row[yy - y + CC_MAX_WM_RADIUS] + (x0 - x + CC_MAX_WM_RADIUS);
+        const uint16_t *lrow = level + (size_t)yy * w + x0;
+        for (int k = 0; k < 32; k += 16) {
+            __m256i above = _mm256_cmpgt_epi16(_mm256_loadu_si256((const __m256i *)(lrow + k)), vb);
+            __m256i cw = _mm256_andnot_si256(above, _mm256_loadu_si256((const __m256i *)(cwb + n + k)));
+            s = _mm256_add_epi32(s, _mm256_madd_epi16(cw, _mm256_loadu_si256((const __m256i *)(srow + k))));
+        }
+    }
+    return (uint32_t)_mm256_cvtsi256_si32(hsum_epi32x(s));
+}
+
+/* Smallest and largest level of the votes with a weight (the stored colour weight is not 0). */
+AVX2 static void planar_level_bounds(const uint16_t *cwb, const uint16_t *level, int w, int x0, int y0, int y1,
+                                     int *lo, int *hi)
+{
+    const __m256i zero = _mm256_setzero_si256();
+    __m256i vmin = _mm256_set1_epi16(-1), vmax = zero;
+    for (int yy = y0, n = 0; yy <= y1; yy++, n += 32) {
+        const uint16_t *lrow = level + (size_t)yy * w + x0;
+        for (int k = 0; k < 32; k += 16) {
+            __m256i lv = _mm256_loadu_si256((const __m256i *)(lrow + k));
+            __m256i none = _mm256_cmpeq_epi16(_mm256_loadu_si256((const __m256i *)(cwb + n + k)), zero);
+            vmin = _mm256_min_epu16(vmin, _mm256_or_si256(lv, none));
+            vmax = _mm256_max_epu16(vmax, _mm256_andnot_si256(none, lv));
+        }
+    }
+    __m128i mn = _mm_min_epu16(_mm256_castsi256_si128(vmin), _mm256_extracti128_si256(vmin, 1));
+    __m128i mx = _mm_max_epu16(_mm256_castsi256_si128(vmax), _mm256_extracti128_si256(vmax, 1));
+    *lo = _mm_cvtsi128_si32(_mm_minpos_epu16(mn)) & 0xFFFF;
+    *hi = 0xFFFF - (_mm_cvtsi128_si32(_mm_minpos_epu16(_mm_xor_si128(mx, _mm_set1_epi16(-1)))) & 0xFFFF);
+}
+
+/* The rounded weighted mean of the values of the votes on level b (b is not the centre's level, so
+ * every weight there is below 2^16: a product of a colour weight <= 256 and a space weight <= 244).
+ * The weights' bytes multiply the int16 values apart (madd, exact in int32), summed in int64. */
+AVX2 static int16_t planar_level_mean(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m,
+                                      const uint16_t *cwb, int b, int x, int y, int x0, int y0, int y1)
+{
+    const int w = g->width;
+    const size_t end = (size_t)w * g->height;
+    const __m256i vb = _mm256_set1_epi16((short)b), low = _mm256_set1_epi16(0xFF);
+    __m256i ws = _mm256_setzero_si256(), lo64 = ws, hi64 = ws;
+    for (int yy = y0, n = 0; yy <= y1; yy++, n += 32) {
+        const uint16_t *srow = t->space_row[yy - y + CC_MAX_WM_RADIUS] + (x0 - x + CC_MAX_WM_RADIUS);
+        const size_t r = (size_t)yy * w + x0;
+        int16_t tail[32];
+        const int16_t *vrow = m->value + r;
+        if (r + 32 > end) { /* the map has no slack: the last row's window is copied */
+            memset(tail, 0, sizeof tail);
+            memcpy(tail, vrow, sizeof(int16_t) * (end - r));
+            vrow = tail;
+        }
+        __m256i plo = _mm256_setzero_si256(), phi = plo;
+        for (int k = 0; k < 32; k += 16) {
+            __m256i on = _mm256_cmpeq_epi16(_mm256_loadu_si256((const __m256i *)(m->level + r + k)), vb);
+            __m256i cw = _mm256_and_si256(on, _mm256_loadu_si256((const __m256i *)(cwb + n + k)));
+            __m256i sw = _mm256_loadu_si256((const __m256i *)(srow + k));
+            __m256i u = _mm256_mullo_epi16(cw, sw); /* < 2^16 on level b: exact */
+            __m256i v = _mm256_loadu_si256((const __m256i *)(vrow + k));
+            ws = _mm256_add_epi32(ws, _mm256_madd_epi16(cw, sw));
+            plo = _mm256_add_epi32(plo, _mm256_madd_epi16(_mm256_and_si256(u, low), v));
+            phi = _mm256_add_epi32(phi, _mm256_madd_epi16(_mm256_srli_epi16(u, 8), v));
+        }
+        lo64 = _mm256_add_epi64(lo64, _mm256_add_epi64(_mm256_cvtepi32_epi64(_mm256_castsi256_si128(plo)),
+                                                       _mm256_cvtepi32_epi64(_mm256_extracti128_si256(plo, 1))));
+        hi64 = _mm256_add_epi64(hi64, _mm256_add_epi64(_mm256_cvtepi32_epi64(_mm256_castsi256_si128(phi)),
+                                                       _mm256_cvtepi32_epi64(_mm256_extracti128_si256(phi, 1))));
+    }
+    int64_t l4[4], h4[4], vs = 0;
+    _mm256_storeu_si256((__m256i *)l4, lo64);
+    _mm256_storeu_si256((__m256i *)h4, hi64);
+    for (int k = 0; k < 4; k++)
+        vs += l4[k] + 256 * h4[k];
+    const int64_t wsum = (uint32_t)_mm256_cvtsi256_si32(hsum_epi32x(ws));
+    return (int16_t)floor_div64(2 * vs + wsum, 2 * wsum);
+}
+
+/* The weighted median at (x, y) with ntab colour tables and `channels` guide planes (constants at
+ * each call: one tight instance per case). */
+AVX2 static inline __attribute__((always_inline)) int16_t wm_pixel_planar_n(
+    const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int x, int y, int x0, int x1, int y0, int y1,
+    const cc_wm_hist *h, int ntab, int channels)
+{
+    const int w = g->width;
+    const size_t o = (size_t)y * w + x;
+    const int c = m->level[o];
+    __m256i tabs[8], cen[3];
+    for (int i = 0; i < ntab; i++)
+        tabs[i] = _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(t->colour_bytes + 16 * i)));
+    for (int i = 0; i < channels; i++)
+        cen[i] = _mm256_set1_epi8((char)g->planes[i][o]);
+    const __m256i lanes = _mm256_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20,
+                                           21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31);
+    const __m256i outside = _mm256_cmpgt_epi8(lanes, _mm256_set1_epi8((char)(x1 - x0)));
+    const __m256i vc = _mm256_set1_epi16((short)c);
+    __m256i tot = _mm256_setzero_si256(), below = tot, at = tot;
+    uint16_t *cwb = (uint16_t *)h->win_weight;
+    for (int yy = y0, n = 0; yy <= y1; yy++, n += 32) {
+        const size_t r = (size_t)yy * w + x0;
+        const uint16_t *srow = t->space_row[yy - y + CC_MAX_WM_RADIUS] + (x0 - x + CC_MAX_WM_RADIUS);
+        __m256i cw[2];
+        planar_colour_row(g->planes, channels, r, cen, outside,
+                          _mm256_loadu_si256((const __m256i *)(m->invalid + r)), tabs, ntab, &cw[0], &cw[1]);
+        for (int k = 0; k < 2; k++) {
+            __m256i lv = _mm256_loadu_si256((const __m256i *)(m->level + r + 16 * k));
+            __m256i sw = _mm256_loadu_si256((const __m256i *)(srow + 16 * k));
+            _mm256_storeu_si256((__m256i *)(cwb + n + 16 * k), cw[k]);
+            tot = _mm256_add_epi32(tot, _mm256_madd_epi16(cw[k], sw));
+            below = _mm256_add_epi32(below, _mm256_madd_epi16(_mm256_and_si256(cw[k], _mm256_cmpgt_epi16(vc, lv)), sw));
+            at = _mm256_add_epi32(at, _mm256_madd_epi16(_mm256_and_si256(cw[k], _mm256_cmpeq_epi16(vc, lv)), sw));
+        }
+    }
+    uint64_t sums[3];
+    hsum3(tot, below, at, sums);
+    const uint64_t total = sums[0], lo_w = sums[1], at_w = sums[2];
+    if (2 * lo_w < total && 2 * (lo_w + at_w) >= total)
+        return m->value[o];
+    /* the first level whose cumulative weight reaches half the total: below c or above it */
+    int lo, hi;
+    planar_level_bounds(cwb, m->level, w, x0, y0, y1, &lo, &hi);
+    if (2 * lo_w >= total)
+        hi = c - 1;
+    else
+        lo = c + 1;
+    while (lo < hi) {
+        int mid = lo + (hi - lo) / 2;
+        if (2 * planar_weight_up_to(t, cwb, m->level, w, x, y, x0, y0, y1, mid) >= total)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return planar_level_mean(t, g, m, cwb, lo, x, y, x0, y0, y1);
+}
+
+AVX2 static int16_t wm_pixel_planar(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int x, int y,
+                                    int x0, int x1, int y0, int y1, const cc_wm_hist *h)
+{
+    if (t->colour_tables <= 5)
+        return g->channels == 3 ? wm_pixel_planar_n(t, g, m, x, y, x0, x1, y0, y1, h, 5, 3)
+                                : wm_pixel_planar_n(t, g, m, x, y, x0, x1, y0, y1, h, 5, 1);
+    return g->channels == 3 ? wm_pixel_planar_n(t, g, m, x, y, x0, x1, y0, y1, h, 8, 3)
+                            : wm_pixel_planar_n(t, g, m, x, y, x0, x1, y0, y1, h, 8, 1);
+}
 #endif
 
 /* Whether the centre's own level c is the weighted median (the first level
@@ -369,19 +603,21 @@ static int window_on_level(const uint16_t *level, const uint16_t *run, int w, in
     return 1;
 }
 
-int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const int16_t *map,
-                    const uint16_t *level, const uint16_t *run, int x, int y, int radius, cc_wm_hist *h)
+int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int x, int y, int radius,
+                    cc_wm_hist *h)
 {
-    const int w = g->width, hgt = g->height, c = level[(size_t)y * w + x];
+    const int w = g->width, hgt = g->height, c = m->level[(size_t)y * w + x];
     if (c == CC_WM_NO_LEVEL)
         return CC_INVALID;
     int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
     int x0 = x - radius < 0 ? 0 : x - radius, x1 = x + radius >= w ? w - 1 : x + radius;
-    if (run && window_on_level(level, run, w, c, x0, x1, y0, y1))
-        return map[(size_t)y * w + x];
+    if (m->run && window_on_level(m->level, m->run, w, c, x0, x1, y0, y1))
+        return m->value[(size_t)y * w + x];
 #if CC_HAVE_X86
+    if (g->use_avx2 && g->planes[0] && m->invalid)
+        return wm_pixel_planar(t, g, m, x, y, x0, x1, y0, y1, h);
     if (g->use_avx2 && g->packed)
-        return wm_pixel_avx2(t, g, map, level, x, y, x0, x1, y0, y1, h);
+        return wm_pixel_avx2(t, g, m->value, m->level, x, y, x0, x1, y0, y1, h);
 #endif
-    return wm_pixel_scalar(t, g, map, level, x, y, x0, x1, y0, y1, h);
+    return wm_pixel_scalar(t, g, m->value, m->level, x, y, x0, x1, y0, y1, h);
 }

@@ -149,6 +149,46 @@ def test_postprocess_matches_reference(case, colour):
         np.testing.assert_array_equal(g, r)
 
 
+WEIGHTED_TWIN_CASES = [
+    dict(),  # the defaults: fill radius 15, weighted median 3, sigma colour 12 (5 colour byte tables)
+    dict(fill_radius=7, weighted_median=5, wm_sigma_colour=20.0),  # 8 colour byte tables
+    dict(fill_radius=1, weighted_median=1, wm_sigma_colour=3.0),  # one table
+    dict(fill="none", median=0, weighted_median=4),  # the rejected pixels reach the weighted median
+    dict(fill_radius=15, weighted_median=15, wm_sigma_space=2.0, num_disparities=20, min_disparity=-4),
+    dict(fill_radius=9, wm_sigma_colour=400.0),  # colour weights past 127: the packed kernel
+]
+
+
+@pytest.mark.parametrize("colour", [True, False])
+@pytest.mark.parametrize("case", WEIGHTED_TWIN_CASES)
+def test_weighted_stages_vector_kernels_equal_the_scalar_kernel(case, colour):
+    """The weighted fill and median on maps wider than a vector row, with whole rows and blocks rejected,
+    an invalid row and the image borders inside the windows: AVX2 (where the CPU has it) == portable."""
+    h, w = 37, 83
+    rng = np.random.default_rng(11)
+    yy, xx = np.mgrid[0:h, 0:w]
+    raw_left = (16 * (3 + (xx > 40) * 6 + (yy > 20) * 3) + rng.integers(-12, 13, (h, w))).astype(np.int16)
+    raw_right = np.full((h, w), stereo.INVALID, np.int16)
+    for y in range(h):
+        for x in range(w):
+            xr = x - (int(raw_left[y, x]) + 8) // 16
+            if 0 <= xr < w:
+                raw_right[y, xr] = raw_left[y, x] + rng.integers(-10, 11)
+    raw_left[5:12, 30:52] = 16 * 14  # a block the check rejects
+    raw_left[rng.random((h, w)) < 0.2] = 16 * 15
+    raw_right[17, :] = stereo.INVALID  # a row without any measurement
+    guide = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    guide[:, 41:] //= 6
+    guide[20:26, :] = 90  # a flat band: equal colours, cd = 0
+    if not colour:
+        guide = guide[:, :, 2].copy()
+    vector = stereo.postprocess(raw_left, raw_right, guide, **case)
+    scalar = stereo.postprocess(raw_left, raw_right, guide, simd="scalar", **case)
+    assert np.count_nonzero(vector[0] == stereo.INVALID) > h * w // 5  # the fill has work
+    for v, s in zip(vector, scalar):
+        np.testing.assert_array_equal(v, s)
+
+
 def test_weighted_stages_change_the_result_and_need_a_matching_guide():
     raw_left, raw_right, guide = _raw_maps()
     plain = stereo.postprocess(raw_left, raw_right, guide, fill="background", median=0, weighted_median=0)
