@@ -352,8 +352,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
         if (wmedian) {
 #pragma omp for schedule(dynamic, 4)
             for (int y = 0; y < height; y++)
-                for (int x = 0; x < width; x++)
-                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, &g, &wm_map, x, y, p->weighted_median, &h);
+                cc_wm_row(&tables, &g, &wm_map, y, p->weighted_median, &h, disp + (size_t)y * width);
         }
     }
 }

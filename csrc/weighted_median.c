@@ -532,6 +532,166 @@ AVX2 static int16_t wm_pixel_planar(const cc_wm_tables *t, const cc_wm_image *g,
     return g->channels == 3 ? wm_pixel_planar_n(t, g, m, x, y, x0, x1, y0, y1, h, 8, 3)
                             : wm_pixel_planar_n(t, g, m, x, y, x0, x1, y0, y1, h, 8, 1);
 }
+
+/* ---- Whole rows: 32 centres at a time (the final weighted median, every pixel). ----
+ * For each offset (dy, dx) of the window, the colour weights of the 32 centres' neighbours are one
+ * byte lookup (planar_colour_row's, with the centres' own colours per lane); then, per centre, only
+ * whether its own level is the median is decided, from two signed sums: S1 = 2 * below - total
+ * (< 0) and S2 = 2 * (below + at) - total (>= 0).  A vote adds +-colour * space to each, two offsets
+ * per madd (their signed colour weights interleaved, their space weights a constant pair).  A centre
+ * whose level is not the median (about one in ten) gets the per-pixel kernel's search. */
+#define BLOCK 32
+#define BLOCK_OFFSETS 32 /* offsets whose colour weights are held at once (2 KiB) */
+
+typedef struct wm_offset {
+    int dy, dx, sw;
+} wm_offset;
+
+/* The signed weights of one offset pair for 16 centres into the S1/S2 accumulators (a: centres
+ * 0-3 and 8-11 of the 16, b: 4-7 and 12-15, the order of unpacklo/unpackhi). */
+AVX2 static inline void block_pair(__m256i cwa, __m256i cwb, __m256i lva, __m256i lvb, __m256i vc, __m256i vcm1,
+                                   __m256i pair_sw, __m256i acc[4])
+{
+    __m256i nba = _mm256_cmpgt_epi16(lva, vcm1), nbb = _mm256_cmpgt_epi16(lvb, vcm1); /* not below */
+    __m256i aba = _mm256_cmpgt_epi16(lva, vc), abb = _mm256_cmpgt_epi16(lvb, vc);     /* above */
+    __m256i s1a = _mm256_sub_epi16(_mm256_xor_si256(cwa, nba), nba);
+    __m256i s1b = _mm256_sub_epi16(_mm256_xor_si256(cwb, nbb), nbb);
+    __m256i s2a = _mm256_sub_epi16(_mm256_xor_si256(cwa, aba), aba);
+    __m256i s2b = _mm256_sub_epi16(_mm256_xor_si256(cwb, abb), abb);
+    acc[0] = _mm256_add_epi32(acc[0], _mm256_madd_epi16(_mm256_unpacklo_epi16(s1a, s1b), pair_sw));
+    acc[1] = _mm256_add_epi32(acc[1], _mm256_madd_epi16(_mm256_unpackhi_epi16(s1a, s1b), pair_sw));
+    acc[2] = _mm256_add_epi32(acc[2], _mm256_madd_epi16(_mm256_unpacklo_epi16(s2a, s2b), pair_sw));
+    acc[3] = _mm256_add_epi32(acc[3], _mm256_madd_epi16(_mm256_unpackhi_epi16(s2a, s2b), pair_sw));
+}
+
+/* S1 and S2 (without the centre's own vote) of the 32 centres x..x+31 of row y into s1[32], s2[32];
+ * every neighbour column is inside the image (rows outside have space weight 0). */
+AVX2 static inline __attribute__((always_inline)) void block_sums(
+    const cc_wm_image *g, const cc_wm_map *m, const wm_offset *off, int noff, int x, int y, uint16_t *buf,
+    const __m256i *tabs, int ntab, int channels, int32_t s1[BLOCK], int32_t s2[BLOCK])
+{
+    const int w = g->width, hgt = g->height;
+    const size_t o = (size_t)y * w + x;
+    __m256i cen[3];
+    for (int i = 0; i < channels; i++)
+        cen[i] = _mm256_loadu_si256((const __m256i *)(g->planes[i] + o));
+    __m256i acc[2][4];
+    for (int hf = 0; hf < 2; hf++)
+        for (int k = 0; k < 4; k++)
+            acc[hf][k] = _mm256_setzero_si256();
+    const __m256i one = _mm256_set1_epi16(1);
+    for (int first = 0; first < noff; first += BLOCK_OFFSETS) {
+        const int count = noff - first < BLOCK_OFFSETS ? noff - first : BLOCK_OFFSETS;
+        for (int i = 0; i < count; i++) {
+            const wm_offset *q = off + first + i;
+            int yy = y + q->dy;
+            yy = yy < 0 ? 0 : (yy >= hgt ? hgt - 1 : yy); /* rows outside: weight 0 below */
+            const size_t r = (size_t)yy * w + x + q->dx;
+            __m256i lo, hi;
+            planar_colour_row(g->planes, channels, r, cen, _mm256_setzero_si256(),
+                              _mm256_loadu_si256((const __m256i *)(m->invalid + r)), tabs, ntab, &lo, &hi);
+            _mm256_storeu_si256((__m256i *)(buf + 32 * i), lo);
+            _mm256_storeu_si256((__m256i *)(buf + 32 * i + 16), hi);
+        }
+        for (int hf = 0; hf < 2; hf++) {
+            const __m256i vc = _mm256_loadu_si256((const __m256i *)(m->level + o + 16 * hf));
+            const __m256i vcm1 = _mm256_sub_epi16(vc, one);
+            for (int i = 0; i < count; i += 2) { /* noff and BLOCK_OFFSETS are even */
+                const wm_offset *qa = off + first + i, *qb = qa + 1;
+                int ya = y + qa->dy, yb = y + qb->dy;
+                int swa = ya >= 0 && ya < hgt ? qa->sw : 0, swb = yb >= 0 && yb < hgt ? qb->sw : 0;
+                ya = ya < 0 ? 0 : (ya >= hgt ? hgt - 1 : ya);
+                yb = yb < 0 ? 0 : (yb >= hgt ? hgt - 1 : yb);
+                const __m256i pair_sw = _mm256_set1_epi32(swa | swb << 16);
+                __m256i cwa = _mm256_loadu_si256((const __m256i *)(buf + 32 * i + 16 * hf));
+                __m256i cwb = _mm256_loadu_si256((const __m256i *)(buf + 32 * (i + 1) + 16 * hf));
+                __m256i lva = _mm256_loadu_si256((const __m256i *)(m->level + (size_t)ya * w + x + qa->dx + 16 * hf));
+                __m256i lvb = _mm256_loadu_si256((const __m256i *)(m->level + (size_t)yb * w + x + qb->dx + 16 * hf));
+                block_pair(cwa, cwb, lva, lvb, vc, vcm1, pair_sw, acc[hf]);
+            }
+        }
+    }
+    /* lanes back to centres: acc[.][0] holds centres 0-3 (low half) and 8-11 (high half), [1] 4-7 and 12-15 */
+    for (int hf = 0; hf < 2; hf++) {
+        int32_t v[4][8];
+        for (int k = 0; k < 4; k++)
+            _mm256_storeu_si256((__m256i *)v[k], acc[hf][k]);
+        for (int j = 0; j < 4; j++) {
+            const int c0 = 16 * hf + j;
+            s1[c0] = v[0][j];
+            s1[c0 + 8] = v[0][4 + j];
+            s1[c0 + 4] = v[1][j];
+            s1[c0 + 12] = v[1][4 + j];
+            s2[c0] = v[2][j];
+            s2[c0 + 8] = v[2][4 + j];
+            s2[c0 + 4] = v[3][j];
+            s2[c0 + 12] = v[3][4 + j];
+        }
+    }
+}
+
+AVX2 static inline __attribute__((always_inline)) void wm_row_blocks_n(
+    const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int y, int radius, cc_wm_hist *h, int16_t *out,
+    const wm_offset *off, int noff, int ntab, int channels)
+{
+    const int w = g->width, hgt = g->height;
+    __m256i tabs[8];
+    for (int i = 0; i < ntab; i++)
+        tabs[i] = _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(t->colour_bytes + 16 * i)));
+    uint16_t *buf = (uint16_t *)h->win_level;
+    const int last = w - radius - BLOCK; /* the last block's first centre: every column inside */
+    for (int bx = radius;; bx += BLOCK) {
+        const int x = bx < last ? bx : last;
+        /* every window of the block on one level (a run through all its rows): the centres keep their values */
+        if (m->run) {
+            const int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
+            const int c = m->level[(size_t)y * w + x];
+            int flat = c != CC_WM_NO_LEVEL;
+            for (int yy = y0; flat && yy <= y1; yy++) {
+                const size_t q = (size_t)yy * w + x - radius;
+                flat = m->level[q] == c && m->run[q] >= BLOCK + 2 * radius;
+            }
+            if (flat) {
+                memcpy(out + x, m->value + (size_t)y * w + x, sizeof(int16_t) * BLOCK);
+                if (x == last)
+                    break;
+                continue;
+            }
+        }
+        int32_t s1[BLOCK], s2[BLOCK];
+        block_sums(g, m, off, noff, x, y, buf, tabs, ntab, channels, s1, s2);
+        for (int j = 0; j < BLOCK; j++) {
+            const size_t o = (size_t)y * w + x + j;
+            const int c = m->level[o];
+            /* the centre's own vote: on its level, weight 256 * 256 */
+            if (c == CC_WM_NO_LEVEL)
+                out[x + j] = CC_INVALID;
+            else if (s1[j] - 65536 < 0 && s2[j] + 65536 >= 0)
+                out[x + j] = m->value[o];
+            else {
+                int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
+                out[x + j] = wm_pixel_planar(t, g, m, x + j, y, x + j - radius, x + j + radius, y0, y1, h);
+            }
+        }
+        if (x == last)
+            break;
+    }
+}
+
+
+AVX2 static void wm_row_blocks(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int y, int radius,
+                               cc_wm_hist *h, int16_t *out, const wm_offset *off, int noff)
+{
+    if (t->colour_tables <= 5) {
+        if (g->channels == 3)
+            wm_row_blocks_n(t, g, m, y, radius, h, out, off, noff, 5, 3);
+        else
+            wm_row_blocks_n(t, g, m, y, radius, h, out, off, noff, 5, 1);
+    } else if (g->channels == 3)
+        wm_row_blocks_n(t, g, m, y, radius, h, out, off, noff, 8, 3);
+    else
+        wm_row_blocks_n(t, g, m, y, radius, h, out, off, noff, 8, 1);
+}
 #endif
 
 /* Whether the centre's own level c is the weighted median (the first level
@@ -620,4 +780,27 @@ int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map
         return wm_pixel_avx2(t, g, m->value, m->level, x, y, x0, x1, y0, y1, h);
 #endif
     return wm_pixel_scalar(t, g, m->value, m->level, x, y, x0, x1, y0, y1, h);
+}
+
+void cc_wm_row(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int y, int radius, cc_wm_hist *h,
+               int16_t *out)
+{
+    const int w = g->width;
+    int done_from = w, done_to = w; /* centres [done_from, done_to) computed by the blocks */
+#if CC_HAVE_X86
+    if (g->use_avx2 && g->planes[0] && m->invalid && radius > 0 && w - 2 * radius >= BLOCK) {
+        wm_offset off[CC_WM_SIDE * CC_WM_SIDE];
+        int noff = 0;
+        for (int dy = -radius; dy <= radius; dy++)
+            for (int dx = -radius; dx <= radius; dx++)
+                if (dy || dx)
+                    off[noff++] = (wm_offset){dy, dx, t->space[dy * dy + dx * dx]};
+        wm_row_blocks(t, g, m, y, radius, h, out, off, noff);
+        done_from = radius;
+        done_to = w - radius;
+    }
+#endif
+    for (int x = 0; x < w; x++)
+        if (x < done_from || x >= done_to)
+            out[x] = cc_wm_pixel(t, g, m, x, y, radius, h);
 }

@@ -69,6 +69,9 @@ typedef struct cc_wm_map {
     const uint16_t *run;
     const uint8_t *invalid;
 } cc_wm_map;
+/* Weighted median of row y of the map into out[0..width): the same values as cc_wm_pixel at every x. */
+void cc_wm_row(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int y, int radius, cc_wm_hist *h,
+               int16_t *out);
 /* Weighted median at (x, y) of the map. */
 int16_t cc_wm_pixel(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int x, int y, int radius,
                     cc_wm_hist *h);

@@ -168,6 +168,7 @@ def test_weighted_stages_vector_kernels_equal_the_scalar_kernel(case, colour):
     rng = np.random.default_rng(11)
     yy, xx = np.mgrid[0:h, 0:w]
     raw_left = (16 * (3 + (xx > 40) * 6 + (yy > 20) * 3) + rng.integers(-12, 13, (h, w))).astype(np.int16)
+    raw_left[24:, :39] = 16 * 6  # a flat region: whole windows on one level
     raw_right = np.full((h, w), stereo.INVALID, np.int16)
     for y in range(h):
         for x in range(w):
