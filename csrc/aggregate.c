@@ -138,38 +138,47 @@ AVX2 static inline uint16_t path_step_avx2_stream(const cc_setup *s, const uint8
 #define VERTICAL_ROW(suffix, attr, kernel)                                                                    \
     attr static void vertical_##suffix(const cc_setup *s, const cc_path_rows *r, int x0, int x1, int dx)     \
     {                                                                                                         \
-        const int Dp = s->Dp;                                                                                 \
+        /* the row's pointers in locals: the stores below may not be taken to change them */                 \
+        const int Dp = s->Dp, w = r->width, p2c = s->p.p2;                                                    \
+        const size_t cs = r->cs, vs = r->vs;                                                                  \
+        const uint8_t *const cost = r->cost, *const grey = r->grey, *const prev_grey = r->prev_grey;          \
+        const uint16_t *const prev_row = r->prev, *const prev_mins = r->prev_min, *const acc_in = r->acc_in;  \
+        uint16_t *const out = r->out, *const out_min = r->out_min, *const acc_out = r->acc_out;               \
         for (int x = x0; x < x1; x++) {                                                                       \
             const int px = x + dx;                                                                            \
             const uint16_t *prev = NULL;                                                                      \
             uint16_t prev_min = 0;                                                                            \
-            int p2 = s->p.p2;                                                                                 \
-            if (r->prev && px >= 0 && px < r->width) {                                                        \
-                prev = r->prev + (size_t)px * r->vs + CC_GUARD;                                               \
-                prev_min = r->prev_min[px];                                                                   \
-                p2 = cc_p2_for_step(s, r->grey[x], r->prev_grey[px]);                                         \
+            int p2 = p2c;                                                                                     \
+            if (prev_row && px >= 0 && px < w) {                                                              \
+                prev = prev_row + (size_t)px * vs + CC_GUARD;                                                 \
+                prev_min = prev_mins[px];                                                                     \
+                p2 = cc_p2_for_step(s, grey[x], prev_grey[px]);                                               \
             }                                                                                                 \
-            uint16_t *acc = r->acc_out + (size_t)x * Dp;                                                      \
-            r->out_min[x] = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2,                        \
-                                   r->out + (size_t)x * r->vs + CC_GUARD, r->acc_in ? acc : NULL, acc);       \
+            uint16_t *acc = acc_out + (size_t)x * Dp;                                                         \
+            out_min[x] = kernel(s, cost + (size_t)x * cs, prev, prev_min, p2, out + (size_t)x * vs + CC_GUARD,\
+                                acc_in ? acc : NULL, acc);                                                    \
         }                                                                                                     \
     }
 #define HORIZONTAL_ROW(suffix, attr, kernel)                                                                  \
     attr static void horizontal_##suffix(const cc_setup *s, const cc_path_rows *r, uint16_t *hpath[2])       \
     {                                                                                                         \
-        const int w = r->width, Dp = s->Dp;                                                                   \
+        const int w = r->width, Dp = s->Dp, p2c = s->p.p2;                                                    \
+        const size_t cs = r->cs;                                                                              \
+        const uint8_t *const cost = r->cost, *const grey = r->grey;                                           \
+        const uint16_t *const acc_in = r->acc_in;                                                             \
+        uint16_t *const acc_out = r->acc_out, *const path[2] = {hpath[0] + CC_GUARD, hpath[1] + CC_GUARD};    \
         uint16_t prev_min = 0;                                                                                \
         for (int x = 0; x < w; x++) { /* left to right: S = volume + L */                                    \
-            const uint16_t *prev = x > 0 ? hpath[(x - 1) & 1] + CC_GUARD : NULL;                              \
-            int p2 = x > 0 ? cc_p2_for_step(s, r->grey[x], r->grey[x - 1]) : s->p.p2;                         \
-            prev_min = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2, hpath[x & 1] + CC_GUARD,    \
-                              r->acc_in + (size_t)x * Dp, r->acc_out + (size_t)x * Dp);                       \
+            const uint16_t *prev = x > 0 ? path[(x - 1) & 1] : NULL;                                          \
+            int p2 = x > 0 ? cc_p2_for_step(s, grey[x], grey[x - 1]) : p2c;                                   \
+            prev_min = kernel(s, cost + (size_t)x * cs, prev, prev_min, p2, path[x & 1],                      \
+                              acc_in + (size_t)x * Dp, acc_out + (size_t)x * Dp);                             \
         }                                                                                                     \
         for (int x = w - 1; x >= 0; x--) { /* right to left: S += L */                                       \
-            const uint16_t *prev = x < w - 1 ? hpath[(x + 1) & 1] + CC_GUARD : NULL;                          \
-            int p2 = x < w - 1 ? cc_p2_for_step(s, r->grey[x], r->grey[x + 1]) : s->p.p2;                     \
-            prev_min = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2, hpath[x & 1] + CC_GUARD,    \
-                              r->acc_out + (size_t)x * Dp, r->acc_out + (size_t)x * Dp);                      \
+            const uint16_t *prev = x < w - 1 ? path[(x + 1) & 1] : NULL;                                      \
+            int p2 = x < w - 1 ? cc_p2_for_step(s, grey[x], grey[x + 1]) : p2c;                               \
+            prev_min = kernel(s, cost + (size_t)x * cs, prev, prev_min, p2, path[x & 1],                      \
+                              acc_out + (size_t)x * Dp, acc_out + (size_t)x * Dp);                            \
         }                                                                                                     \
     }
 

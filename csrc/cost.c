@@ -1,6 +1,8 @@
 /* Fused matching cost of one left pixel against all disparities:
  * C = rho(Hamming(census), lambda_c) + rho(BT, lambda_b), both looked up in
  * quantised tables.  Right pixels outside the image get the largest cost. */
+#include <string.h>
+
 #include "cost.h"
 
 #if CC_HAVE_X86
@@ -53,23 +55,13 @@ AVX2 static inline void load_lut(const uint8_t *table, __m256i t[4])
         t[i] = _mm256_broadcastsi128_si256(_mm_loadu_si128((const __m128i *)(table + 16 * i)));
 }
 
-AVX2 static inline void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out,
-                                        const __m256i tc[4], const __m256i tb[4]);
-
-AVX2 static void cost_segment_avx2(const cc_setup *s, const cc_frame *f, int x0, int x1, int y,
-                                   uint8_t *out, size_t stride)
+/* One left pixel against all disparities; `nb` census planes (a constant at each call below, so the
+ * planes' loop unrolls and the left pixel's bytes stay in registers). */
+AVX2 static inline __attribute__((always_inline)) void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x,
+                                                                       int y, uint8_t *out, const __m256i tc[4],
+                                                                       const __m256i tb[4], int nb)
 {
-    __m256i tc[4], tb[4];
-    load_lut(s->lut_census, tc);
-    load_lut(s->lut_bt, tb);
-    for (int x = x0; x < x1; x++, out += stride)
-        cost_pixel_avx2(s, f, x, y, out, tc, tb);
-}
-
-AVX2 static inline void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, int x, int y, uint8_t *out,
-                                        const __m256i tc[4], const __m256i tb[4])
-{
-    int w = f->width, h = f->height, nb = f->nbytes;
+    int w = f->width, h = f->height;
     size_t lo = (size_t)y * w + x;
     size_t ro = (size_t)y * f->rstride + f->pad + (w - 1 - x) + s->p.min_disparity;
     size_t lplane = (size_t)w * h, rplane = (size_t)f->rstride * h;
@@ -103,6 +95,34 @@ AVX2 static inline void cost_pixel_avx2(const cc_setup *s, const cc_frame *f, in
         _mm256_storeu_si256((__m256i *)(out + k), c);
     }
 }
+
+#define COST_SEGMENT_NB(nb)                                                                                  \
+    AVX2 static void cost_segment_avx2_##nb(const cc_setup *s, const cc_frame *f, int x0, int x1, int y,     \
+                                            uint8_t *out, size_t stride)                                     \
+    {                                                                                                        \
+        __m256i tc[4], tb[4];                                                                                \
+        load_lut(s->lut_census, tc);                                                                         \
+        load_lut(s->lut_bt, tb);                                                                             \
+        for (int x = x0; x < x1; x++, out += stride)                                                         \
+            cost_pixel_avx2(s, f, x, y, out, tc, tb, nb);                                                    \
+    }
+COST_SEGMENT_NB(1)
+COST_SEGMENT_NB(2)
+COST_SEGMENT_NB(3)
+COST_SEGMENT_NB(4)
+COST_SEGMENT_NB(5)
+COST_SEGMENT_NB(6)
+COST_SEGMENT_NB(7)
+COST_SEGMENT_NB(8)
+
+static void cost_segment_avx2(const cc_setup *s, const cc_frame *f, int x0, int x1, int y, uint8_t *out,
+                              size_t stride)
+{
+    static void (*const by_planes[8])(const cc_setup *, const cc_frame *, int, int, int, uint8_t *, size_t) = {
+        cost_segment_avx2_1, cost_segment_avx2_2, cost_segment_avx2_3, cost_segment_avx2_4,
+        cost_segment_avx2_5, cost_segment_avx2_6, cost_segment_avx2_7, cost_segment_avx2_8};
+    by_planes[f->nbytes - 1](s, f, x0, x1, y, out, stride);
+}
 #endif
 
 /* Disparities whose right pixel x - d falls outside the image get the largest cost. */
@@ -110,10 +130,11 @@ static void outside_costs(const cc_setup *s, int width, int x, uint8_t *out)
 {
     int dmin = s->p.min_disparity;
     int k_lo = x - dmin - (width - 1), k_hi = x - dmin;
-    for (int k = 0; k < k_lo && k < s->D; k++)
-        out[k] = (uint8_t)s->cmax;
-    for (int k = k_hi + 1 < 0 ? 0 : k_hi + 1; k < s->D; k++)
-        out[k] = (uint8_t)s->cmax;
+    if (k_lo > 0)
+        memset(out, s->cmax, (size_t)(k_lo < s->D ? k_lo : s->D));
+    int from = k_hi + 1 < 0 ? 0 : k_hi + 1;
+    if (from < s->D)
+        memset(out + from, s->cmax, (size_t)(s->D - from));
 }
 
 void cc_cost_segment(const cc_setup *s, const cc_frame *f, int x0, int x1, int y, uint8_t *out, size_t stride)
