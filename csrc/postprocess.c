@@ -5,6 +5,10 @@
 #include "params.h"
 #include "postprocess.h"
 
+#if CC_HAVE_X86
+#include <immintrin.h>
+#endif
+
 static void lr_check_row(const cc_params *p, const int16_t *left, const int16_t *right, int width,
                          int16_t *out)
 {
@@ -200,13 +204,74 @@ static inline int median9_full(const int16_t *in, int width, int x0, int y0, int
     return 1;
 }
 
+#if CC_HAVE_X86
+#define VSORT2(a, b)                           \
+    do {                                       \
+        __m256i lo_ = _mm256_min_epi16(a, b);  \
+        b = _mm256_max_epi16(a, b);            \
+        a = lo_;                               \
+    } while (0)
+
+/* median9_full on 16 pixels x..x+15 of row y (all nine neighbours inside the image): the same
+ * exchange network, lane by lane.  Returns a bit per pixel (two per lane, movemask of 16-bit lanes)
+ * whose window holds an invalid pixel: those are left to the general code. */
+__attribute__((target("avx2"))) static unsigned median9_16(const int16_t *in, int width, int x, int y, int16_t *out)
+{
+    __m256i p[9];
+    for (int i = 0; i < 9; i++)
+        p[i] = _mm256_loadu_si256((const __m256i *)(in + (size_t)(y - 1 + i / 3) * width + x - 1 + i % 3));
+    __m256i lowest = p[0];
+    for (int i = 1; i < 9; i++)
+        lowest = _mm256_min_epi16(lowest, p[i]);
+    VSORT2(p[1], p[2]); VSORT2(p[4], p[5]); VSORT2(p[7], p[8]);
+    VSORT2(p[0], p[1]); VSORT2(p[3], p[4]); VSORT2(p[6], p[7]);
+    VSORT2(p[1], p[2]); VSORT2(p[4], p[5]); VSORT2(p[7], p[8]);
+    VSORT2(p[0], p[3]); VSORT2(p[5], p[8]); VSORT2(p[4], p[7]);
+    VSORT2(p[3], p[6]); VSORT2(p[1], p[4]); VSORT2(p[2], p[5]);
+    VSORT2(p[4], p[7]); VSORT2(p[4], p[2]); VSORT2(p[6], p[4]);
+    VSORT2(p[4], p[2]);
+    _mm256_storeu_si256((__m256i *)(out + x), p[4]);
+    /* CC_INVALID is the smallest int16: a window holds one exactly when its minimum is it */
+    return (unsigned)_mm256_movemask_epi8(_mm256_cmpeq_epi16(lowest, _mm256_set1_epi16(CC_INVALID)));
+}
+#endif
+
+static void median_row_general(const int16_t *in, int width, int height, int y, int size, int x_from, int x_to,
+                               int16_t *out);
+
 /* Median of the valid pixels of the window (clipped at the border); an
- * invalid pixel stays invalid, so the filter never invents a measurement. */
-static void median_row(const int16_t *in, int width, int height, int y, int size, int16_t *out)
+ * invalid pixel stays invalid, so the filter never invents a measurement.
+ * The 3 x 3 filter of an inner row runs 16 pixels at a time with AVX2. */
+static void median_row(const int16_t *in, int width, int height, int y, int size, int use_avx2, int16_t *out)
+{
+#if CC_HAVE_X86
+    if (use_avx2 && size == 3 && y > 0 && y < height - 1 && width - 2 >= 16) {
+        const int last = width - 1 - 16; /* the last chunk's first pixel: x + 16 <= width - 1 */
+        for (int x0 = 1;; x0 += 16) {
+            const int x = x0 < last ? x0 : last;
+            unsigned bad = median9_16(in, width, x, y, out);
+            while (bad) { /* windows with an invalid pixel: the general code, pixel by pixel */
+                int lane = __builtin_ctz(bad) / 2;
+                median_row_general(in, width, height, y, size, x + lane, x + lane + 1, out);
+                bad &= ~(3u << (2 * lane));
+            }
+            if (x == last)
+                break;
+        }
+        median_row_general(in, width, height, y, size, 0, 1, out);
+        median_row_general(in, width, height, y, size, width - 1, width, out);
+        return;
+    }
+#endif
+    median_row_general(in, width, height, y, size, 0, width, out);
+}
+
+static void median_row_general(const int16_t *in, int width, int height, int y, int size, int x_from, int x_to,
+                               int16_t *out)
 {
     int r = size / 2;
     int y0 = y - r < 0 ? 0 : y - r, y1 = y + r >= height ? height - 1 : y + r;
-    for (int x = 0; x < width; x++) {
+    for (int x = x_from; x < x_to; x++) {
         if (in[(size_t)y * width + x] == CC_INVALID) {
             out[x] = CC_INVALID;
             continue;
@@ -247,13 +312,40 @@ size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, i
            4 * plane_bytes(n) + cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64) * (size_t)threads;
 }
 
-/* Levels of a row for the weighted medians, their runs (cc_wm_pixel), and 0xFF where a pixel has none. */
-static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out, uint16_t *run,
-                       uint8_t *invalid)
+#if CC_HAVE_X86
+/* cc_wm_level of 16 values at a time: floor((v + 8) / 16) as (v >> 4) + ((v & 15) + 8 >> 4), which
+ * cannot overflow 16 bits, less dmin, clamped to 0..levels-1; CC_WM_NO_LEVEL where v is CC_INVALID.
+ * Returns how many pixels it did (a multiple of 16); the caller does the rest. */
+__attribute__((target("avx2"))) static int levels_avx2(const int16_t *in, int width, int dmin, int levels,
+                                                        uint16_t *out)
 {
-    for (int x = 0; x < width; x++)
+    const __m256i vdmin = _mm256_set1_epi16((short)dmin), top = _mm256_set1_epi16((short)(levels - 1));
+    const __m256i fifteen = _mm256_set1_epi16(15), eight = _mm256_set1_epi16(8), zero = _mm256_setzero_si256();
+    const __m256i invalid = _mm256_set1_epi16(CC_INVALID);
+    int x = 0;
+    for (; x + 16 <= width; x += 16) {
+        __m256i v = _mm256_loadu_si256((const __m256i *)(in + x));
+        __m256i whole = _mm256_add_epi16(_mm256_srai_epi16(v, 4),
+                                         _mm256_srli_epi16(_mm256_add_epi16(_mm256_and_si256(v, fifteen), eight), 4));
+        __m256i b = _mm256_min_epi16(_mm256_max_epi16(_mm256_sub_epi16(whole, vdmin), zero), top);
+        _mm256_storeu_si256((__m256i *)(out + x), _mm256_or_si256(b, _mm256_cmpeq_epi16(v, invalid)));
+    }
+    return x;
+}
+#endif
+
+/* Levels of a row for the weighted medians, their runs (cc_wm_pixel), and 0xFF where a pixel has none. */
+static void levels_row(const cc_params *p, const int16_t *in, int width, int use_avx2, uint16_t *out,
+                       uint16_t *run, uint8_t *invalid)
+{
+    int x = 0;
+#if CC_HAVE_X86
+    if (use_avx2)
+        x = levels_avx2(in, width, p->min_disparity, p->num_disparities, out);
+#endif
+    for (; x < width; x++)
         out[x] = (uint16_t)cc_wm_level(in[x], p->min_disparity, p->num_disparities);
-    for (int x = 0; x < width; x++)
+    for (x = 0; x < width; x++)
         invalid[x] = out[x] == CC_WM_NO_LEVEL ? 0xFF : 0;
     run[width - 1] = 1;
     for (int x = width - 2; x >= 0; x--)
@@ -318,7 +410,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             else
                 memcpy(fill_out + o, checked + o, sizeof(int16_t) * width);
             if (weighted_fill)
-                levels_row(p, tmp + o, width, level + o, run + o, invalid + o);
+                levels_row(p, tmp + o, width, g.use_avx2, level + o, run + o, invalid + o);
             if (planar)
                 cc_wm_planes_row(&g, y, planes);
             else if (weighted_fill || wmedian)
@@ -343,11 +435,12 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
         for (int y = 0; y < height; y++) {
             size_t o = (size_t)y * width;
             if (p->median)
-                median_row(filled, width, height, y, p->median, median_out + o);
+                median_row(filled, width, height, y, p->median, g.use_avx2, median_out + o);
             else if (!wmedian)
                 memcpy(disp + o, filled + o, sizeof(int16_t) * width);
             if (wmedian) /* levels of the weighted median's input, complete for this row */
-                levels_row(p, p->median ? median_out + o : filled + o, width, level + o, run + o, invalid + o);
+                levels_row(p, p->median ? median_out + o : filled + o, width, g.use_avx2, level + o, run + o,
+                           invalid + o);
         }
         if (wmedian) {
 #pragma omp for schedule(dynamic, 4)
