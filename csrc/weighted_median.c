@@ -423,14 +423,15 @@ AVX2 static void planar_level_bounds(const uint16_t *cwb, const uint16_t *level,
 
 /* The rounded weighted mean of the values of the votes on level b (b is not the centre's level, so
  * every weight there is below 2^16: a product of a colour weight <= 256 and a space weight <= 244).
- * The weights' bytes multiply the int16 values apart (madd, exact in int32), summed in int64. */
+ * The weights' low and high bytes multiply the int16 values apart (madd): a lane gains at most
+ * 4 * 255 * 2^15 per window row, so 31 rows stay within int32; summed in int64 at the end. */
 AVX2 static int16_t planar_level_mean(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m,
                                       const uint16_t *cwb, int b, int x, int y, int x0, int y0, int y1)
 {
     const int w = g->width;
     const size_t end = (size_t)w * g->height;
     const __m256i vb = _mm256_set1_epi16((short)b), low = _mm256_set1_epi16(0xFF);
-    __m256i ws = _mm256_setzero_si256(), lo64 = ws, hi64 = ws;
+    __m256i ws = _mm256_setzero_si256(), plo = ws, phi = ws;
     for (int yy = y0, n = 0; yy <= y1; yy++, n += 32) {
         const uint16_t *srow = t->space_row[yy - y + CC_MAX_WM_RADIUS] + (x0 - x + CC_MAX_WM_RADIUS);
         const size_t r = (size_t)yy * w + x0;
@@ -441,7 +442,6 @@ AVX2 static int16_t planar_level_mean(const cc_wm_tables *t, const cc_wm_image *
             memcpy(tail, vrow, sizeof(int16_t) * (end - r));
             vrow = tail;
         }
-        __m256i plo = _mm256_setzero_si256(), phi = plo;
         for (int k = 0; k < 32; k += 16) {
             __m256i on = _mm256_cmpeq_epi16(_mm256_loadu_si256((const __m256i *)(m->level + r + k)), vb);
             __m256i cw = _mm256_and_si256(on, _mm256_loadu_si256((const __m256i *)(cwb + n + k)));
@@ -452,16 +452,13 @@ AVX2 static int16_t planar_level_mean(const cc_wm_tables *t, const cc_wm_image *
             plo = _mm256_add_epi32(plo, _mm256_madd_epi16(_mm256_and_si256(u, low), v));
             phi = _mm256_add_epi32(phi, _mm256_madd_epi16(_mm256_srli_epi16(u, 8), v));
         }
-        lo64 = _mm256_add_epi64(lo64, _mm256_add_epi64(_mm256_cvtepi32_epi64(_mm256_castsi256_si128(plo)),
-                                                       _mm256_cvtepi32_epi64(_mm256_extracti128_si256(plo, 1))));
-        hi64 = _mm256_add_epi64(hi64, _mm256_add_epi64(_mm256_cvtepi32_epi64(_mm256_castsi256_si128(phi)),
-                                                       _mm256_cvtepi32_epi64(_mm256_extracti128_si256(phi, 1))));
     }
-    int64_t l4[4], h4[4], vs = 0;
-    _mm256_storeu_si256((__m256i *)l4, lo64);
-    _mm256_storeu_si256((__m256i *)h4, hi64);
-    for (int k = 0; k < 4; k++)
-        vs += l4[k] + 256 * h4[k];
+    int32_t l8[8], h8[8];
+    _mm256_storeu_si256((__m256i *)l8, plo);
+    _mm256_storeu_si256((__m256i *)h8, phi);
+    int64_t vs = 0;
+    for (int k = 0; k < 8; k++)
+        vs += l8[k] + 256 * (int64_t)h8[k];
     const int64_t wsum = (uint32_t)_mm256_cvtsi256_si32(hsum_epi32x(ws));
     return (int16_t)floor_div64(2 * vs + wsum, 2 * wsum);
 }
