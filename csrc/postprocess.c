@@ -423,11 +423,15 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                 border_fit_row(p, checked, width, height, y, filled + (size_t)y * width, &left_end, &right_begin);
                 if (!weighted_fill)
                     continue;
+                h.guess = -1; /* the kernel's guess: the median level of the fill pixel just before */
                 for (int x = left_end; x < right_begin; x++) {
                     size_t o = (size_t)y * width + x;
-                    filled[o] = checked[o] == CC_INVALID
-                                    ? cc_wm_pixel(&tables, &g, &fill_map, x, y, p->fill_radius, &h)
-                                    : tmp[o];
+                    if (checked[o] == CC_INVALID) {
+                        filled[o] = cc_wm_pixel(&tables, &g, &fill_map, x, y, p->fill_radius, &h);
+                    } else {
+                        filled[o] = tmp[o];
+                        h.guess = -1;
+                    }
                 }
             }
         }

@@ -72,6 +72,7 @@ cc_wm_hist cc_wm_hist_at(void *base, int levels)
     h.weight = (uint32_t *)((int64_t *)base + levels);
     h.win_weight = (uint32_t *)((uint8_t *)base + hist_part_bytes(levels));
     h.win_level = h.win_weight + CC_WM_CHUNKS * 8;
+    h.guess = -1;
     return h;
 }
 
@@ -463,11 +464,32 @@ AVX2 static int16_t planar_level_mean(const cc_wm_tables *t, const cc_wm_image *
     return (int16_t)floor_div64(2 * vs + wsum, 2 * wsum);
 }
 
+/* Weight of the kept votes below level b and on it (one pass over the stored colour weights). */
+AVX2 static void planar_split(const cc_wm_tables *t, const uint16_t *cwb, const uint16_t *level, int w, int x, int y,
+                              int x0, int y0, int y1, int b, uint64_t *below, uint64_t *at)
+{
+    const __m256i vb = _mm256_set1_epi16((short)b);
+    __m256i sb = _mm256_setzero_si256(), sa = sb;
+    for (int yy = y0, n = 0; yy <= y1; yy++, n += 32) {
+        const uint16_t *srow = t->space_row[yy - y + CC_MAX_WM_RADIUS] + (x0 - x + CC_MAX_WM_RADIUS);
+        const uint16_t *lrow = level + (size_t)yy * w + x0;
+        for (int k = 0; k < 32; k += 16) {
+            __m256i lv = _mm256_loadu_si256((const __m256i *)(lrow + k));
+            __m256i cw = _mm256_loadu_si256((const __m256i *)(cwb + n + k));
+            __m256i sw = _mm256_loadu_si256((const __m256i *)(srow + k));
+            sb = _mm256_add_epi32(sb, _mm256_madd_epi16(_mm256_and_si256(cw, _mm256_cmpgt_epi16(vb, lv)), sw));
+            sa = _mm256_add_epi32(sa, _mm256_madd_epi16(_mm256_and_si256(cw, _mm256_cmpeq_epi16(vb, lv)), sw));
+        }
+    }
+    *below = (uint32_t)_mm256_cvtsi256_si32(hsum_epi32x(sb));
+    *at = (uint32_t)_mm256_cvtsi256_si32(hsum_epi32x(sa));
+}
+
 /* The weighted median at (x, y) with ntab colour tables and `channels` guide planes (constants at
  * each call: one tight instance per case). */
 AVX2 static inline __attribute__((always_inline)) int16_t wm_pixel_planar_n(
     const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int x, int y, int x0, int x1, int y0, int y1,
-    const cc_wm_hist *h, int ntab, int channels)
+    cc_wm_hist *h, int ntab, int channels)
 {
     const int w = g->width;
     const size_t o = (size_t)y * w + x;
@@ -501,15 +523,29 @@ AVX2 static inline __attribute__((always_inline)) int16_t wm_pixel_planar_n(
     uint64_t sums[3];
     hsum3(tot, below, at, sums);
     const uint64_t total = sums[0], lo_w = sums[1], at_w = sums[2];
-    if (2 * lo_w < total && 2 * (lo_w + at_w) >= total)
+    if (2 * lo_w < total && 2 * (lo_w + at_w) >= total) {
+        h->guess = c;
         return m->value[o];
+    }
     /* the first level whose cumulative weight reaches half the total: below c or above it */
     int lo, hi;
+    const int guess = h->guess;
     planar_level_bounds(cwb, m->level, w, x0, y0, y1, &lo, &hi);
     if (2 * lo_w >= total)
         hi = c - 1;
     else
         lo = c + 1;
+    /* the guess (usually the median level of the pixel before, often this one's): one pass to test it */
+    if (guess >= lo && guess <= hi) {
+        uint64_t below_g, at_g;
+        planar_split(t, cwb, m->level, w, x, y, x0, y0, y1, guess, &below_g, &at_g);
+        if (2 * below_g < total && 2 * (below_g + at_g) >= total)
+            return planar_level_mean(t, g, m, cwb, guess, x, y, x0, y0, y1); /* h->guess stays */
+        if (2 * below_g >= total)
+            hi = guess - 1;
+        else
+            lo = guess + 1;
+    }
     while (lo < hi) {
         int mid = lo + (hi - lo) / 2;
         if (2 * planar_weight_up_to(t, cwb, m->level, w, x, y, x0, y0, y1, mid) >= total)
@@ -517,11 +553,12 @@ AVX2 static inline __attribute__((always_inline)) int16_t wm_pixel_planar_n(
         else
             lo = mid + 1;
     }
+    h->guess = lo;
     return planar_level_mean(t, g, m, cwb, lo, x, y, x0, y0, y1);
 }
 
 AVX2 static int16_t wm_pixel_planar(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, int x, int y,
-                                    int x0, int x1, int y0, int y1, const cc_wm_hist *h)
+                                    int x0, int x1, int y0, int y1, cc_wm_hist *h)
 {
     if (t->colour_tables <= 5)
         return g->channels == 3 ? wm_pixel_planar_n(t, g, m, x, y, x0, x1, y0, y1, h, 5, 3)
@@ -650,6 +687,7 @@ AVX2 static inline __attribute__((always_inline)) void wm_row_blocks_n(
             }
             if (flat) {
                 memcpy(out + x, m->value + (size_t)y * w + x, sizeof(int16_t) * BLOCK);
+                h->guess = c;
                 if (x == last)
                     break;
                 continue;
@@ -661,11 +699,13 @@ AVX2 static inline __attribute__((always_inline)) void wm_row_blocks_n(
             const size_t o = (size_t)y * w + x + j;
             const int c = m->level[o];
             /* the centre's own vote: on its level, weight 256 * 256 */
-            if (c == CC_WM_NO_LEVEL)
+            if (c == CC_WM_NO_LEVEL) {
                 out[x + j] = CC_INVALID;
-            else if (s1[j] - 65536 < 0 && s2[j] + 65536 >= 0)
+                h->guess = -1;
+            } else if (s1[j] - 65536 < 0 && s2[j] + 65536 >= 0) {
                 out[x + j] = m->value[o];
-            else {
+                h->guess = c;
+            } else {
                 int y0 = y - radius < 0 ? 0 : y - radius, y1 = y + radius >= hgt ? hgt - 1 : y + radius;
                 out[x + j] = wm_pixel_planar(t, g, m, x + j, y, x + j - radius, x + j + radius, y0, y1, h);
             }
@@ -784,6 +824,7 @@ void cc_wm_row(const cc_wm_tables *t, const cc_wm_image *g, const cc_wm_map *m, 
 {
     const int w = g->width;
     int done_from = w, done_to = w; /* centres [done_from, done_to) computed by the blocks */
+    h->guess = -1;
 #if CC_HAVE_X86
     if (g->use_avx2 && g->planes[0] && m->invalid && radius > 0 && w - 2 * radius >= BLOCK) {
         wm_offset off[CC_WM_SIDE * CC_WM_SIDE];

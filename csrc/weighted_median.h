@@ -43,6 +43,8 @@ typedef struct cc_wm_hist {   /* per thread */
     uint32_t *weight;
     uint32_t *win_weight;     /* the vector kernel's votes of one window: CC_WM_CHUNKS * 8 each */
     uint32_t *win_level;
+    int guess;                /* the planar kernel's first guess of the median level: the last pixel's (-1: none);
+                                 a guess only saves work, the result does not depend on it */
 } cc_wm_hist;
 void cc_wm_tables_init(cc_wm_tables *t, float sigma_colour, float sigma_space);
 size_t cc_wm_hist_bytes(int levels);
