@@ -103,6 +103,9 @@ int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
                        int16_t *disp, int16_t *raw_left, int16_t *raw_right,
                        int16_t *checked, int16_t *filled);
 
+/* Fixed-point disparities (x16, CC_INVALID) to float pixels with NaN where invalid: out[i] = disp[i] / 16. */
+int cc_disparity_to_float(const int16_t *disp, size_t count, float *out);
+
 /* ---- Stage entry points: the same code the pipeline runs, for tests and tools. ---- */
 
 /* Census bit string per pixel (bit i = centre >= i-th neighbour in raster order). */
