@@ -140,6 +140,43 @@ void cc_wm_pack_row(const cc_wm_image *g, int y, uint32_t *out)
     }
 }
 
+#if CC_HAVE_X86
+/* 16 interleaved BGR pixels at a time (48 bytes): each channel gathered from the three 16-byte
+ * loads by byte shuffles.  Returns how many pixels it did. */
+__attribute__((target("avx2"))) static int planes_row_avx2(const uint8_t *row, int width, uint8_t *b, uint8_t *g,
+                                                           uint8_t *r)
+{
+    /* for channel c and load j: the bytes of load j that hold channel c, placed at their pixel's lane */
+    static const int8_t pick[3][3][16] = {
+        {{0, 3, 6, 9, 12, 15, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1},
+         {-1, -1, -1, -1, -1, -1, 2, 5, 8, 11, 14, -1, -1, -1, -1, -1},
+         {-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, 1, 4, 7, 10, 13}},
+        {{1, 4, 7, 10, 13, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1},
+         {-1, -1, -1, -1, -1, 0, 3, 6, 9, 12, 15, -1, -1, -1, -1, -1},
+         {-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, 2, 5, 8, 11, 14}},
+        {{2, 5, 8, 11, 14, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1},
+         {-1, -1, -1, -1, -1, 1, 4, 7, 10, 13, -1, -1, -1, -1, -1, -1},
+         {-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, 0, 3, 6, 9, 12, 15}}};
+    __m128i sel[3][3];
+    for (int c = 0; c < 3; c++)
+        for (int j = 0; j < 3; j++)
+            sel[c][j] = _mm_loadu_si128((const __m128i *)pick[c][j]);
+    uint8_t *out[3] = {b, g, r};
+    int x = 0;
+    for (; x + 16 <= width; x += 16) {
+        const uint8_t *q = row + 3 * (size_t)x;
+        __m128i v[3] = {_mm_loadu_si128((const __m128i *)q), _mm_loadu_si128((const __m128i *)(q + 16)),
+                        _mm_loadu_si128((const __m128i *)(q + 32))};
+        for (int c = 0; c < 3; c++) {
+            __m128i o = _mm_or_si128(_mm_or_si128(_mm_shuffle_epi8(v[0], sel[c][0]), _mm_shuffle_epi8(v[1], sel[c][1])),
+                                     _mm_shuffle_epi8(v[2], sel[c][2]));
+            _mm_storeu_si128((__m128i *)(out[c] + x), o);
+        }
+    }
+    return x;
+}
+#endif
+
 void cc_wm_planes_row(const cc_wm_image *g, int y, uint8_t *const planes[3])
 {
     const uint8_t *row = g->data + (size_t)y * g->stride;
@@ -148,7 +185,12 @@ void cc_wm_planes_row(const cc_wm_image *g, int y, uint8_t *const planes[3])
         memcpy(planes[0] + o, row, (size_t)g->width);
         return;
     }
-    for (int x = 0; x < g->width; x++)
+    int x = 0;
+#if CC_HAVE_X86
+    if (g->use_avx2)
+        x = planes_row_avx2(row, g->width, planes[0] + o, planes[1] + o, planes[2] + o);
+#endif
+    for (; x < g->width; x++)
         for (int c = 0; c < 3; c++)
             planes[c][o + x] = row[3 * x + c];
 }
