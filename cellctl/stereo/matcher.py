@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from cellctl.stereo._core import ffi, lib
-from cellctl.stereo.params import DEFAULTS, DISP_SCALE, INVALID, MatcherParams, make_params
+from cellctl.stereo.params import DEFAULTS, INVALID, MatcherParams, make_params
 
 _ERRORS = {  # what the core's error codes mean, for the messages
     lib.CC_ERR_NULL: "a required buffer is missing",

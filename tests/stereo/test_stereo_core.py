@@ -93,7 +93,9 @@ def test_aggregation_matches_reference(case, simd):
 
 
 @pytest.mark.parametrize("simd", ["auto", "scalar"])
-@pytest.mark.parametrize("levels,uniqueness", [(11, 0), (11, 15), (37, 0), (37, 25), (48, 60), (3, 40), (16, 0), (64, 30)])
+@pytest.mark.parametrize(
+    "levels,uniqueness", [(11, 0), (11, 15), (37, 0), (37, 25), (48, 60), (3, 40), (16, 0), (64, 30)]
+)
 @pytest.mark.parametrize("subpixel", [True, False])
 @pytest.mark.parametrize("dmin", [0, -3, 4])
 def test_selection_matches_reference(subpixel, dmin, levels, uniqueness, simd):
