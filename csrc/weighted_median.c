@@ -570,14 +570,10 @@ AVX2 static inline __attribute__((always_inline)) int16_t wm_pixel_planar_n(
         return m->value[o];
     }
     /* the first level whose cumulative weight reaches half the total: below c or above it */
-    int lo, hi;
-    const int guess = h->guess;
-    planar_level_bounds(cwb, m->level, w, x0, y0, y1, &lo, &hi);
-    if (2 * lo_w >= total)
-        hi = c - 1;
-    else
-        lo = c + 1;
+    const int below_c = 2 * lo_w >= total; /* the median is below c, else above */
+    int lo = below_c ? 0 : c + 1, hi = below_c ? c - 1 : CC_WM_NO_LEVEL - 1;
     /* the guess (usually the median level of the pixel before, often this one's): one pass to test it */
+    const int guess = h->guess;
     if (guess >= lo && guess <= hi) {
         uint64_t below_g, at_g;
         planar_split(t, cwb, m->level, w, x, y, x0, y0, y1, guess, &below_g, &at_g);
@@ -588,6 +584,11 @@ AVX2 static inline __attribute__((always_inline)) int16_t wm_pixel_planar_n(
         else
             lo = guess + 1;
     }
+    /* narrowed to the levels the window holds */
+    int lv_lo, lv_hi;
+    planar_level_bounds(cwb, m->level, w, x0, y0, y1, &lv_lo, &lv_hi);
+    lo = lo > lv_lo ? lo : lv_lo;
+    hi = hi < lv_hi ? hi : lv_hi;
     while (lo < hi) {
         int mid = lo + (hi - lo) / 2;
         if (2 * planar_weight_up_to(t, cwb, m->level, w, x, y, x0, y0, y1, mid) >= total)
