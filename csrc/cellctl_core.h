@@ -28,7 +28,9 @@ enum cc_status {
 
 enum cc_cost_mode { CC_COST_CENSUS_BT = 0, CC_COST_CENSUS = 1, CC_COST_BT = 2 };
 enum cc_fill_mode { CC_FILL_NONE = 0, CC_FILL_BACKGROUND = 1, CC_FILL_WEIGHTED = 2 };
-enum cc_simd_mode { CC_SIMD_AUTO = 0, CC_SIMD_SCALAR = 1 };
+/* AUTO: the widest kernels the CPU runs (AVX-512 for the cost where it has BW, VL, VBMI and BITALG, else
+ * AVX2); SCALAR: the portable ones; AVX2: the AVX2 ones even where AVX-512 ones could run (tests). */
+enum cc_simd_mode { CC_SIMD_AUTO = 0, CC_SIMD_SCALAR = 1, CC_SIMD_AVX2 = 2 };
 
 typedef struct cc_params {
     int min_disparity;      /* may be negative */

@@ -378,7 +378,7 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
     if (weighted_fill || wmedian)
         cc_wm_tables_init(&tables, p->wm_sigma_colour, p->wm_sigma_space);
     cc_wm_image g = *guide;
-    g.use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();
+    g.use_avx2 = p->simd != CC_SIMD_SCALAR && cc_cpu_has_avx2();
     /* the planar kernel when it can run (AVX2, colour weights ending early), else the packed one */
     const int planar = (weighted_fill || wmedian) && cc_wm_planar_usable(&tables, g.use_avx2);
     g.packed = planar ? NULL : packed;

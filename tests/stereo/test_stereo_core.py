@@ -52,7 +52,7 @@ COST_CASES = [
 ]
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
 @pytest.mark.parametrize("case", COST_CASES)
 def test_cost_volume_matches_reference(case, simd):
     left, right = _pair(2, 9, 40)
@@ -60,7 +60,7 @@ def test_cost_volume_matches_reference(case, simd):
     np.testing.assert_array_equal(got, ref.cost_volume(left, right, _params(**case)))
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
 @pytest.mark.parametrize("threshold", [0, 1, 2, 4])
 def test_ternary_census_cost_on_a_low_contrast_pair_matches_reference(threshold, simd):
     """Levels 100..104 only: most pairs fall in the dead band, ties and +-1 steps decide the binary bits."""
@@ -84,7 +84,7 @@ AGG_CASES = [
 ]
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
 @pytest.mark.parametrize("case", AGG_CASES)
 def test_aggregation_matches_reference(case, simd):
     left, right = _pair(3, 12, 26)
@@ -92,7 +92,7 @@ def test_aggregation_matches_reference(case, simd):
     np.testing.assert_array_equal(got, ref.aggregate(left, right, _params(**case)))
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
 @pytest.mark.parametrize(
     "levels,uniqueness", [(11, 0), (11, 15), (37, 0), (37, 25), (48, 60), (3, 40), (16, 0), (64, 30)]
 )
