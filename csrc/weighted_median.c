@@ -619,6 +619,10 @@ AVX2 static int16_t wm_pixel_planar(const cc_wm_tables *t, const cc_wm_image *g,
  * whose level is not the median (about one in ten) gets the per-pixel kernel's search. */
 #define BLOCK 32
 #define BLOCK_OFFSETS 32 /* offsets whose colour weights are held at once (2 KiB) */
+_Static_assert(BLOCK_OFFSETS * BLOCK * sizeof(uint16_t) <= CC_WM_CHUNKS * 8 * sizeof(uint32_t),
+               "the row kernel's colour weights fit the thread's win_level buffer");
+_Static_assert(CC_WM_SIDE * 32 * sizeof(uint16_t) <= CC_WM_CHUNKS * 8 * sizeof(uint32_t),
+               "the planar kernel's colour weights fit the thread's win_weight buffer");
 
 typedef struct wm_offset {
     int dy, dx, sw;

@@ -41,8 +41,9 @@ int cc_wm_planar_usable(const cc_wm_tables *t, int use_avx2);
 typedef struct cc_wm_hist {   /* per thread */
     int64_t *value;           /* one entry per disparity level, kept zero between pixels (scalar kernel) */
     uint32_t *weight;
-    uint32_t *win_weight;     /* the vector kernel's votes of one window: CC_WM_CHUNKS * 8 each */
-    uint32_t *win_level;
+    uint32_t *win_weight;     /* CC_WM_CHUNKS * 8 each: the packed kernel's votes of one window (weights, */
+    uint32_t *win_level;      /* levels); the planar kernel's 16-bit colour weights (win_weight) and the
+                                 row kernel's colour weights of 32 centres x 32 offsets (win_level) */
     int guess;                /* the planar kernel's first guess of the median level: the last pixel's (-1: none);
                                  a guess only saves work, the result does not depend on it */
 } cc_wm_hist;
