@@ -202,3 +202,4 @@ def test_to_float_is_the_fixed_point_value_with_nan_for_invalid(shape):
     assert got.dtype == np.float32 and got.shape == shape
     assert got.tobytes() == want.tobytes()
     assert to_float(fixed.T).tobytes() == np.ascontiguousarray(want.T).tobytes()  # any layout
+    assert to_float(fixed.astype(np.int32)).tobytes() == want.tobytes()  # other integer types: the same
