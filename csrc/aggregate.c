@@ -60,34 +60,55 @@ static inline uint16_t path_step_scalar(const cc_setup *s, const uint8_t *cost, 
 #if CC_HAVE_X86
 #define AVX2 __attribute__((target("avx2")))
 
+/* One vector of 16 disparities k..k+15 of a path step; `tail` masks the lanes past the last disparity
+ * (they never win). */
+AVX2 static inline __m256i path_lanes_avx2(const uint8_t *cost, const uint16_t *prev, int k, __m256i vp1,
+                                           __m256i vpm, __m256i vlim, __m256i tail)
+{
+    __m256i l = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i *)(cost + k)));
+    if (prev) {
+        __m256i m = _mm256_load_si256((const __m256i *)(prev + k));
+        __m256i lo = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k - 1)), vp1);
+        __m256i hi = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k + 1)), vp1);
+        m = _mm256_min_epu16(_mm256_min_epu16(m, lo), _mm256_min_epu16(hi, vlim));
+        l = _mm256_add_epi16(l, _mm256_sub_epi16(m, vpm));
+    }
+    return _mm256_or_si256(l, tail);
+}
+
+AVX2 static inline void path_store_avx2(uint16_t *out, const uint16_t *acc_in, uint16_t *acc_out, int k,
+                                        __m256i l, int stream)
+{
+    _mm256_store_si256((__m256i *)(out + k), l);
+    __m256i a = acc_in ? _mm256_add_epi16(_mm256_load_si256((const __m256i *)(acc_in + k)), l) : l;
+    if (stream)
+        _mm256_stream_si256((__m256i *)(acc_out + k), a);
+    else
+        _mm256_store_si256((__m256i *)(acc_out + k), a);
+}
+
+/* The full vectors first, without any lane test; then the last, partial one (only when D is not a
+ * multiple of 16), with its lanes past D - 1 set to CC_PATH_INF. */
 AVX2 static inline uint16_t path_step_avx2_nt(const cc_setup *s, const uint8_t *cost, const uint16_t *prev,
                                        uint16_t prev_min, int p2, uint16_t *out,
                                        const uint16_t *acc_in, uint16_t *acc_out, int stream)
 {
-    int D = s->D, Dp = s->Dp;
+    const int D = s->D, full = D & ~(CC_LANES - 1);
     const __m256i vp1 = _mm256_set1_epi16((short)s->p.p1);
     const __m256i vpm = _mm256_set1_epi16((short)prev_min);
     const __m256i vlim = _mm256_set1_epi16((short)(prev_min + p2));
-    const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const __m256i none = _mm256_setzero_si256();
     __m256i best = _mm256_set1_epi16((short)CC_PATH_INF);
-    for (int k = 0; k < Dp; k += CC_LANES) {
-        __m256i l = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i *)(cost + k)));
-        if (prev) {
-            __m256i m = _mm256_load_si256((const __m256i *)(prev + k));
-            __m256i lo = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k - 1)), vp1);
-            __m256i hi = _mm256_adds_epu16(_mm256_loadu_si256((const __m256i *)(prev + k + 1)), vp1);
-            m = _mm256_min_epu16(_mm256_min_epu16(m, lo), _mm256_min_epu16(hi, vlim));
-            l = _mm256_add_epi16(l, _mm256_sub_epi16(m, vpm));
-        }
-        if (k + CC_LANES > D) /* lanes past the last disparity never win */
-            l = _mm256_or_si256(l, _mm256_cmpgt_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((short)k)),
-                                                      _mm256_set1_epi16((short)(D - 1))));
-        _mm256_store_si256((__m256i *)(out + k), l);
-        __m256i a = acc_in ? _mm256_add_epi16(_mm256_load_si256((const __m256i *)(acc_in + k)), l) : l;
-        if (stream)
-            _mm256_stream_si256((__m256i *)(acc_out + k), a);
-        else
-            _mm256_store_si256((__m256i *)(acc_out + k), a);
+    for (int k = 0; k < full; k += CC_LANES) {
+        __m256i l = path_lanes_avx2(cost, prev, k, vp1, vpm, vlim, none);
+        path_store_avx2(out, acc_in, acc_out, k, l, stream);
+        best = _mm256_min_epu16(best, l);
+    }
+    if (full < D) {
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        __m256i tail = _mm256_cmpgt_epi16(lane, _mm256_set1_epi16((short)(D - 1 - full)));
+        __m256i l = path_lanes_avx2(cost, prev, full, vp1, vpm, vlim, tail);
+        path_store_avx2(out, acc_in, acc_out, full, l, stream);
         best = _mm256_min_epu16(best, l);
     }
     __m128i b = _mm_min_epu16(_mm256_castsi256_si128(best), _mm256_extracti128_si256(best, 1));
@@ -117,38 +138,47 @@ AVX2 static inline uint16_t path_step_avx2_stream(const cc_setup *s, const uint8
 #define VERTICAL_ROW(suffix, attr, kernel)                                                                    \
     attr static void vertical_##suffix(const cc_setup *s, const cc_path_rows *r, int x0, int x1, int dx)     \
     {                                                                                                         \
-        const int Dp = s->Dp;                                                                                 \
+        /* the row's pointers in locals: the stores below may not be taken to change them */                 \
+        const int Dp = s->Dp, w = r->width, p2c = s->p.p2;                                                    \
+        const size_t cs = r->cs, vs = r->vs;                                                                  \
+        const uint8_t *const cost = r->cost, *const grey = r->grey, *const prev_grey = r->prev_grey;          \
+        const uint16_t *const prev_row = r->prev, *const prev_mins = r->prev_min, *const acc_in = r->acc_in;  \
+        uint16_t *const out = r->out, *const out_min = r->out_min, *const acc_out = r->acc_out;               \
         for (int x = x0; x < x1; x++) {                                                                       \
             const int px = x + dx;                                                                            \
             const uint16_t *prev = NULL;                                                                      \
             uint16_t prev_min = 0;                                                                            \
-            int p2 = s->p.p2;                                                                                 \
-            if (r->prev && px >= 0 && px < r->width) {                                                        \
-                prev = r->prev + (size_t)px * r->vs + CC_GUARD;                                               \
-                prev_min = r->prev_min[px];                                                                   \
-                p2 = cc_p2_for_step(s, r->grey[x], r->prev_grey[px]);                                         \
+            int p2 = p2c;                                                                                     \
+            if (prev_row && px >= 0 && px < w) {                                                              \
+                prev = prev_row + (size_t)px * vs + CC_GUARD;                                                 \
+                prev_min = prev_mins[px];                                                                     \
+                p2 = cc_p2_for_step(s, grey[x], prev_grey[px]);                                               \
             }                                                                                                 \
-            uint16_t *acc = r->acc_out + (size_t)x * Dp;                                                      \
-            r->out_min[x] = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2,                        \
-                                   r->out + (size_t)x * r->vs + CC_GUARD, r->acc_in ? acc : NULL, acc);       \
+            uint16_t *acc = acc_out + (size_t)x * Dp;                                                         \
+            out_min[x] = kernel(s, cost + (size_t)x * cs, prev, prev_min, p2, out + (size_t)x * vs + CC_GUARD,\
+                                acc_in ? acc : NULL, acc);                                                    \
         }                                                                                                     \
     }
 #define HORIZONTAL_ROW(suffix, attr, kernel)                                                                  \
     attr static void horizontal_##suffix(const cc_setup *s, const cc_path_rows *r, uint16_t *hpath[2])       \
     {                                                                                                         \
-        const int w = r->width, Dp = s->Dp;                                                                   \
+        const int w = r->width, Dp = s->Dp, p2c = s->p.p2;                                                    \
+        const size_t cs = r->cs;                                                                              \
+        const uint8_t *const cost = r->cost, *const grey = r->grey;                                           \
+        const uint16_t *const acc_in = r->acc_in;                                                             \
+        uint16_t *const acc_out = r->acc_out, *const path[2] = {hpath[0] + CC_GUARD, hpath[1] + CC_GUARD};    \
         uint16_t prev_min = 0;                                                                                \
         for (int x = 0; x < w; x++) { /* left to right: S = volume + L */                                    \
-            const uint16_t *prev = x > 0 ? hpath[(x - 1) & 1] + CC_GUARD : NULL;                              \
-            int p2 = x > 0 ? cc_p2_for_step(s, r->grey[x], r->grey[x - 1]) : s->p.p2;                         \
-            prev_min = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2, hpath[x & 1] + CC_GUARD,    \
-                              r->acc_in + (size_t)x * Dp, r->acc_out + (size_t)x * Dp);                       \
+            const uint16_t *prev = x > 0 ? path[(x - 1) & 1] : NULL;                                          \
+            int p2 = x > 0 ? cc_p2_for_step(s, grey[x], grey[x - 1]) : p2c;                                   \
+            prev_min = kernel(s, cost + (size_t)x * cs, prev, prev_min, p2, path[x & 1],                      \
+                              acc_in + (size_t)x * Dp, acc_out + (size_t)x * Dp);                             \
         }                                                                                                     \
         for (int x = w - 1; x >= 0; x--) { /* right to left: S += L */                                       \
-            const uint16_t *prev = x < w - 1 ? hpath[(x + 1) & 1] + CC_GUARD : NULL;                          \
-            int p2 = x < w - 1 ? cc_p2_for_step(s, r->grey[x], r->grey[x + 1]) : s->p.p2;                     \
-            prev_min = kernel(s, r->cost + (size_t)x * r->cs, prev, prev_min, p2, hpath[x & 1] + CC_GUARD,    \
-                              r->acc_out + (size_t)x * Dp, r->acc_out + (size_t)x * Dp);                      \
+            const uint16_t *prev = x < w - 1 ? path[(x + 1) & 1] : NULL;                                      \
+            int p2 = x < w - 1 ? cc_p2_for_step(s, grey[x], grey[x + 1]) : p2c;                               \
+            prev_min = kernel(s, cost + (size_t)x * cs, prev, prev_min, p2, path[x & 1],                      \
+                              acc_out + (size_t)x * Dp, acc_out + (size_t)x * Dp);                            \
         }                                                                                                     \
     }
 

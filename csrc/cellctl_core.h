@@ -28,7 +28,9 @@ enum cc_status {
 
 enum cc_cost_mode { CC_COST_CENSUS_BT = 0, CC_COST_CENSUS = 1, CC_COST_BT = 2 };
 enum cc_fill_mode { CC_FILL_NONE = 0, CC_FILL_BACKGROUND = 1, CC_FILL_WEIGHTED = 2 };
-enum cc_simd_mode { CC_SIMD_AUTO = 0, CC_SIMD_SCALAR = 1 };
+/* AUTO: the widest kernels the CPU runs (AVX-512 for the cost where it has BW, VL, VBMI and BITALG, else
+ * AVX2); SCALAR: the portable ones; AVX2: the AVX2 ones even where AVX-512 ones could run (tests). */
+enum cc_simd_mode { CC_SIMD_AUTO = 0, CC_SIMD_SCALAR = 1, CC_SIMD_AVX2 = 2 };
 
 typedef struct cc_params {
     int min_disparity;      /* may be negative */
@@ -102,6 +104,9 @@ int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
                        const uint8_t *guide, int guide_channels, int stride_guide,
                        int16_t *disp, int16_t *raw_left, int16_t *raw_right,
                        int16_t *checked, int16_t *filled);
+
+/* Fixed-point disparities (x16, CC_INVALID) to float pixels with NaN where invalid: out[i] = disp[i] / 16. */
+int cc_disparity_to_float(const int16_t *disp, size_t count, float *out);
 
 /* ---- Stage entry points: the same code the pipeline runs, for tests and tools. ---- */
 

@@ -1,4 +1,5 @@
 /* The matcher object, its buffers, and the public entry points. */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -9,6 +10,10 @@
 #include "postprocess.h"
 #include "select.h"
 #include "workspace.h"
+
+#if CC_HAVE_X86
+#include <immintrin.h>
+#endif
 
 struct cc_matcher {
     cc_setup setup;
@@ -126,6 +131,38 @@ int cc_matcher_compute(cc_matcher *m, const uint8_t *left, const uint8_t *right,
     run_passes(m, left, right, stride_left, stride_right, raw_left, raw_right, NULL);
     cc_postprocess_maps(&m->setup.p, raw_left, raw_right, &g, width, height, checked, filled, disp,
                         m->post, m->ws.threads);
+    return CC_OK;
+}
+
+#if CC_HAVE_X86
+/* 8 values at a time; returns how many it did. */
+__attribute__((target("avx2"))) static size_t disparity_to_float_avx2(const int16_t *disp, size_t count, float *out)
+{
+    const __m256 scale = _mm256_set1_ps(1.0f / CC_DISP_SCALE), nan = _mm256_set1_ps(NAN);
+    const __m256i invalid = _mm256_set1_epi32(CC_INVALID);
+    size_t i = 0;
+    for (; i + 8 <= count; i += 8) {
+        __m256i d = _mm256_cvtepi16_epi32(_mm_loadu_si128((const __m128i *)(disp + i)));
+        __m256 v = _mm256_mul_ps(_mm256_cvtepi32_ps(d), scale);
+        __m256 bad = _mm256_castsi256_ps(_mm256_cmpeq_epi32(d, invalid));
+        _mm256_storeu_ps(out + i, _mm256_blendv_ps(v, nan, bad));
+    }
+    return i;
+}
+#endif
+
+int cc_disparity_to_float(const int16_t *disp, size_t count, float *out)
+{
+    if (!disp || !out)
+        return CC_ERR_NULL;
+    size_t i = 0;
+#if CC_HAVE_X86
+    if (cc_cpu_has_avx2())
+        i = disparity_to_float_avx2(disp, count, out);
+#endif
+    const float scale = 1.0f / CC_DISP_SCALE; /* a power of two: the same as dividing */
+    for (; i < count; i++)
+        out[i] = disp[i] == CC_INVALID ? NAN : (float)disp[i] * scale;
     return CC_OK;
 }
 

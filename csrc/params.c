@@ -114,9 +114,20 @@ int cc_params_check(const cc_params *p, const char **message)
         REJECT("wm_sigma_space must be a finite number > 0");
     if (p->threads < 0 || p->threads > 256)
         REJECT("threads must be between 0 (all) and 256");
-    if (p->simd != CC_SIMD_AUTO && p->simd != CC_SIMD_SCALAR)
-        REJECT("simd must be auto or scalar");
+    if (p->simd != CC_SIMD_AUTO && p->simd != CC_SIMD_SCALAR && p->simd != CC_SIMD_AVX2)
+        REJECT("simd must be auto, scalar or avx2");
     return CC_OK;
+}
+
+int cc_cpu_has_avx512_lookup(void)
+{
+#if CC_HAVE_X86 && defined(__GNUC__)
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512vl") &&
+           __builtin_cpu_supports("avx512vbmi") && __builtin_cpu_supports("avx512bitalg");
+#else
+    return 0;
+#endif
 }
 
 int cc_cpu_has_avx2(void)
@@ -145,7 +156,8 @@ int cc_setup_init(cc_setup *s, const cc_params *p)
     s->p = *p;
     s->D = p->num_disparities;
     s->Dp = (p->num_disparities + CC_LANES - 1) / CC_LANES * CC_LANES;
-    s->use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();
+    s->use_avx2 = p->simd != CC_SIMD_SCALAR && cc_cpu_has_avx2();
+    s->use_avx512 = p->simd == CC_SIMD_AUTO && s->use_avx2 && cc_cpu_has_avx512_lookup();
     if (p->cost_mode != CC_COST_BT)
         fill_rho_table(s->lut_census, p->lambda_census, p->cost_scale);
     if (p->cost_mode != CC_COST_CENSUS)

@@ -10,6 +10,7 @@ typedef struct cc_setup {
     int D, Dp;               /* disparity count and its padded count */
     int cmax;                /* largest fused cost */
     int use_avx2;
+    int use_avx512;          /* the cost's AVX-512 kernel (byte popcount and 64-entry byte lookups) */
     uint8_t lut_census[CC_LUT];
     uint8_t lut_bt[CC_LUT];
     uint16_t p2_by_step[256];
@@ -21,6 +22,8 @@ int cc_setup_init(cc_setup *s, const cc_params *p);
 int cc_check_images(const uint8_t *left, const uint8_t *right, int width, int height,
                     int stride_left, int stride_right, const cc_params *p);
 int cc_cpu_has_avx2(void);
+/* AVX-512 BW, VL, VBMI and BITALG: what the cost's AVX-512 kernel uses (256-bit vectors). */
+int cc_cpu_has_avx512_lookup(void);
 
 /* P2 for an intensity step |I(p) - I(p-r)| (from the table cc_setup_init fills). */
 static inline int cc_p2_for_step(const cc_setup *s, int intensity, int prev_intensity)

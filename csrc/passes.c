@@ -43,8 +43,12 @@ void cc_pass_vertical(const cc_setup *s, const cc_frame *f, cc_workspace *ws, in
 {
     const int w = f->width, h = f->height;
     if (s->p.paths == 4) {
-        int stripes = w / 64 < 4 * ws->threads ? w / 64 : 4 * ws->threads;
-        stripes = stripes > 0 ? stripes : 1;
+        /* four stripes per thread where each is at least 32 px wide, else fewer but a multiple of the thread
+         * count, so that equal threads finish together (7 stripes on 2 threads left one waiting for a
+         * seventh of the pass) */
+        int per_thread = w / (32 * ws->threads);
+        per_thread = per_thread > 4 ? 4 : per_thread;
+        int stripes = per_thread > 0 ? per_thread * ws->threads : (w / 32 > 0 ? w / 32 : 1);
 #pragma omp parallel for schedule(dynamic, 1) num_threads(ws->threads)
         for (int st = 0; st < stripes; st++) {
             int x0 = (int)((long)st * w / stripes), x1 = (int)((long)(st + 1) * w / stripes);

@@ -5,6 +5,10 @@
 #include "params.h"
 #include "postprocess.h"
 
+#if CC_HAVE_X86
+#include <immintrin.h>
+#endif
+
 static void lr_check_row(const cc_params *p, const int16_t *left, const int16_t *right, int width,
                          int16_t *out)
 {
@@ -200,13 +204,74 @@ static inline int median9_full(const int16_t *in, int width, int x0, int y0, int
     return 1;
 }
 
+#if CC_HAVE_X86
+#define VSORT2(a, b)                           \
+    do {                                       \
+        __m256i lo_ = _mm256_min_epi16(a, b);  \
+        b = _mm256_max_epi16(a, b);            \
+        a = lo_;                               \
+    } while (0)
+
+/* median9_full on 16 pixels x..x+15 of row y (all nine neighbours inside the image): the same
+ * exchange network, lane by lane.  Returns a bit per pixel (two per lane, movemask of 16-bit lanes)
+ * whose window holds an invalid pixel: those are left to the general code. */
+__attribute__((target("avx2"))) static unsigned median9_16(const int16_t *in, int width, int x, int y, int16_t *out)
+{
+    __m256i p[9];
+    for (int i = 0; i < 9; i++)
+        p[i] = _mm256_loadu_si256((const __m256i *)(in + (size_t)(y - 1 + i / 3) * width + x - 1 + i % 3));
+    __m256i lowest = p[0];
+    for (int i = 1; i < 9; i++)
+        lowest = _mm256_min_epi16(lowest, p[i]);
+    VSORT2(p[1], p[2]); VSORT2(p[4], p[5]); VSORT2(p[7], p[8]);
+    VSORT2(p[0], p[1]); VSORT2(p[3], p[4]); VSORT2(p[6], p[7]);
+    VSORT2(p[1], p[2]); VSORT2(p[4], p[5]); VSORT2(p[7], p[8]);
+    VSORT2(p[0], p[3]); VSORT2(p[5], p[8]); VSORT2(p[4], p[7]);
+    VSORT2(p[3], p[6]); VSORT2(p[1], p[4]); VSORT2(p[2], p[5]);
+    VSORT2(p[4], p[7]); VSORT2(p[4], p[2]); VSORT2(p[6], p[4]);
+    VSORT2(p[4], p[2]);
+    _mm256_storeu_si256((__m256i *)(out + x), p[4]);
+    /* CC_INVALID is the smallest int16: a window holds one exactly when its minimum is it */
+    return (unsigned)_mm256_movemask_epi8(_mm256_cmpeq_epi16(lowest, _mm256_set1_epi16(CC_INVALID)));
+}
+#endif
+
+static void median_row_general(const int16_t *in, int width, int height, int y, int size, int x_from, int x_to,
+                               int16_t *out);
+
 /* Median of the valid pixels of the window (clipped at the border); an
- * invalid pixel stays invalid, so the filter never invents a measurement. */
-static void median_row(const int16_t *in, int width, int height, int y, int size, int16_t *out)
+ * invalid pixel stays invalid, so the filter never invents a measurement.
+ * The 3 x 3 filter of an inner row runs 16 pixels at a time with AVX2. */
+static void median_row(const int16_t *in, int width, int height, int y, int size, int use_avx2, int16_t *out)
+{
+#if CC_HAVE_X86
+    if (use_avx2 && size == 3 && y > 0 && y < height - 1 && width - 2 >= 16) {
+        const int last = width - 1 - 16; /* the last chunk's first pixel: x + 16 <= width - 1 */
+        for (int x0 = 1;; x0 += 16) {
+            const int x = x0 < last ? x0 : last;
+            unsigned bad = median9_16(in, width, x, y, out);
+            while (bad) { /* windows with an invalid pixel: the general code, pixel by pixel */
+                int lane = __builtin_ctz(bad) / 2;
+                median_row_general(in, width, height, y, size, x + lane, x + lane + 1, out);
+                bad &= ~(3u << (2 * lane));
+            }
+            if (x == last)
+                break;
+        }
+        median_row_general(in, width, height, y, size, 0, 1, out);
+        median_row_general(in, width, height, y, size, width - 1, width, out);
+        return;
+    }
+#endif
+    median_row_general(in, width, height, y, size, 0, width, out);
+}
+
+static void median_row_general(const int16_t *in, int width, int height, int y, int size, int x_from, int x_to,
+                               int16_t *out)
 {
     int r = size / 2;
     int y0 = y - r < 0 ? 0 : y - r, y1 = y + r >= height ? height - 1 : y + r;
-    for (int x = 0; x < width; x++) {
+    for (int x = x_from; x < x_to; x++) {
         if (in[(size_t)y * width + x] == CC_INVALID) {
             out[x] = CC_INVALID;
             continue;
@@ -233,21 +298,55 @@ static void median_row(const int16_t *in, int width, int height, int y, int size
 }
 
 
+/* The post-processing's scratch, in this order: a map; the levels (32 entries of slack for the vector
+ * loads); the packed guide (8 px of slack); the level runs; the guide's planes (3, each with 32 bytes of
+ * slack); the no-level bytes (32 of slack); a histogram per thread. */
+#define LEVEL_SLACK 32
+static size_t plane_bytes(size_t n) { return cc_round_up(n + 32, 64); }
+
 size_t cc_postprocess_scratch_bytes(const cc_params *p, int width, int height, int threads)
 {
     size_t n = (size_t)width * height;
-    /* map, levels and packed guide, each with 8 pixels of slack for the vector loads; level runs */
-    return cc_round_up(n * sizeof(int16_t), 64) + cc_round_up((n + 8) * sizeof(uint16_t), 64) +
-           cc_round_up(n * sizeof(uint16_t), 64) +
-           cc_round_up((n + 8) * sizeof(uint32_t), 64) +
-           cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64) * (size_t)threads;
+    return cc_round_up(n * sizeof(int16_t), 64) + cc_round_up((n + LEVEL_SLACK) * sizeof(uint16_t), 64) +
+           cc_round_up((n + 8) * sizeof(uint32_t), 64) + cc_round_up(n * sizeof(uint16_t), 64) +
+           4 * plane_bytes(n) + cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64) * (size_t)threads;
 }
 
-/* Levels of a row for the weighted medians, and their runs (cc_wm_pixel). */
-static void levels_row(const cc_params *p, const int16_t *in, int width, uint16_t *out, uint16_t *run)
+#if CC_HAVE_X86
+/* cc_wm_level of 16 values at a time: floor((v + 8) / 16) as (v >> 4) + ((v & 15) + 8 >> 4), which
+ * cannot overflow 16 bits, less dmin, clamped to 0..levels-1; CC_WM_NO_LEVEL where v is CC_INVALID.
+ * Returns how many pixels it did (a multiple of 16); the caller does the rest. */
+__attribute__((target("avx2"))) static int levels_avx2(const int16_t *in, int width, int dmin, int levels,
+                                                        uint16_t *out)
 {
-    for (int x = 0; x < width; x++)
+    const __m256i vdmin = _mm256_set1_epi16((short)dmin), top = _mm256_set1_epi16((short)(levels - 1));
+    const __m256i fifteen = _mm256_set1_epi16(15), eight = _mm256_set1_epi16(8), zero = _mm256_setzero_si256();
+    const __m256i invalid = _mm256_set1_epi16(CC_INVALID);
+    int x = 0;
+    for (; x + 16 <= width; x += 16) {
+        __m256i v = _mm256_loadu_si256((const __m256i *)(in + x));
+        __m256i whole = _mm256_add_epi16(_mm256_srai_epi16(v, 4),
+                                         _mm256_srli_epi16(_mm256_add_epi16(_mm256_and_si256(v, fifteen), eight), 4));
+        __m256i b = _mm256_min_epi16(_mm256_max_epi16(_mm256_sub_epi16(whole, vdmin), zero), top);
+        _mm256_storeu_si256((__m256i *)(out + x), _mm256_or_si256(b, _mm256_cmpeq_epi16(v, invalid)));
+    }
+    return x;
+}
+#endif
+
+/* Levels of a row for the weighted medians, their runs (cc_wm_pixel), and 0xFF where a pixel has none. */
+static void levels_row(const cc_params *p, const int16_t *in, int width, int use_avx2, uint16_t *out,
+                       uint16_t *run, uint8_t *invalid)
+{
+    int x = 0;
+#if CC_HAVE_X86
+    if (use_avx2)
+        x = levels_avx2(in, width, p->min_disparity, p->num_disparities, out);
+#endif
+    for (; x < width; x++)
         out[x] = (uint16_t)cc_wm_level(in[x], p->min_disparity, p->num_disparities);
+    for (x = 0; x < width; x++)
+        invalid[x] = out[x] == CC_WM_NO_LEVEL ? 0xFF : 0;
     run[width - 1] = 1;
     for (int x = width - 2; x >= 0; x--)
         run[x] = out[x] == out[x + 1] && run[x + 1] < UINT16_MAX ? (uint16_t)(run[x + 1] + 1) : 1;
@@ -267,20 +366,34 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
     const size_t hist_stride = cc_round_up(cc_wm_hist_bytes(p->num_disparities), 64);
     int16_t *tmp = scratch;
     uint16_t *level = (uint16_t *)((uint8_t *)scratch + map_bytes);
-    uint32_t *packed = (uint32_t *)((uint8_t *)level + cc_round_up((n + 8) * sizeof(uint16_t), 64));
+    uint32_t *packed = (uint32_t *)((uint8_t *)level + cc_round_up((n + LEVEL_SLACK) * sizeof(uint16_t), 64));
     uint16_t *run = (uint16_t *)((uint8_t *)packed + cc_round_up((n + 8) * sizeof(uint32_t), 64));
-    uint8_t *hist_base = (uint8_t *)run + cc_round_up(n * sizeof(uint16_t), 64);
-    cc_wm_image g = *guide;
-    g.packed = packed;
-    g.use_avx2 = p->simd == CC_SIMD_AUTO && cc_cpu_has_avx2();
-    memset(level + n, 0xFF, 8 * sizeof(uint16_t));
-    memset(packed + n, 0, 8 * sizeof(uint32_t));
+    uint8_t *planes[3], *invalid;
+    planes[0] = (uint8_t *)run + cc_round_up(n * sizeof(uint16_t), 64);
+    planes[1] = planes[0] + plane_bytes(n);
+    planes[2] = planes[1] + plane_bytes(n);
+    invalid = planes[2] + plane_bytes(n);
+    uint8_t *hist_base = invalid + plane_bytes(n);
     cc_wm_tables tables;
     if (weighted_fill || wmedian)
         cc_wm_tables_init(&tables, p->wm_sigma_colour, p->wm_sigma_space);
+    cc_wm_image g = *guide;
+    g.use_avx2 = p->simd != CC_SIMD_SCALAR && cc_cpu_has_avx2();
+    /* the planar kernel when it can run (AVX2, colour weights ending early), else the packed one */
+    const int planar = (weighted_fill || wmedian) && cc_wm_planar_usable(&tables, g.use_avx2);
+    g.packed = planar ? NULL : packed;
+    for (int c = 0; c < 3; c++)
+        g.planes[c] = planar && c < (g.channels == 3 ? 3 : 1) ? planes[c] : NULL;
+    memset(level + n, 0xFF, LEVEL_SLACK * sizeof(uint16_t));
+    memset(packed + n, 0, 8 * sizeof(uint32_t));
+    for (int c = 0; c < 3; c++)
+        memset(planes[c] + n, 0, 32);
+    memset(invalid + n, 0xFF, 32);
     int16_t *fill_out = weighted_fill ? tmp : filled;
     int16_t *median_out = wmedian ? tmp : disp;
     const int16_t *wm_in = p->median ? tmp : filled;
+    const cc_wm_map fill_map = {.value = tmp, .level = level, .run = run, .invalid = planar ? invalid : NULL};
+    const cc_wm_map wm_map = {.value = wm_in, .level = level, .run = run, .invalid = planar ? invalid : NULL};
 #pragma omp parallel num_threads(threads)
     {
         cc_wm_hist h = cc_wm_hist_at(hist_base + hist_stride * (size_t)omp_get_thread_num(), p->num_disparities);
@@ -297,8 +410,10 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
             else
                 memcpy(fill_out + o, checked + o, sizeof(int16_t) * width);
             if (weighted_fill)
-                levels_row(p, tmp + o, width, level + o, run + o);
-            if (weighted_fill || wmedian)
+                levels_row(p, tmp + o, width, g.use_avx2, level + o, run + o, invalid + o);
+            if (planar)
+                cc_wm_planes_row(&g, y, planes);
+            else if (weighted_fill || wmedian)
                 cc_wm_pack_row(&g, y, packed + o);
         }
         if (p->fill_mode != CC_FILL_NONE) { /* border strips, then (weighted) the rejected pixels */
@@ -308,11 +423,15 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
                 border_fit_row(p, checked, width, height, y, filled + (size_t)y * width, &left_end, &right_begin);
                 if (!weighted_fill)
                     continue;
+                h.guess = -1; /* the kernel's guess: the median level of the fill pixel just before */
                 for (int x = left_end; x < right_begin; x++) {
                     size_t o = (size_t)y * width + x;
-                    filled[o] = checked[o] == CC_INVALID
-                                    ? cc_wm_pixel(&tables, &g, tmp, level, run, x, y, p->fill_radius, &h)
-                                    : tmp[o];
+                    if (checked[o] == CC_INVALID) {
+                        filled[o] = cc_wm_pixel(&tables, &g, &fill_map, x, y, p->fill_radius, &h);
+                    } else {
+                        filled[o] = tmp[o];
+                        h.guess = -1;
+                    }
                 }
             }
         }
@@ -320,18 +439,17 @@ void cc_postprocess_maps(const cc_params *p, const int16_t *raw_left, const int1
         for (int y = 0; y < height; y++) {
             size_t o = (size_t)y * width;
             if (p->median)
-                median_row(filled, width, height, y, p->median, median_out + o);
+                median_row(filled, width, height, y, p->median, g.use_avx2, median_out + o);
             else if (!wmedian)
                 memcpy(disp + o, filled + o, sizeof(int16_t) * width);
             if (wmedian) /* levels of the weighted median's input, complete for this row */
-                levels_row(p, p->median ? median_out + o : filled + o, width, level + o, run + o);
+                levels_row(p, p->median ? median_out + o : filled + o, width, g.use_avx2, level + o, run + o,
+                           invalid + o);
         }
         if (wmedian) {
 #pragma omp for schedule(dynamic, 4)
             for (int y = 0; y < height; y++)
-                for (int x = 0; x < width; x++)
-                    disp[(size_t)y * width + x] = cc_wm_pixel(&tables, &g, wm_in, level, run, x, y,
-                                                              p->weighted_median, &h);
+                cc_wm_row(&tables, &g, &wm_map, y, p->weighted_median, &h, disp + (size_t)y * width);
         }
     }
 }

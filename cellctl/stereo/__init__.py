@@ -14,7 +14,6 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 from cellctl.stereo.matcher import (  # noqa: E402 (after the setting above)
-    DISP_SCALE,
     INVALID,
     MatcherParams,
     StereoMatcher,
@@ -26,6 +25,7 @@ from cellctl.stereo.matcher import (  # noqa: E402 (after the setting above)
     select,
     to_float,
 )
+from cellctl.stereo.params import DISP_SCALE  # noqa: E402
 
 __all__ = [
     "DISP_SCALE",

@@ -46,9 +46,19 @@ class StereoResult:
 
 
 def to_float(fixed: np.ndarray) -> np.ndarray:
-    """int16 fixed-point disparities (x16, INVALID) to float32 px with NaN."""
-    out = fixed.astype(np.float32) / DISP_SCALE
-    out[fixed == INVALID] = np.nan
+    """int16 fixed-point disparities (x16, INVALID) to float32 px with NaN (in C: numpy's masked
+    assignment alone took 0.4 ms of a 450x375 match)."""
+    if fixed.dtype != np.int16:  # not the core's maps: the plain definition
+        out = fixed.astype(np.float32) / DISP_SCALE
+        out[fixed == INVALID] = np.nan
+        return out
+    src = np.ascontiguousarray(fixed)
+    out = np.empty(src.shape, np.float32)
+    rc = lib.cc_disparity_to_float(
+        ffi.cast("const int16_t *", ffi.from_buffer(src)), src.size, ffi.cast("float *", ffi.from_buffer(out))
+    )
+    if rc != 0:
+        raise ValueError(f"disparity conversion failed (error {rc})")
     return out
 
 

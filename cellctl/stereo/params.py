@@ -20,7 +20,7 @@ INVALID = lib.CC_INVALID
 
 _COSTS = {"census_bt": lib.CC_COST_CENSUS_BT, "census": lib.CC_COST_CENSUS, "bt": lib.CC_COST_BT}
 _FILLS = {"none": lib.CC_FILL_NONE, "background": lib.CC_FILL_BACKGROUND, "weighted": lib.CC_FILL_WEIGHTED}
-_SIMD = {"auto": lib.CC_SIMD_AUTO, "scalar": lib.CC_SIMD_SCALAR}
+_SIMD = {"auto": lib.CC_SIMD_AUTO, "scalar": lib.CC_SIMD_SCALAR, "avx2": lib.CC_SIMD_AVX2}
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,7 @@ class MatcherParams:
     wm_sigma_colour: float  # weighted medians: colour scale, summed |dB| + |dG| + |dR|
     wm_sigma_space: float  # weighted medians: distance scale, px
     threads: int  # 0: all cores
-    simd: str  # "auto" or "scalar"
+    simd: str  # "auto", "scalar" or "avx2" (the AVX2 kernels even where AVX-512 ones could run)
 
     def to_c(self) -> Any:
         """The C struct, after the core's own validation (ValueError naming the problem)."""

@@ -173,3 +173,11 @@ def test_stage_entry_points_refuse_bad_arguments():
         lib.cc_postprocess(_params(), _i16(OUT), ffi.NULL, _u8(IMG), 1, W, W, H, *(_i16(m) for m in maps))
         == lib.CC_ERR_NULL
     )
+
+
+def test_disparity_conversion_refuses_null():
+    out = np.zeros(4, np.float32)
+    disp = np.zeros(4, np.int16)
+    assert lib.cc_disparity_to_float(ffi.NULL, 4, ffi.cast("float *", ffi.from_buffer(out))) == lib.CC_ERR_NULL
+    assert lib.cc_disparity_to_float(_i16(disp), 4, ffi.NULL) == lib.CC_ERR_NULL
+    assert lib.cc_disparity_to_float(_i16(disp), 0, ffi.cast("float *", ffi.from_buffer(out))) == lib.CC_OK

@@ -187,3 +187,19 @@ def test_tiny_images_work():
     two = np.array([[10, 200]], np.uint8)
     disp = StereoMatcher(0, 2, median=0).compute(two, two)
     assert disp.shape == (1, 2)
+
+
+@pytest.mark.parametrize("shape", [(375, 450), (3, 5), (1, 1), (9, 7)])
+def test_to_float_is_the_fixed_point_value_with_nan_for_invalid(shape):
+    from cellctl.stereo import INVALID, to_float
+
+    rng = np.random.default_rng(3)
+    fixed = rng.integers(-32768, 32768, shape).astype(np.int16)
+    fixed[rng.random(shape) < 0.2] = INVALID
+    want = fixed.astype(np.float32) / 16
+    want[fixed == INVALID] = np.nan
+    got = to_float(fixed)
+    assert got.dtype == np.float32 and got.shape == shape
+    assert got.tobytes() == want.tobytes()
+    assert to_float(fixed.T).tobytes() == np.ascontiguousarray(want.T).tobytes()  # any layout
+    assert to_float(fixed.astype(np.int32)).tobytes() == want.tobytes()  # other integer types: the same

@@ -52,7 +52,7 @@ COST_CASES = [
 ]
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
 @pytest.mark.parametrize("case", COST_CASES)
 def test_cost_volume_matches_reference(case, simd):
     left, right = _pair(2, 9, 40)
@@ -60,7 +60,7 @@ def test_cost_volume_matches_reference(case, simd):
     np.testing.assert_array_equal(got, ref.cost_volume(left, right, _params(**case)))
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
 @pytest.mark.parametrize("threshold", [0, 1, 2, 4])
 def test_ternary_census_cost_on_a_low_contrast_pair_matches_reference(threshold, simd):
     """Levels 100..104 only: most pairs fall in the dead band, ties and +-1 steps decide the binary bits."""
@@ -84,7 +84,7 @@ AGG_CASES = [
 ]
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
 @pytest.mark.parametrize("case", AGG_CASES)
 def test_aggregation_matches_reference(case, simd):
     left, right = _pair(3, 12, 26)
@@ -92,8 +92,10 @@ def test_aggregation_matches_reference(case, simd):
     np.testing.assert_array_equal(got, ref.aggregate(left, right, _params(**case)))
 
 
-@pytest.mark.parametrize("simd", ["auto", "scalar"])
-@pytest.mark.parametrize("levels,uniqueness", [(11, 0), (11, 15), (37, 0), (37, 25), (48, 60), (3, 40)])
+@pytest.mark.parametrize("simd", ["auto", "avx2", "scalar"])
+@pytest.mark.parametrize(
+    "levels,uniqueness", [(11, 0), (11, 15), (37, 0), (37, 25), (48, 60), (3, 40), (16, 0), (64, 30)]
+)
 @pytest.mark.parametrize("subpixel", [True, False])
 @pytest.mark.parametrize("dmin", [0, -3, 4])
 def test_selection_matches_reference(subpixel, dmin, levels, uniqueness, simd):
@@ -147,6 +149,47 @@ def test_postprocess_matches_reference(case, colour):
     want = ref.postprocess(raw_left.astype(np.int64), raw_right.astype(np.int64), _params(**case), guide)
     for g, r in zip(got, want):
         np.testing.assert_array_equal(g, r)
+
+
+WEIGHTED_TWIN_CASES = [
+    dict(),  # the defaults: fill radius 15, weighted median 3, sigma colour 12 (5 colour byte tables)
+    dict(fill_radius=7, weighted_median=5, wm_sigma_colour=20.0),  # 8 colour byte tables
+    dict(fill_radius=1, weighted_median=1, wm_sigma_colour=3.0),  # one table
+    dict(fill="none", median=0, weighted_median=4),  # the rejected pixels reach the weighted median
+    dict(fill_radius=15, weighted_median=15, wm_sigma_space=2.0, num_disparities=20, min_disparity=-4),
+    dict(fill_radius=9, wm_sigma_colour=400.0),  # colour weights past 127: the packed kernel
+]
+
+
+@pytest.mark.parametrize("colour", [True, False])
+@pytest.mark.parametrize("case", WEIGHTED_TWIN_CASES)
+def test_weighted_stages_vector_kernels_equal_the_scalar_kernel(case, colour):
+    """The weighted fill and median on maps wider than a vector row, with whole rows and blocks rejected,
+    an invalid row and the image borders inside the windows: AVX2 (where the CPU has it) == portable."""
+    h, w = 37, 83
+    rng = np.random.default_rng(11)
+    yy, xx = np.mgrid[0:h, 0:w]
+    raw_left = (16 * (3 + (xx > 40) * 6 + (yy > 20) * 3) + rng.integers(-12, 13, (h, w))).astype(np.int16)
+    raw_left[24:, :39] = 16 * 6  # a flat region: whole windows on one level
+    raw_right = np.full((h, w), stereo.INVALID, np.int16)
+    for y in range(h):
+        for x in range(w):
+            xr = x - (int(raw_left[y, x]) + 8) // 16
+            if 0 <= xr < w:
+                raw_right[y, xr] = raw_left[y, x] + rng.integers(-10, 11)
+    raw_left[5:12, 30:52] = 16 * 14  # a block the check rejects
+    raw_left[rng.random((h, w)) < 0.2] = 16 * 15
+    raw_right[17, :] = stereo.INVALID  # a row without any measurement
+    guide = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    guide[:, 41:] //= 6
+    guide[20:26, :] = 90  # a flat band: equal colours, cd = 0
+    if not colour:
+        guide = guide[:, :, 2].copy()
+    vector = stereo.postprocess(raw_left, raw_right, guide, **case)
+    scalar = stereo.postprocess(raw_left, raw_right, guide, simd="scalar", **case)
+    assert np.count_nonzero(vector[0] == stereo.INVALID) > h * w // 5  # the fill has work
+    for v, s in zip(vector, scalar):
+        np.testing.assert_array_equal(v, s)
 
 
 def test_weighted_stages_change_the_result_and_need_a_matching_guide():
