@@ -30,11 +30,13 @@ from cellctl.vision.checks import (
     GLUE_COVER_RADIUS_MM,
     OUTLINE_OUTSIDE_MM,
     CheckFailure,
+    check_edge_offsets,
     check_edge_profile,
     check_glue_coverage,
     check_glue_path,
     check_outline_depth,
     check_outline_right,
+    edge_offsets,
     hidden_from,
 )
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_closed
@@ -220,7 +222,30 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surfac
             reconstruction.raised.origin,
             reconstruction.raised.cell_mm,
         )
-    return check_outline_right(ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level)
+    problem = check_outline_right(
+        ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level
+    )
+    if problem is not None or reconstruction.changed_left is None:
+        return problem
+
+    def left_pixel(table: np.ndarray) -> np.ndarray:
+        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
+        return np.column_stack([f * camera[:, 0] / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy])
+
+    offsets = []
+    for changed, to_pixel, camera_centre in (
+        (reconstruction.changed_left, left_pixel, reconstruction.camera_to_table[:3, 3]),
+        (changed_right, right_pixel, centre[:3]),
+    ):
+        # From the inward side of a (vertical) wall the silhouette is the top edge, at the edge's height. A
+        # camera on the outward side sees the wall, and the change mask ends at its foot on the table, or
+        # at the top edge where the wall is lit so that it hardly differs from the table: either is the edge.
+        top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
+        foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
+        sees_wall = np.sum(outward * (camera_centre[:2] - ring), axis=1) > 0
+        nearer = np.where(np.abs(np.nan_to_num(foot, nan=np.inf)) < np.abs(np.nan_to_num(top, nan=np.inf)), foot, top)
+        offsets.append(np.where(sees_wall, nearer, top))
+    return check_edge_offsets(offsets)
 
 
 HEIGHT_MAP_CELL_MM = 1.0
