@@ -73,6 +73,11 @@ OUTLINE_SMOOTHING_MM = 0.75
 # Without a taught table the edge comes from the colour test, whose noise on black soles biases the extreme
 # projections (the length) outward by 0.3-0.5 mm at 0.75 mm: the 2 mm it was tuned with.
 COLOUR_OUTLINE_SMOOTHING_MM = 2.0
+# Radius of the disc the glue line's edge is closed with: a sole's outline curves inward nowhere tighter
+# (simulated soles: 28 mm at least; a nozzle could not follow a tight notch either), while the measured
+# outline has dents of 1-2 mm depth and 4-8 mm width where edge pixels lost their depth. A disc of radius R
+# leaves R - sqrt(R^2 - w^2 / 4) of a dent w wide: 0.4 mm of a 6 mm dent at 12 mm.
+GLUE_EDGE_CLOSE_MM = 12.0
 GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
@@ -151,7 +156,9 @@ def measure_sole(
     # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
     # The offset is taken from the outline reported (smoothed against the edge's pixel noise), rasterised
     # again on the footprint's cells: the glue path keeps its distance from that outline.
-    edge = footprint.filled(outline)
+    # A dent in the measured outline narrower than GLUE_EDGE_CLOSE_MM (edge pixels whose depth dropped out)
+    # is no part of a sole's shape: the glue line does not follow it.
+    edge = footprint.filled(outline).closed(GLUE_EDGE_CLOSE_MM)
     inset = edge.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
     if len(inset) < 3:
         return _invalid(
