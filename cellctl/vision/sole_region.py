@@ -33,7 +33,6 @@ MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviati
 # reads 2.2, and heights came out 1.1-1.3 mm off and glue points 1.9 mm off their offset, every other
 # self-check passing.
 MAX_IMAGE_NOISE_DN = 1.5
-_LAPLACE_3X3 = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)  # noise gain 6 (sum of squares 36)
 
 
 @dataclass(frozen=True)
@@ -122,8 +121,18 @@ def change_split(
 def image_noise_dn(grey: np.ndarray) -> float:
     """Robust sensor noise (DN) of an image: the median absolute response of a 3 x 3 second-difference
     kernel that cancels planar brightness (Immerkaer's estimator, with a median so that the few edges and
-    texture lines of a scene do not count)."""
-    response = cv2.filter2D(np.ascontiguousarray(grey[::2], np.float32), -1, _LAPLACE_3X3)[1:-1, 1:-1]
+    texture lines of a scene do not count), evaluated at every 4th pixel of every 4th row (a few ms)."""
+    g = np.asarray(grey, np.float32)
+    height, width = g.shape
+
+    def at(dy: int, dx: int) -> np.ndarray:
+        return g[1 + dy : height - 1 + dy : 4, 1 + dx : width - 1 + dx : 4]
+
+    response = (
+        4.0 * at(0, 0)
+        - 2.0 * (at(-1, 0) + at(1, 0) + at(0, -1) + at(0, 1))
+        + (at(-1, -1) + at(-1, 1) + at(1, -1) + at(1, 1))
+    )
     return float(np.median(np.abs(response))) / 0.6745 / 6.0
 
 
