@@ -349,10 +349,10 @@ def edge_offsets(
     px = np.round(table_to_pixel(points)).astype(np.int64)
     height, width = changed.shape
     ok = (px[:, 0] >= 0) & (px[:, 0] < width) & (px[:, 1] >= 0) & (px[:, 1] < height)
-    value = np.zeros(len(points), bool)
-    value[ok] = changed[px[ok, 1], px[ok, 0]]
+    flat = np.zeros(len(points), bool)
+    flat[ok] = changed[px[ok, 1], px[ok, 0]]
     known = ok.reshape(n, k)
-    value = value.reshape(n, k)
+    value = flat.reshape(n, k)
     if table_level is not None:  # a changed pixel on the measured table outside: a shadow, no evidence
         known &= ~(value & table_level.contains(xy.reshape(-1, 2)).reshape(n, k) & (steps > 0)[None, :])
     on = value & known
