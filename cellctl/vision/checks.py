@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.vision.closed_path import smooth_along
 from cellctl.vision.footprint import Footprint
 
 OUTLINE_INSIDE_MM = 2.0  # the sole must rise above the table this far inside its outline...
@@ -80,12 +79,6 @@ EDGE_PROFILE_MIN_KNOWN = 0.7  # of a profile's samples in the image and not excu
 EDGE_PROFILE_MAX_MISFIT = 0.2  # of the known samples on the wrong side of the best step: no clear edge
 EDGE_OFFSET_WINDOW_MM = 5
 MAX_EDGE_OFFSET_MM = 0.8
-# The outline is moved onto the edge the images show where it is more than this off it (the edge's own
-# scatter in the images is ~0.2 mm; a bulge or dent of the depth-based outline is 1-2 mm) and the two
-# cameras agree within EDGE_CORRECTION_AGREE_MM; the shift smoothed along the outline (points 1 mm apart).
-EDGE_CORRECTION_MIN_MM = 0.5
-EDGE_CORRECTION_AGREE_MM = 0.5
-EDGE_CORRECTION_SMOOTHING_MM = 1.5
 
 
 @dataclass(frozen=True)
@@ -421,15 +414,3 @@ def local_edge_offsets(offsets: list[np.ndarray]) -> np.ndarray:
     with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
         warnings.simplefilter("ignore", RuntimeWarning)
         return np.where(enough, np.nanmedian(window, axis=0), 0.0)
-
-
-def outline_shift(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """How far to move each outline point (1 mm apart) along its outward normal onto the edge the images
-    show: the cameras' mean local offset (`local_edge_offsets`) where it exceeds EDGE_CORRECTION_MIN_MM and
-    the two agree within EDGE_CORRECTION_AGREE_MM (a texture line or a shadow fools one change mask, not
-    both in the same place), else 0; smoothed along the outline."""
-    local_left, local_right = local_edge_offsets([left]), local_edge_offsets([right])
-    local = 0.5 * (local_left + local_right)
-    agree = np.abs(local_left - local_right) <= EDGE_CORRECTION_AGREE_MM
-    shift = np.where(agree & (np.abs(local) > EDGE_CORRECTION_MIN_MM), local, 0.0)
-    return smooth_along(shift, EDGE_CORRECTION_SMOOTHING_MM)

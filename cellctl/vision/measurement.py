@@ -39,9 +39,9 @@ from cellctl.vision.checks import (
     check_outline_right,
     edge_offsets,
     hidden_from,
-    outline_shift,
+    local_edge_offsets,
 )
-from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_closed
+from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along, smooth_closed
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
@@ -80,6 +80,12 @@ COLOUR_OUTLINE_SMOOTHING_MM = 2.0
 # outline has dents of 1-2 mm depth and 4-8 mm width where edge pixels lost their depth. A disc of radius R
 # leaves R - sqrt(R^2 - w^2 / 4) of a dent w wide: 0.4 mm of a 6 mm dent at 12 mm.
 GLUE_EDGE_CLOSE_MM = 12.0
+# The outline is moved onto the edge the images show where it is more than this off it (the edge's own
+# scatter in the images is ~0.2 mm; a bulge or dent of the depth-based outline is 1-2 mm), the shift
+# smoothed along the outline over this (the outline's points are 1 mm apart here).
+EDGE_CORRECTION_MIN_MM = 0.5
+EDGE_CORRECTION_SMOOTHING_MM = 1.5
+EDGE_CORRECTION_AGREE_MM = 0.5  # the two cameras' offsets at least this close to move the outline
 GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
@@ -289,8 +295,8 @@ def _image_edge_offsets(
 
 
 def _onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:
-    """The outline (resampled every 1 mm) moved onto the edge both cameras' change masks show, where it is
-    more than EDGE_CORRECTION_MIN_MM off it and the two cameras agree (checks.outline_shift).
+    """The outline moved onto the edge both cameras' change masks show, where it is more than
+    EDGE_CORRECTION_MIN_MM off it and the two cameras agree on where the edge is.
 
     The depth-based outline bulges or dents by 1-2 mm in places (edge pixels whose depth dropped out or was
     dragged over); the change masks place the edge without depth. Smaller offsets are the edge's noise and
@@ -302,7 +308,13 @@ def _onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surfac
     ring = resample_closed(outline, 1.0)
     outward = outward_normals(ring)
     left, right = _image_edge_offsets(views, ring, outward, _edge_height(surface, ring, outward))
-    return ring + outline_shift(left, right)[:, None] * outward
+    local_left, local_right = local_edge_offsets([left]), local_edge_offsets([right])
+    local = 0.5 * (local_left + local_right)
+    # Only where both cameras see the edge there (a texture line or a shadow fools one change mask, not
+    # both in the same place): elsewhere the outline check judges the outline as it is.
+    agree = np.abs(local_left - local_right) <= EDGE_CORRECTION_AGREE_MM
+    shift = np.where(agree & (np.abs(local) > EDGE_CORRECTION_MIN_MM), local, 0.0)
+    return ring + smooth_along(shift, EDGE_CORRECTION_SMOOTHING_MM)[:, None] * outward
 
 
 HEIGHT_MAP_CELL_MM = 1.0

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cellctl.errors import FailureKind
-from cellctl.vision.checks import check_edge_offsets, edge_offsets, outline_shift
+from cellctl.vision.checks import check_edge_offsets, edge_offsets
 from cellctl.vision.footprint import Footprint
 
 RADIUS = 50.0
@@ -75,15 +75,3 @@ def test_an_outline_with_no_edge_near_it_is_refused(changed: np.ndarray) -> None
     found = offsets(np.full(314, RADIUS - 10.0), changed)  # the edge is beyond the search everywhere
     problem = check_edge_offsets([found])
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
-
-
-def test_the_outline_moves_onto_the_edge_where_both_cameras_agree_and_only_there() -> None:
-    n = 300
-    left, right = np.full(n, 0.12), np.full(n, -0.12)  # the edge's scatter: no move
-    left[50:60] = right[50:60] = -1.1  # a bulge both cameras see: the outline moves in by ~1.1 mm
-    left[150:160] = -2.1  # one camera's mask fooled (a texture line): no move, the check judges it
-    left[250:260], right[250:260] = 0.9, np.nan  # the other camera has no edge there: no move
-    shift = outline_shift(left, right)
-    assert shift[54] == pytest.approx(-1.1, abs=0.15)
-    assert np.all(np.abs(shift[np.r_[0:40, 70:300]]) < 1e-9)
-    assert check_edge_offsets([left, right]) is not None  # as found (bulge, fooled mask): refused
