@@ -378,14 +378,21 @@ def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
     `offsets`: per camera, `edge_offsets` along the outline. Their mean per point, a running median over
     EDGE_OFFSET_WINDOW_MM, must stay within MAX_EDGE_OFFSET_MM of the outline everywhere it is known.
     """
-    mean = _mean_offset(offsets)
+    stacked = np.vstack(offsets)
+    known = np.isfinite(stacked)
+    mean = np.where(known.any(axis=0), np.nansum(stacked, axis=0) / np.maximum(known.sum(axis=0), 1), np.nan)
     if np.count_nonzero(np.isfinite(mean)) < MIN_TESTABLE * len(mean):
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"the sole's edge is not clear in the images: only {np.count_nonzero(np.isfinite(mean))} of "
             f"{len(mean)} outline points show one within {EDGE_SEARCH_MM:g} mm",
         )
-    local = local_edge_offsets(offsets)
+    half = EDGE_OFFSET_WINDOW_MM // 2
+    window = np.stack([np.roll(mean, s) for s in range(-half, half + 1)])
+    enough = np.isfinite(window).sum(axis=0) > half
+    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
+        warnings.simplefilter("ignore", RuntimeWarning)
+        local = np.where(enough, np.nanmedian(window, axis=0), 0.0)
     worst = int(np.argmax(np.abs(local)))
     if abs(local[worst]) > MAX_EDGE_OFFSET_MM:
         where = "beyond" if local[worst] > 0 else "inside"
@@ -395,22 +402,3 @@ def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
             f"{worst} (limit {MAX_EDGE_OFFSET_MM:g} mm): the outline there is not the sole's edge",
         )
     return None
-
-
-def _mean_offset(offsets: list[np.ndarray]) -> np.ndarray:
-    """The cameras' offsets averaged per outline point (NaN where none has one)."""
-    stacked = np.vstack(offsets)
-    known = np.isfinite(stacked)
-    return np.where(known.any(axis=0), np.nansum(stacked, axis=0) / np.maximum(known.sum(axis=0), 1), np.nan)
-
-
-def local_edge_offsets(offsets: list[np.ndarray]) -> np.ndarray:
-    """The cameras' mean offset per outline point, a running median over EDGE_OFFSET_WINDOW_MM (0 where
-    fewer than half the window's points have one)."""
-    mean = _mean_offset(offsets)
-    half = EDGE_OFFSET_WINDOW_MM // 2
-    window = np.stack([np.roll(mean, s) for s in range(-half, half + 1)])
-    enough = np.isfinite(window).sum(axis=0) > half
-    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.where(enough, np.nanmedian(window, axis=0), 0.0)

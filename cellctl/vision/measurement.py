@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import cv2
@@ -39,9 +38,8 @@ from cellctl.vision.checks import (
     check_outline_right,
     edge_offsets,
     hidden_from,
-    local_edge_offsets,
 )
-from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along, smooth_closed
+from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_closed
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
@@ -80,12 +78,6 @@ COLOUR_OUTLINE_SMOOTHING_MM = 2.0
 # outline has dents of 1-2 mm depth and 4-8 mm width where edge pixels lost their depth. A disc of radius R
 # leaves R - sqrt(R^2 - w^2 / 4) of a dent w wide: 0.4 mm of a 6 mm dent at 12 mm.
 GLUE_EDGE_CLOSE_MM = 12.0
-# The outline is moved onto the edge the images show where it is more than this off it (the edge's own
-# scatter in the images is ~0.2 mm; a bulge or dent of the depth-based outline is 1-2 mm), the shift
-# smoothed along the outline over this (the outline's points are 1 mm apart here).
-EDGE_CORRECTION_MIN_MM = 0.5
-EDGE_CORRECTION_SMOOTHING_MM = 1.5
-EDGE_CORRECTION_AGREE_MM = 0.5  # the two cameras' offsets at least this close to move the outline
 GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
@@ -115,8 +107,7 @@ def measure_sole(
     start = time.perf_counter()
     footprint = reconstruction.footprint
     smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
-    surface = SoleSurface(reconstruction)  # one per reconstruction: its k-d tree serves every query below
-    outline = _onto_image_edge(reconstruction, smooth_closed(footprint.outline(), smoothing), surface)
+    outline = smooth_closed(footprint.outline(), smoothing)
     centroid, axis = _principal_axis(outline)
     proj = (outline - centroid) @ axis
     lo, hi = float(proj.min()), float(proj.max())
@@ -132,6 +123,7 @@ def measure_sole(
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
         )
+    surface = SoleSurface(reconstruction)  # one per reconstruction: its k-d tree serves every query below
     problem = _outline_problem(reconstruction, outline, surface)
     if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
         # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
@@ -215,47 +207,21 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surfac
     problem = check_edge_profile(ring, outward, heights)
     if problem is not None:
         return problem
-    views = _views(reconstruction)
-    if views is None:
-        return None
-    edge_height = _edge_height(surface, ring, outward)
-    problem = check_outline_right(
-        ring, outward, edge_height, views.changed[1], views.to_pixel[1], views.centre[1], heights, views.table_level
-    )
-    if problem is not None:
-        return problem
-    return check_edge_offsets(_image_edge_offsets(views, ring, outward, edge_height))
-
-
-@dataclass(frozen=True)
-class _Views:
-    """The two cameras as the outline's image checks see them: change masks, projections, centres."""
-
-    changed: tuple[np.ndarray, np.ndarray]  # left, right: rectified pixels changed against the taught table
-    to_pixel: tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]  # table -> pixel
-    centre: tuple[np.ndarray, np.ndarray]  # optical centres in the table frame
-    table_level: Footprint | None  # cells whose measured points lie at the table's height
-
-
-def _views(reconstruction: Reconstruction) -> _Views | None:
-    """The cameras of a taught-table reconstruction (None without both change masks)."""
-    changed_left, changed_right = reconstruction.changed_left, reconstruction.changed_right
-    calib = reconstruction.calibration
-    if changed_left is None or changed_right is None or calib is None:
+    changed_right, calib = reconstruction.changed_right, reconstruction.calibration
+    if changed_right is None or calib is None:
         return None
     to_camera = np.linalg.inv(reconstruction.camera_to_table)
     f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
 
-    def pixel(shift: float) -> Callable[[np.ndarray], np.ndarray]:
-        def project(table: np.ndarray) -> np.ndarray:
-            camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
-            return np.column_stack(
-                [f * (camera[:, 0] - shift) / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy]
-            )
+    def right_pixel(table: np.ndarray) -> np.ndarray:
+        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
+        return np.column_stack(
+            [f * (camera[:, 0] - baseline) / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy]
+        )
 
-        return project
-
-    right_centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
+    centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
+    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
+    edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
     table_level = None
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
         table_level = Footprint(
@@ -263,58 +229,30 @@ def _views(reconstruction: Reconstruction) -> _Views | None:
             reconstruction.raised.origin,
             reconstruction.raised.cell_mm,
         )
-    return _Views(
-        (changed_left, changed_right),
-        (pixel(0.0), pixel(baseline)),
-        (reconstruction.camera_to_table[:3, 3], right_centre[:3]),
-        table_level,
+    problem = check_outline_right(
+        ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level
     )
+    if problem is not None or reconstruction.changed_left is None:
+        return problem
 
+    def left_pixel(table: np.ndarray) -> np.ndarray:
+        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
+        return np.column_stack([f * camera[:, 0] / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy])
 
-def _edge_height(surface: SoleSurface, ring: np.ndarray, outward: np.ndarray) -> np.ndarray:
-    """The sole's height near each outline point (3 mm inside; the median where none was measured)."""
-    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
-    return np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
-
-
-def _image_edge_offsets(
-    views: _Views, ring: np.ndarray, outward: np.ndarray, edge_height: np.ndarray
-) -> list[np.ndarray]:
-    """Per camera, where its change mask ends along each outline point's normal (checks.edge_offsets)."""
     offsets = []
-    for changed, to_pixel, camera_centre in zip(views.changed, views.to_pixel, views.centre, strict=True):
+    for changed, to_pixel, camera_centre in (
+        (reconstruction.changed_left, left_pixel, reconstruction.camera_to_table[:3, 3]),
+        (changed_right, right_pixel, centre[:3]),
+    ):
         # From the inward side of a (vertical) wall the silhouette is the top edge, at the edge's height. A
         # camera on the outward side sees the wall, and the change mask ends at its foot on the table, or
         # at the top edge where the wall is lit so that it hardly differs from the table: either is the edge.
-        top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, views.table_level)
-        foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, views.table_level)
+        top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
+        foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
         sees_wall = np.sum(outward * (camera_centre[:2] - ring), axis=1) > 0
         nearer = np.where(np.abs(np.nan_to_num(foot, nan=np.inf)) < np.abs(np.nan_to_num(top, nan=np.inf)), foot, top)
         offsets.append(np.where(sees_wall, nearer, top))
-    return offsets
-
-
-def _onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:
-    """The outline moved onto the edge both cameras' change masks show, where it is more than
-    EDGE_CORRECTION_MIN_MM off it and the two cameras agree on where the edge is.
-
-    The depth-based outline bulges or dents by 1-2 mm in places (edge pixels whose depth dropped out or was
-    dragged over); the change masks place the edge without depth. Smaller offsets are the edge's noise and
-    are left alone, so a sharp sole's outline (and length) is what it was.
-    """
-    views = _views(reconstruction)
-    if views is None:
-        return outline
-    ring = resample_closed(outline, 1.0)
-    outward = outward_normals(ring)
-    left, right = _image_edge_offsets(views, ring, outward, _edge_height(surface, ring, outward))
-    local_left, local_right = local_edge_offsets([left]), local_edge_offsets([right])
-    local = 0.5 * (local_left + local_right)
-    # Only where both cameras see the edge there (a texture line or a shadow fools one change mask, not
-    # both in the same place): elsewhere the outline check judges the outline as it is.
-    agree = np.abs(local_left - local_right) <= EDGE_CORRECTION_AGREE_MM
-    shift = np.where(agree & (np.abs(local) > EDGE_CORRECTION_MIN_MM), local, 0.0)
-    return ring + smooth_along(shift, EDGE_CORRECTION_SMOOTHING_MM)[:, None] * outward
+    return check_edge_offsets(offsets)
 
 
 HEIGHT_MAP_CELL_MM = 1.0
