@@ -212,3 +212,339 @@ int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, c
     }
     return CK_OK;
 }
+
+/* ---- cell grid of points in a plane (cellctl.vision.surface) ---- */
+
+/* Cells of one axis a radius query at q reaches, [*lo, *hi] (empty when *lo > *hi). The span is widened by
+ * 1e-6 cells so that rounding in the cell arithmetic never leaves out a point the distance test takes. */
+static void reach(double q, double radius, double origin, double cell, int64_t n, int64_t *lo, int64_t *hi) {
+    const double a = floor((q - radius - origin) / cell - 1e-6), b = floor((q + radius - origin) / cell + 1e-6);
+    *lo = 1;
+    *hi = 0;
+    if (!(a <= b) || b < 0.0 || a > (double)(n - 1)) /* also NaN */
+        return;
+    *lo = a < 0.0 ? 0 : (int64_t)a;
+    *hi = b > (double)(n - 1) ? n - 1 : (int64_t)b;
+}
+
+/* CK_OK when the grid's shape is usable. */
+static int check_grid(double cell, int64_t cols, int64_t rows) {
+    if (!(cell > 0.0) || cols < 1 || rows < 1 || cols > ((int64_t)1 << 24) || rows > ((int64_t)1 << 24) ||
+        cols * rows > ((int64_t)1 << 30))
+        return CK_ERR_SIZE;
+    return CK_OK;
+}
+
+/* The cell (flat index) of a point, or -1 outside the grid (or NaN). */
+static int64_t cell_of(double x, double y, double x0, double y0, double cell, int64_t cols, int64_t rows) {
+    const double c = floor((x - x0) / cell), r = floor((y - y0) / cell);
+    if (!(c >= 0.0 && c < (double)cols && r >= 0.0 && r < (double)rows))
+        return -1;
+    return (int64_t)r * cols + (int64_t)c;
+}
+
+int ck_grid_build(const double *x, const double *y, int64_t n, double x0, double y0, double cell, int64_t cols,
+                  int64_t rows, int64_t *order, int64_t *starts) {
+    if (!x || !y || !order || !starts)
+        return CK_ERR_NULL;
+    if (n < 0)
+        return CK_ERR_SIZE;
+    int rc = check_grid(cell, cols, rows);
+    if (rc != CK_OK)
+        return rc;
+    const int64_t cells = cols * rows;
+    for (int64_t c = 0; c <= cells; ++c)
+        starts[c] = 0;
+    for (int64_t i = 0; i < n; ++i) {
+        const int64_t c = cell_of(x[i], y[i], x0, y0, cell, cols, rows);
+        if (c < 0)
+            return CK_ERR_RANGE;
+        starts[c + 1] += 1;
+    }
+    for (int64_t c = 0; c < cells; ++c)
+        starts[c + 1] += starts[c];
+    /* starts[c] is the next free place of cell c while placing; afterwards it is cell c + 1's start. */
+    for (int64_t i = 0; i < n; ++i) {
+        const int64_t c = cell_of(x[i], y[i], x0, y0, cell, cols, rows);
+        order[starts[c]++] = i;
+    }
+    for (int64_t c = cells; c > 0; --c)
+        starts[c] = starts[c - 1];
+    starts[0] = 0;
+    return CK_OK;
+}
+
+/* CK_OK when the queries' arguments are usable. */
+static int check_queries(const int64_t *starts, double cell, int64_t cols, int64_t rows, int64_t count,
+                         double radius, int threads) {
+    int rc = check_grid(cell, cols, rows);
+    if (rc != CK_OK)
+        return rc;
+    if (count < 0 || threads < 0 || !(radius >= 0.0) || starts[0] != 0)
+        return CK_ERR_SIZE;
+    return CK_OK;
+}
+
+int ck_grid_radius(const double *gx, const double *gy, const int64_t *gi, const int64_t *starts, double x0,
+                   double y0, double cell, int64_t cols, int64_t rows, const double *qx, const double *qy,
+                   int64_t count, double radius, int64_t *counts, const int64_t *offsets, int64_t *found,
+                   int threads) {
+    if (!gx || !gy || !gi || !starts || !qx || !qy || !counts || (found && !offsets))
+        return CK_ERR_NULL;
+    int rc = check_queries(starts, cell, cols, rows, count, radius, threads);
+    if (rc != CK_OK)
+        return rc;
+    const double r2 = radius * radius;
+    int overflow = 0;
+#pragma omp parallel for schedule(dynamic, 16) num_threads(thread_count(threads)) if (count >= 256)
+    for (int64_t k = 0; k < count; ++k) {
+        int64_t c0, c1, r0, r1, m = 0;
+        const int64_t room = found ? offsets[k + 1] - offsets[k] : 0;
+        reach(qx[k], radius, x0, cell, cols, &c0, &c1);
+        reach(qy[k], radius, y0, cell, rows, &r0, &r1);
+        for (int64_t r = r0; r <= r1; ++r)
+            for (int64_t i = starts[r * cols + c0]; i < starts[r * cols + c1 + 1]; ++i) {
+                /* as a k-d tree's radius search on (x, y, 0): (0 + dx^2) + dy^2 (+ 0^2), below radius^2 */
+                const double dx = qx[k] - gx[i], dy = qy[k] - gy[i];
+                if (dx * dx + dy * dy < r2) {
+                    if (found) {
+                        if (m >= room) {
+#pragma omp atomic write
+                            overflow = 1;
+                            break;
+                        }
+                        found[offsets[k] + m] = gi[i];
+                    }
+                    ++m;
+                }
+            }
+        counts[k] = m;
+    }
+    return overflow ? CK_ERR_RANGE : CK_OK;
+}
+
+static inline void swap_d(double *a, double *b) {
+    const double t = *a;
+    *a = *b;
+    *b = t;
+}
+
+/* The k-th smallest of a[0..n) (n > k >= 0), leaving every a[i] for i > k at least as large. */
+static double select_kth(double *a, int64_t n, int64_t k) {
+    int64_t lo = 0, hi = n - 1;
+    while (hi > lo) {
+        const int64_t mid = lo + (hi - lo) / 2;
+        if (a[mid] < a[lo])
+            swap_d(&a[mid], &a[lo]);
+        if (a[hi] < a[lo])
+            swap_d(&a[hi], &a[lo]);
+        if (a[hi] < a[mid])
+            swap_d(&a[hi], &a[mid]);
+        const double pivot = a[mid];
+        int64_t i = lo, j = hi;
+        while (i <= j) {
+            while (a[i] < pivot)
+                ++i;
+            while (a[j] > pivot)
+                --j;
+            if (i <= j) {
+                swap_d(&a[i], &a[j]);
+                ++i;
+                --j;
+            }
+        }
+        if (k <= j)
+            hi = j;
+        else if (k >= i)
+            lo = i;
+        else
+            break; /* a[j + 1 .. i - 1] all equal the pivot */
+    }
+    return a[k];
+}
+
+int ck_grid_radius_medians(const double *gx, const double *gy, const double *gz, const int64_t *starts, double x0,
+                           double y0, double cell, int64_t cols, int64_t rows, const double *qx, const double *qy,
+                           int64_t count, double radius, const int64_t *offsets, double *scratch, double *medians,
+                           int threads) {
+    if (!gx || !gy || !gz || !starts || !qx || !qy || !offsets || !scratch || !medians)
+        return CK_ERR_NULL;
+    int rc = check_queries(starts, cell, cols, rows, count, radius, threads);
+    if (rc != CK_OK)
+        return rc;
+    if (offsets[0] != 0)
+        return CK_ERR_RANGE;
+    for (int64_t k = 0; k < count; ++k)
+        if (offsets[k + 1] < offsets[k])
+            return CK_ERR_RANGE;
+    const double r2 = radius * radius;
+    int overflow = 0;
+#pragma omp parallel for schedule(dynamic, 16) num_threads(thread_count(threads)) if (count >= 256)
+    for (int64_t k = 0; k < count; ++k) {
+        int64_t c0, c1, r0, r1, m = 0;
+        double *z = scratch + offsets[k];
+        const int64_t room = offsets[k + 1] - offsets[k];
+        reach(qx[k], radius, x0, cell, cols, &c0, &c1);
+        reach(qy[k], radius, y0, cell, rows, &r0, &r1);
+        for (int64_t r = r0; r <= r1 && m <= room; ++r)
+            for (int64_t i = starts[r * cols + c0]; i < starts[r * cols + c1 + 1]; ++i) {
+                const double dx = qx[k] - gx[i], dy = qy[k] - gy[i];
+                if (dx * dx + dy * dy < r2) {
+                    if (m >= room) {
+                        m = room + 1;
+                        break;
+                    }
+                    z[m++] = gz[i];
+                }
+            }
+        if (m > room) {
+#pragma omp atomic write
+            overflow = 1;
+            medians[k] = NAN;
+            continue;
+        }
+        if (m == 0) {
+            medians[k] = NAN;
+            continue;
+        }
+        const int64_t half = (m - 1) / 2;
+        const double lower = select_kth(z, m, half);
+        double upper = lower;
+        if (m % 2 == 0) { /* the smallest of those above the lower middle */
+            upper = z[half + 1];
+            for (int64_t i = half + 2; i < m; ++i)
+                upper = min_d(upper, z[i]);
+        }
+        medians[k] = (lower + upper) / 2;
+    }
+    return overflow ? CK_ERR_RANGE : CK_OK;
+}
+
+int ck_cell_upper_medians(const double *gz, const int64_t *starts, int64_t cells, double *scratch, double *out,
+                          int threads) {
+    if (!gz || !starts || !scratch || !out)
+        return CK_ERR_NULL;
+    if (cells < 1 || cells > ((int64_t)1 << 30) || threads < 0)
+        return CK_ERR_SIZE;
+    if (starts[0] != 0)
+        return CK_ERR_RANGE;
+    for (int64_t c = 0; c < cells; ++c)
+        if (starts[c + 1] < starts[c])
+            return CK_ERR_RANGE;
+#pragma omp parallel for schedule(dynamic, 256) num_threads(thread_count(threads)) if (cells >= CK_PARALLEL_MIN)
+    for (int64_t c = 0; c < cells; ++c) {
+        const int64_t lo = starts[c], n = starts[c + 1] - starts[c];
+        if (n == 0) {
+            out[c] = NAN;
+            continue;
+        }
+        for (int64_t i = 0; i < n; ++i)
+            scratch[lo + i] = gz[lo + i];
+        out[c] = select_kth(scratch + lo, n, n / 2);
+    }
+    return CK_OK;
+}
+
+/* ---- points against a polygon (cellctl.vision.footprint) ---- */
+
+/* The first of the m sorted values ys[2 i] (stride 2) not below y (ge) or above it (!ge). */
+static int64_t first_index(const float *ys, int64_t m, float y, int ge) {
+    int64_t lo = 0, hi = m;
+    while (lo < hi) {
+        const int64_t mid = lo + (hi - lo) / 2;
+        if (ge ? ys[2 * mid] < y : ys[2 * mid] <= y)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+int ck_points_in_polygon(const float *polygon, int64_t n, const float *points, int64_t m, int8_t *out) {
+    if (!polygon || !points || !out)
+        return CK_ERR_NULL;
+    if (n < 0 || m < 0)
+        return CK_ERR_SIZE;
+    for (int64_t j = 1; j < m; ++j)
+        if (!(points[2 * j + 1] >= points[2 * j - 1]))
+            return CK_ERR_RANGE;
+    /* out holds the crossing count's parity (1 odd, 2 even) while the edges are applied, 0 once on an edge */
+    for (int64_t j = 0; j < m; ++j)
+        out[j] = n > 0 ? 2 : -1;
+    for (int64_t i = 0; i < n; ++i) {
+        const float *v0 = polygon + 2 * (i == 0 ? n - 1 : i - 1), *v = polygon + 2 * i;
+        const float low = v0[1] < v[1] ? v0[1] : v[1], high = v0[1] < v[1] ? v[1] : v0[1];
+        /* Points whose y lies outside the edge's closed y span: the edge neither crosses their ray nor holds
+         * them, whatever its x. */
+        const int64_t end = first_index(points + 1, m, high, 0);
+        for (int64_t j = first_index(points + 1, m, low, 1); j < end; ++j) {
+            if (out[j] == 0)
+                continue;
+            const float px = points[2 * j], py = points[2 * j + 1];
+            if ((v0[1] <= py && v[1] <= py) || (v0[1] > py && v[1] > py) || (v0[0] < px && v[0] < px)) {
+                if (py == v[1] && (px == v[0] || (py == v0[1] && ((v0[0] <= px && px <= v[0]) ||
+                                                                  (v[0] <= px && px <= v0[0])))))
+                    out[j] = 0;
+                continue;
+            }
+            double dist = (double)(py - v0[1]) * (v[0] - v0[0]) - (double)(px - v0[0]) * (v[1] - v0[1]);
+            if (dist == 0) {
+                out[j] = 0;
+                continue;
+            }
+            if (v[1] < v0[1])
+                dist = -dist;
+            if (dist > 0)
+                out[j] = (int8_t)(3 - out[j]); /* one more crossing: parity flips */
+        }
+    }
+    for (int64_t j = 0; j < m; ++j)
+        if (out[j] > 0)
+            out[j] = out[j] == 1 ? 1 : -1;
+    return CK_OK;
+}
+
+/* ---- bicubic samples on image rows (cellctl.vision.subpixel) ---- */
+
+int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params, const float *x, const double *dx,
+                    const double *dy, const int32_t *rows, const float *image, int height, int width, float *out,
+                    int threads) {
+    if (!starts || !params || !x || !dx || !dy || !rows || !image || !out)
+        return CK_ERR_NULL;
+    if (height < 1 || width < 1)
+        return CK_ERR_SIZE;
+    int rc = check_patches(patches, starts, threads);
+    if (rc != CK_OK)
+        return rc;
+    for (int64_t i = 0; i < starts[patches]; ++i)
+        if (rows[i] < 0 || rows[i] >= height)
+            return CK_ERR_RANGE;
+    const float a = -0.75f, limit = (float)width + 4.0f;
+#pragma omp parallel for schedule(static) num_threads(thread_count(threads)) \
+    if (starts[patches] >= CK_PARALLEL_MIN)
+    for (int64_t k = 0; k < patches; ++k) {
+        const double pa = params[3 * k], pb = params[3 * k + 1], pc = params[3 * k + 2];
+        for (int64_t i = starts[k]; i < starts[k + 1]; ++i) {
+            float at = (float)((double)x[i] - (pa + pb * dx[i] + pc * dy[i])); /* as ck_patch_shift */
+            at = at >= -4.0f ? (at <= limit ? at : limit) : -4.0f;            /* NaN: -4, column 0 */
+            const int whole = (int)(at + 4.0f) - 4;                             /* floor: at + 4 >= 0 */
+            const float t = at - (float)whole, t1 = t + 1.0f, u = 1.0f - t;
+            const float w0 = ((a * t1 - 5.0f * a) * t1 + 8.0f * a) * t1 - 4.0f * a;
+            const float w1 = ((a + 2.0f) * t - (a + 3.0f)) * t * t + 1.0f;
+            const float w2 = ((a + 2.0f) * u - (a + 3.0f)) * u * u + 1.0f;
+            const float w3 = 1.0f - w0 - w1 - w2;
+            const float *row = image + (int64_t)rows[i] * width * 2;
+            int c0 = whole - 1, c1 = whole, c2 = whole + 1, c3 = whole + 2;
+            if (c0 < 0 || c3 >= width) {
+                c0 = c0 < 0 ? 0 : (c0 >= width ? width - 1 : c0);
+                c1 = c1 < 0 ? 0 : (c1 >= width ? width - 1 : c1);
+                c2 = c2 < 0 ? 0 : (c2 >= width ? width - 1 : c2);
+                c3 = c3 < 0 ? 0 : (c3 >= width ? width - 1 : c3);
+            }
+            for (int ch = 0; ch < 2; ++ch)
+                out[2 * i + ch] = row[2 * c0 + ch] * w0 + row[2 * c1 + ch] * w1 + row[2 * c2 + ch] * w2 +
+                                  row[2 * c3 + ch] * w3;
+        }
+    }
+    return CK_OK;
+}

@@ -1,9 +1,11 @@
 /*
- * Hot loops of the measurement after the match (cellctl.vision.outliers, cellctl.vision.subpixel):
- * per-point and per-patch arithmetic that numpy can only do in many full passes over ~10^5 elements.
- * Each entry point checks its arguments and returns a CK_* status; nothing is allocated. `threads`: the
- * OpenMP threads to use (0: all OpenMP offers; small calls stay on one). Every output element is computed
- * whole by one thread in a fixed arithmetic order, so the results are bit-identical for any thread count.
+ * Hot loops of the measurement after the match (cellctl.vision.outliers, cellctl.vision.subpixel,
+ * cellctl.vision.surface): per-point and per-patch arithmetic that numpy can only do in many full passes
+ * over ~10^5 elements, and neighbour searches that would otherwise be a Python loop over a k-d tree.
+ * Each entry point checks its arguments and returns a CK_* status; nothing is allocated (scratch space
+ * comes from the caller). `threads`: the OpenMP threads to use (0: all OpenMP offers; small calls stay on
+ * one). Every output element is computed whole by one thread in a fixed arithmetic order, so the results
+ * are bit-identical for any thread count.
  */
 #ifndef CELLCTL_CLOUD_KERNELS_H
 #define CELLCTL_CLOUD_KERNELS_H
@@ -48,5 +50,69 @@ int ck_patch_step(int64_t patches, const int64_t *starts, const double *l_dev, c
  */
 int ck_patch_shift(int64_t patches, const int64_t *starts, const double *params, const float *x,
                    const double *dx, const double *dy, float *out, int threads);
+
+/*
+ * A cell grid of points in a plane (the sole's points seen from above, cellctl.vision.surface): the points
+ * of cell (row, col) are order[starts[row * cols + col] .. starts[row * cols + col + 1]), cell (row, col)
+ * covering [x0 + col * cell, x0 + (col + 1) * cell) and the same in y. A radius query of a point reads only
+ * the cells the radius reaches; within them a point counts when its squared distance in double,
+ * (qx - x)^2 + (qy - y)^2, is below radius^2 (as a k-d tree's radius search takes it).
+ *
+ * ck_grid_build: the counting sort of n points (x, y) into the grid; every point must fall inside it.
+ * Out: order (n, point indices cell after cell, ascending within a cell) and starts (rows * cols + 1).
+ */
+int ck_grid_build(const double *x, const double *y, int64_t n, double x0, double y0, double cell, int64_t cols,
+                  int64_t rows, int64_t *order, int64_t *starts);
+
+/*
+ * The grid's points within `radius` of each of the `count` queries (qx, qy): how many (counts), and with
+ * `offsets` (count + 1, the counts' running sum) and `found` (offsets[count] entries) which ones, query k's
+ * in found[offsets[k] .. offsets[k + 1]) in cell order (found NULL: counts only). gx, gy: the points'
+ * coordinates in grid order (x[order[i]]), gi: their indices (order).
+ */
+int ck_grid_radius(const double *gx, const double *gy, const int64_t *gi, const int64_t *starts, double x0,
+                   double y0, double cell, int64_t cols, int64_t rows, const double *qx, const double *qy,
+                   int64_t count, double radius, int64_t *counts, const int64_t *offsets, int64_t *found,
+                   int threads);
+
+/*
+ * The median of the heights gz (in grid order, finite) of the grid's points within `radius` of each query,
+ * as numpy's median takes it (the mean of the two middle values; one for an odd count), NaN where none.
+ * offsets: count + 1, the running sum of the queries' counts (ck_grid_radius); scratch: offsets[count]
+ * doubles. A query with more points than its slot is refused (CK_ERR_RANGE).
+ */
+int ck_grid_radius_medians(const double *gx, const double *gy, const double *gz, const int64_t *starts, double x0,
+                           double y0, double cell, int64_t cols, int64_t rows, const double *qx, const double *qy,
+                           int64_t count, double radius, const int64_t *offsets, double *scratch, double *medians,
+                           int threads);
+
+/*
+ * Per cell of the grid, the value of rank floor(n / 2) among its n points' values gz (in grid order,
+ * finite): the median for an odd count, the upper of the two middle values for an even one; NaN for an
+ * empty cell. scratch: starts[cells] doubles. out: cells.
+ */
+int ck_cell_upper_medians(const double *gz, const int64_t *starts, int64_t cells, double *scratch, double *out,
+                          int threads);
+
+/*
+ * Where each point lies against a closed polygon, as OpenCV's pointPolygonTest (measureDist false, float32
+ * contour) answers for it: 1 inside, -1 outside, 0 on an edge or vertex (the same crossing rule and the
+ * same float32 differences and double products). polygon: n vertices (x, y float32); points: m (x, y
+ * float32), sorted by y; out: m. Each point meets only the edges whose y span holds it (one thread: every
+ * edge updates the points of its rows).
+ */
+int ck_points_in_polygon(const float *polygon, int64_t n, const float *points, int64_t m, int8_t *out);
+
+/*
+ * Bicubic samples of a two-channel image on whole rows, where each patch pixel's plane puts it (x - (a + b dx
+ * + c dy), as ck_patch_shift rounds it to float32): Keys' cubic convolution with a = -0.75 (OpenCV's
+ * INTER_CUBIC weights, here from the exact fraction of x in float32), border columns replicated
+ * (BORDER_REPLICATE). It agrees with cv2.remap at an integer y to ~2e-6 of the value: OpenCV quantises and
+ * orders its arithmetic differently. A NaN position samples column 0. image: height x width x 2 float32
+ * (value, x gradient); rows[i] in 0..height-1; out: pixels x 2.
+ */
+int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params, const float *x, const double *dx,
+                    const double *dy, const int32_t *rows, const float *image, int height, int width, float *out,
+                    int threads);
 
 #endif

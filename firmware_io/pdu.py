@@ -43,7 +43,7 @@ MAX_READ_WRITE_WRITE = 121
 
 
 class RegisterAccess(Protocol):
-    """What a request runs against (firmware_io.handshake.PlcHandshake): the served map's size and the
+    """What a request runs against (firmware_io.plc_side.PlcSide, a PlcHandshake): the served map's size and the
     registers a PLC may write depend on the map version."""
 
     @property

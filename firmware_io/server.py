@@ -14,6 +14,19 @@ piecewise (a refused fc 23 had already started a cycle), answered function codes
 serve (8, 17, 43 naming the stack; on RTU for any unit id), fell silent for ~22 requests after one bad
 frame and had no connection cap or idle timeout (docs/modbus.md lists what is answered now).
 pymodbus remains the client of the PLC simulator, a master this server did not write.
+
+Typical controller loop::
+
+    with PlcLink(TcpEndpoint("192.168.10.2", 5020), unit_id=1, cycle_timeout_s=4.0) as link:
+        link.set_status(cameras_ok=True, calibration_ok=True)
+        while running:
+            trigger = link.wait_trigger(timeout_s=0.5)
+            if trigger is None:
+                continue
+            ...measure...
+            link.publish_result(trigger.cycle, heel_height_mm=..., toe_height_mm=...,
+                                length_mm=..., cycle_time_ms=..., glue_points=points)
+            # or: link.publish_error(trigger.cycle, ErrorCode.NO_SOLE, cycle_time_ms=...)
 """
 
 from __future__ import annotations
@@ -22,6 +35,7 @@ from numpy.typing import ArrayLike
 
 from firmware_io.endpoints import Endpoint, TcpEndpoint, check_unit_id
 from firmware_io.handshake import Inspection, PathInfo, PlcHandshake, Trigger
+from firmware_io.heartbeat import Heartbeat
 from firmware_io.registers import ErrorCode, MapLayout, RegisterMap, StatusBit, WordOrder
 from firmware_io.server_thread import ModbusServerThread
 from firmware_io.tcp import ConnectionLimits
@@ -31,20 +45,8 @@ class PlcLink:
     """The controller's side of the PLC handshake, served over Modbus TCP or RTU.
 
     The field side's one facade (lifetime and the controller API); the work is in handshake, the server
-    thread (firmware_io.server_thread), pdu, tcp and rtu.
-
-    Typical controller loop::
-
-        with PlcLink(TcpEndpoint("192.168.10.2", 5020), unit_id=1, cycle_timeout_s=4.0) as link:
-            link.set_status(cameras_ok=True, calibration_ok=True)
-            while running:
-                trigger = link.wait_trigger(timeout_s=0.5)
-                if trigger is None:
-                    continue
-                ...measure...
-                link.publish_result(trigger.cycle, heel_height_mm=..., toe_height_mm=...,
-                                    length_mm=..., cycle_time_ms=..., glue_points=points)
-                # or: link.publish_error(trigger.cycle, ErrorCode.NO_SOLE, cycle_time_ms=...)
+    thread (firmware_io.server_thread), its heartbeat (firmware_io.heartbeat), pdu, tcp and rtu. The module
+    docstring shows a typical controller loop.
     """
 
     def __init__(
@@ -72,24 +74,11 @@ class PlcLink:
             rule applies again from then on. None: no limit.
         limits: TCP connection cap, idle timeout and allowed client addresses.
         """
-        if not 0 < heartbeat_period_s < 0.5:
-            raise ValueError(f"heartbeat period {heartbeat_period_s} s must be above 0 and below 0.5 s")
-        if liveness_timeout_s is not None and liveness_timeout_s <= heartbeat_period_s:
-            raise ValueError(f"liveness timeout {liveness_timeout_s} s must be longer than the heartbeat period")
-        if cycle_timeout_s is not None and cycle_timeout_s <= 0:
-            raise ValueError(f"cycle timeout {cycle_timeout_s} s must be positive")
-        self._heartbeat_period_s = heartbeat_period_s
-        self._liveness_timeout_s = liveness_timeout_s
         self._layout = MapLayout.of(map_version)
         self._handshake = PlcHandshake(RegisterMap(word_order), self._layout)
+        self._heartbeat = Heartbeat(self._handshake, heartbeat_period_s, liveness_timeout_s, cycle_timeout_s)
         self._server = ModbusServerThread(
-            endpoint,
-            check_unit_id(unit_id, endpoint),
-            self._handshake,
-            limits,
-            heartbeat_period_s,
-            liveness_timeout_s,
-            cycle_timeout_s,
+            endpoint, check_unit_id(unit_id, endpoint), self._handshake, limits, self._heartbeat
         )
 
     # ---- lifetime ------------------------------------------------------------------------------
@@ -122,11 +111,11 @@ class PlcLink:
     @property
     def heartbeat_stalls(self) -> int:
         """Times the heartbeat stopped because the controller went silent (station, /metrics)."""
-        return self._server.heartbeat_stalls
+        return self._heartbeat.stalls
 
     @property
     def heartbeat_stalled(self) -> bool:
-        return self._server.heartbeat_stalled
+        return self._heartbeat.stalled
 
     # ---- controller API ------------------------------------------------------------------------
 
@@ -142,8 +131,7 @@ class PlcLink:
 
     def wait_trigger(self, timeout_s: float | None = None) -> Trigger | None:
         """Block until the PLC starts a new cycle; None on timeout or when the link stops."""
-        slice_s = self._heartbeat_period_s if self._liveness_timeout_s is None else self._liveness_timeout_s / 2
-        return self._handshake.wait_trigger(timeout_s, liveness_slice_s=slice_s)
+        return self._handshake.wait_trigger(timeout_s, liveness_slice_s=self._heartbeat.liveness_slice_s)
 
     def timed_out(self, cycle: int) -> bool:
         """True if the link already answered `cycle` with CYCLE_TIMEOUT (see cycle_timeout_s)."""

@@ -1,6 +1,6 @@
 """The Modbus server of PlcLink in its own thread with its own asyncio loop: TCP (firmware_io.tcp) or RTU
 (firmware_io.rtu) framing, requests executed by firmware_io.pdu against the handshake's register image, and
-the heartbeat task (which also answers overdue cycles with CYCLE_TIMEOUT).
+the heartbeat task (firmware_io.heartbeat, which also answers overdue cycles with CYCLE_TIMEOUT).
 
 The controller stays plain blocking code: it only calls start() and stop() here; everything it says to the
 PLC goes through the handshake (firmware_io.handshake), under the handshake's lock.
@@ -16,6 +16,7 @@ import serial
 
 from firmware_io.endpoints import Endpoint, LinkStartError, SerialEndpoint, TcpEndpoint
 from firmware_io.handshake import PlcHandshake
+from firmware_io.heartbeat import Heartbeat
 from firmware_io.pdu import ExceptionCode, exception_reply, execute
 from firmware_io.rtu import SerialLine, serve_serial_line
 from firmware_io.tcp import ConnectionLimits, TcpFrontEnd
@@ -24,7 +25,7 @@ log = logging.getLogger("firmware_io.server")  # PlcLink's log, as operators kno
 
 
 class ModbusServerThread:
-    """Serves one handshake to the PLC at one endpoint; the heartbeat beats while the controller is alive."""
+    """Serves one handshake to the PLC at one endpoint, with its heartbeat running on the same loop."""
 
     def __init__(
         self,
@@ -32,14 +33,10 @@ class ModbusServerThread:
         unit_id: int,
         handshake: PlcHandshake,
         limits: ConnectionLimits,
-        heartbeat_period_s: float,
-        liveness_timeout_s: float | None,
-        cycle_timeout_s: float | None,
+        heartbeat: Heartbeat,
     ) -> None:
         self._endpoint, self._unit_id, self._handshake, self._limits = endpoint, unit_id, handshake, limits
-        self._heartbeat_period_s = heartbeat_period_s
-        self._liveness_timeout_s = liveness_timeout_s
-        self._cycle_timeout_s = cycle_timeout_s
+        self._heartbeat = heartbeat
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop_requested: asyncio.Event | None = None
@@ -48,9 +45,6 @@ class ModbusServerThread:
         self.bound: Endpoint = endpoint  # for TCP port 0, the port actually bound once started
         self._tcp: TcpFrontEnd | None = None
         self._serial_open = False
-        # For the operator station and /metrics (read from other threads; ints are replaced atomically).
-        self.heartbeat_stalls = 0  # times the heartbeat stopped because the controller went silent
-        self.heartbeat_stalled = False
 
     def start(self, timeout_s: float = 5.0) -> None:
         """Open the TCP port or serial line and start serving; raises if that fails."""
@@ -112,7 +106,7 @@ class ModbusServerThread:
     async def _serve(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop_requested = asyncio.Event()
-        heartbeat = asyncio.create_task(self._heartbeat(), name="plc heartbeat")
+        heartbeat = asyncio.create_task(self._heartbeat.run(), name="plc heartbeat")
         try:
             if isinstance(self._endpoint, SerialEndpoint):
                 await self._serve_rtu(self._endpoint)
@@ -156,21 +150,6 @@ class ModbusServerThread:
 
     def _on_serial_state(self, line_open: bool) -> None:
         self._serial_open = line_open
-
-    async def _heartbeat(self) -> None:
-        while True:
-            expired = self._handshake.expire_overdue(self._cycle_timeout_s)
-            beating = self._handshake.beat(self._liveness_timeout_s)
-            if not beating and not self.heartbeat_stalled:
-                self.heartbeat_stalls += 1
-            self.heartbeat_stalled = not beating
-            if expired is not None:
-                log.error(
-                    "cycle %d: not published within cycle_timeout_s = %g s; answered CYCLE_TIMEOUT",
-                    expired,
-                    self._cycle_timeout_s,
-                )
-            await asyncio.sleep(self._heartbeat_period_s)
 
 
 def _start_failure_text(endpoint: Endpoint, error: BaseException) -> str:

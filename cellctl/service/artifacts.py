@@ -59,6 +59,17 @@ class ArtifactJob:
         """Where the files are written first: the cycle's folder appears whole (renamed) or not at all."""
         return self.folder.parent.parent / "partial" / self.folder.name
 
+    def move_into_place(self) -> bool:
+        """Rename the written staging folder to the cycle's folder; False (logged) if that fails."""
+        try:
+            self.folder.parent.mkdir(parents=True, exist_ok=True)
+            shutil.rmtree(self.folder, ignore_errors=True)
+            self.staging.rename(self.folder)
+        except OSError as exc:
+            log.warning("cycle %d: artifacts not kept: %s", self.cycle, exc)
+            return False
+        return True
+
 
 @dataclass(frozen=True)
 class WrittenArtifacts:
@@ -171,14 +182,8 @@ class ArtifactWriter:
         """Publish a written job (its folder renamed into place) unless it was given up at stop."""
         with self._work:
             mine = threading.current_thread() is self._thread
-            if written is not None and not (mine and self._abandon):
-                try:
-                    job.folder.parent.mkdir(parents=True, exist_ok=True)
-                    shutil.rmtree(job.folder, ignore_errors=True)
-                    job.staging.rename(job.folder)
-                    self._finished.append(written)
-                except OSError as exc:
-                    log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
+            if written is not None and not (mine and self._abandon) and job.move_into_place():
+                self._finished.append(written)
             shutil.rmtree(job.staging, ignore_errors=True)
             if mine:
                 self._writing = False
@@ -199,28 +204,34 @@ class ArtifactWriter:
         return WrittenArtifacts(job.row_id, job.cycle, *_paths(job, job.folder))
 
     def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
-        """Short steps (tens of ms each): a trigger arriving meanwhile waits for at most one of them."""
-        ply, overlay = _paths(job, job.staging)
-        picture: list[np.ndarray] = []
+        """What is written, as short steps (tests replace them to see the scheduling alone)."""
+        return artifact_steps(job, self.calib)
 
-        def write_ply() -> None:
-            points = job.reconstruction.sole_points
-            colours = job.reconstruction.sole_colors[:, ::-1]
-            write_cloud_ply(ply, points, cloud_normals(points), colours, frame="table")
 
-        def write_glue() -> None:
-            path, folder = job.measurement.glue_path, ply.parent
-            write_glue_csv(folder / f"cycle-{job.cycle}-glue.csv", path.points, path.normals)
-            write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
+def artifact_steps(job: ArtifactJob, calib: Calibration) -> list[Callable[[], None]]:
+    """A job's files as short steps (tens of ms each), into its staging folder: a trigger arriving meanwhile waits
+    for at most one of them."""
+    ply, overlay = _paths(job, job.staging)
+    picture: list[np.ndarray] = []
 
-        def draw() -> None:
-            picture.append(draw_on_left(job.frame.left, self.calib, job.measurement))
+    def write_ply() -> None:
+        points = job.reconstruction.sole_points
+        colours = job.reconstruction.sole_colors[:, ::-1]
+        write_cloud_ply(ply, points, cloud_normals(points), colours, frame="table")
 
-        def write_png() -> None:
-            if not cv2.imwrite(str(overlay), picture[0], PNG_FAST):
-                raise OSError(f"cannot write {overlay}")
+    def write_glue() -> None:
+        path, folder = job.measurement.glue_path, ply.parent
+        write_glue_csv(folder / f"cycle-{job.cycle}-glue.csv", path.points, path.normals)
+        write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
 
-        return [write_ply, write_glue, draw, write_png]
+    def draw() -> None:
+        picture.append(draw_on_left(job.frame.left, calib, job.measurement))
+
+    def write_png() -> None:
+        if not cv2.imwrite(str(overlay), picture[0], PNG_FAST):
+            raise OSError(f"cannot write {overlay}")
+
+    return [write_ply, write_glue, draw, write_png]
 
 
 def _paths(job: ArtifactJob, folder: Path) -> tuple[Path, Path]:

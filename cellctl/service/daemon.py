@@ -21,20 +21,18 @@ between cycles, so CAMERAS_OK and READY come back by themselves when a camera is
 Stopping (request_stop, e.g. SIGTERM): a cycle triggered before the stop request is finished and published
 (it takes a second or two, far below systemd's stop timeout, and the PLC gets its answer); a trigger that
 arrives once stopping has begun is answered with CYCLE_ABORTED. The link then keeps serving for
-STOP_LINGER_S, so the PLC can read that last answer, and closes.
+STOP_LINGER_S, so the PLC can read that last answer, and closes (cellctl.service.stopping).
 
 This module is the wiring and the order of things (start, one cycle, stop). The parts live beside it:
 the cameras' health (camera_health), the reconstructors and the warm-up (measuring), the pure cycle
-(cycle), journal, PLC and listeners in that order (reporting), recipes, the glue path's frame, the outcome
-records, the artifact writer and the OPC UA server.
+(cycle), journal, PLC and listeners in that order (reporting), the stop request (stopping), recipes, the glue
+path's frame, the outcome records, the artifact writer and the OPC UA server.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import threading
-import time
 from typing import TYPE_CHECKING
 
 from cellctl.cameras import FrameSource, open_frame_source
@@ -51,6 +49,7 @@ from cellctl.service.outcome import OutcomeListener
 from cellctl.service.recipes import Recipe, RecipeBook
 from cellctl.service.reporting import CycleReporter, log_cycle
 from cellctl.service.sdnotify import SystemdNotifier, check_watchdog
+from cellctl.service.stopping import StopRequest
 from firmware_io.handshake import Trigger
 from firmware_io.server import PlcLink
 
@@ -63,8 +62,6 @@ log = logging.getLogger(__name__)
 
 #: How long one wait for a trigger lasts: the loop's tick for stop requests, watchdog pings and probes.
 TICK_S = 0.25
-#: After a stop request, how long the Modbus link still serves so the PLC can read the last answer.
-STOP_LINGER_S = 0.5
 
 
 class Daemon:
@@ -93,8 +90,7 @@ class Daemon:
         self.listeners: list[OutcomeListener] = self.reporter.listeners  # called after the PLC has its answer
         self.active_recipe: Recipe | None = self.recipes.get(0)
         self.opcua: OpcUaServer | None = None  # the OPC UA server while running, if [opcua] enabled
-        self._stop = threading.Event()
-        self._stop_at = math.inf  # time.monotonic() of the stop request
+        self._stop = StopRequest()
         self._started = threading.Event()
         self._artifacts = None if self.calib is None else ArtifactWriter(self.calib, config.journal.keep_artifacts)
 
@@ -102,8 +98,7 @@ class Daemon:
 
     def request_stop(self) -> None:
         """Finish the running cycle, answer later triggers with CYCLE_ABORTED, then stop (thread-safe)."""
-        self._stop_at = min(self._stop_at, time.monotonic())
-        self._stop.set()
+        self._stop.request()
 
     def wait_started(self, timeout_s: float) -> bool:
         """True once the Modbus link serves and the service waits for triggers."""
@@ -111,19 +106,10 @@ class Daemon:
 
     def run(self) -> None:
         """Serve until request_stop(); raises if the journal or the Modbus port cannot be opened."""
-        # A stuck cycle is answered CYCLE_TIMEOUT, the heartbeat stops liveness_timeout_s later: both must
-        # come before systemd's watchdog (pinged between cycles only) restarts the service.
-        plc = self.config.plc
-        check_watchdog(
-            plc.cycle_timeout_s + plc.liveness_timeout_s,
-            f"{self.config.source}: [plc] cycle_timeout_s + liveness_timeout_s",
-        )
+        _check_watchdog(self.config)
         journal = Journal.open(self.config.journal.state_dir)
         try:
-            # A restart must not make the PLC's cyclic rewrite of its last cycle number a new cycle.
-            self.link.restore_last_cycle(journal.last_cycle())
-            if orphans := journal.prune_orphans():
-                log.info("removed %d artifact folders no journal row refers to (left by a crash)", orphans)
+            _resume(journal, self.link)
             # Cameras first: preparing them may take long (the simulator renders its scenes), and the
             # heartbeat would stop meanwhile (PlcLink's liveness check), alarming the PLC for nothing.
             self._probe_cameras(force=True)
@@ -147,7 +133,7 @@ class Daemon:
             self.status.ready()
             log.info("ready: Modbus %s, cameras %s", self.link.endpoint, "ok" if self.cameras.ok else "NOT ok")
             self._started.set()
-            while not self._stop.is_set():
+            while not self._stop.requested:
                 self.status.notifier.notify(WATCHDOG=1)
                 self._set_idle(journal, True)
                 trigger = self.link.wait_trigger(timeout_s=TICK_S)
@@ -156,12 +142,7 @@ class Daemon:
                     self._probe_cameras()
                     continue
                 self._answer(journal, trigger)
-            # Serve a little longer: the PLC reads the last answer, and a trigger arriving now is answered.
-            deadline = time.monotonic() + STOP_LINGER_S
-            while (left := deadline - time.monotonic()) > 0:
-                late = self.link.wait_trigger(timeout_s=left)
-                if late is not None:
-                    self._answer(journal, late)
+            self._stop.linger(self.link, lambda late: self._answer(journal, late))
         finally:
             self.status.stopping()
             self.link.stop()
@@ -180,7 +161,7 @@ class Daemon:
 
     def _answer(self, journal: Journal, trigger: Trigger) -> None:
         """Measure a trigger accepted before any stop request; abort one accepted after it."""
-        if trigger.received_at >= self._stop_at:
+        if self._stop.aborts(trigger):
             record = self.reporter.abort(journal, trigger, self.recipes.get(trigger.recipe))
             self.events.publish(CycleDone(record, None, None))
             return
@@ -221,6 +202,23 @@ class Daemon:
             self.status.publish_state()
             if not self.measurer.warmed_up:
                 self._warm_up()
+
+
+def _check_watchdog(config: CellConfig) -> None:
+    """A stuck cycle is answered CYCLE_TIMEOUT, the heartbeat stops liveness_timeout_s later: both must come
+    before systemd's watchdog (pinged between cycles only) restarts the service."""
+    plc = config.plc
+    check_watchdog(
+        plc.cycle_timeout_s + plc.liveness_timeout_s, f"{config.source}: [plc] cycle_timeout_s + liveness_timeout_s"
+    )
+
+
+def _resume(journal: Journal, link: PlcLink) -> None:
+    """After a (re)start: the PLC's cyclic rewrite of its last cycle number must not be a new cycle, and
+    artifact folders a crash left without a journal row go."""
+    link.restore_last_cycle(journal.last_cycle())
+    if orphans := journal.prune_orphans():
+        log.info("removed %d artifact folders no journal row refers to (left by a crash)", orphans)
 
 
 def _plc_link(config: CellConfig) -> PlcLink:

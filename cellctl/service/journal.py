@@ -126,21 +126,7 @@ class Journal:
                 state.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise ValueError(f"cannot create the state directory {state}: {exc.strerror}") from None
-        try:
-            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True) if readonly else sqlite3.connect(path)
-            if readonly:
-                db.execute("SELECT 1 FROM cycles LIMIT 1")
-            else:
-                db.execute("PRAGMA journal_mode=WAL")
-                db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
-                db.executescript(SCHEMA)
-                _add_columns(db)
-        except sqlite3.Error as exc:
-            raise ValueError(
-                f"journal {path} cannot be used ({exc}): is it a cellctl journal? move it away to start a new one"
-            ) from None
-        db.row_factory = sqlite3.Row
-        return cls(db, state)
+        return cls(_connect(path, readonly), state)
 
     def close(self) -> None:
         self._db.close()
@@ -248,6 +234,25 @@ class Journal:
             f"SELECT {self._select} FROM cycles WHERE cycle = ? ORDER BY id DESC LIMIT 1", (cycle,)
         ).fetchone()
         return None if row is None else _record(row)
+
+
+def _connect(path: Path, readonly: bool) -> sqlite3.Connection:
+    """The journal's database: read-only, or for the writer in WAL mode, durable at commit, schema up to date."""
+    try:
+        db = sqlite3.connect(f"file:{path}?mode=ro", uri=True) if readonly else sqlite3.connect(path)
+        if readonly:
+            db.execute("SELECT 1 FROM cycles LIMIT 1")
+        else:
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA synchronous=FULL")  # durable at commit, the promise made to the PLC
+            db.executescript(SCHEMA)
+            _add_columns(db)
+    except sqlite3.Error as exc:
+        raise ValueError(
+            f"journal {path} cannot be used ({exc}): is it a cellctl journal? move it away to start a new one"
+        ) from None
+    db.row_factory = sqlite3.Row
+    return db
 
 
 def _add_columns(db: sqlite3.Connection) -> None:

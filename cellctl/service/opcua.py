@@ -11,7 +11,7 @@ VisionStateMachine (CurrentState: Preoperational, Ready, SingleExecution, Error,
 (active recipe), ResultManagement with the last result (ResultId, CreationTime, RecipeId, measurements,
 IsPass) and its history, and a ResultReadyEventType event per cycle (emitted by the Server object, SourceNode
 the cell's object).
-docs/opcua.md lists every node. Off unless [opcua] enabled = true; anonymous access only if
+docs/opcua.md lists every node; cellctl.service.opcua_nodes builds them and writes to them. Off unless [opcua] enabled = true; anonymous access only if
 allow_anonymous = true, otherwise username and the password from password_file.
 """
 
@@ -19,62 +19,31 @@ from __future__ import annotations
 
 import asyncio
 import hmac
-import json
 import logging
-import math
 import threading
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict
-from datetime import UTC, datetime, timedelta
 from typing import Any
 
-from asyncua import Node, Server, ua
+from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 
 from cellctl.errors import UserError
 from cellctl.service.config import OpcUaConfig
+from cellctl.service.opcua_nodes import NAMESPACE, CellNodes
 from cellctl.service.outcome import CycleOutcome
 from cellctl.service.recipes import Recipe, RecipeBook
 from firmware_io.registers import StatusBit
 from firmware_io.server import PlcLink
 
+__all__ = ["NAMESPACE", "OpcUaServer", "serve_cell", "system_state"]
+
 log = logging.getLogger(__name__)
 # asyncua reports every connection and endpoint at INFO; the service log keeps its warnings and errors.
 logging.getLogger("asyncua").setLevel(logging.WARNING)
 
-NAMESPACE = "urn:cellctl:machinevision"
 #: How often CurrentState follows the PLC link's status register.
 STATE_PERIOD_S = 0.2
-
-#: LastResult variables: browse name -> (OPC UA type, CycleOutcome field or a function of it).
-_RESULT_FIELDS: dict[str, tuple[ua.VariantType, Callable[[CycleOutcome], Any]]] = {
-    "ResultId": (ua.VariantType.String, lambda o: o.result_id),
-    "CreationTime": (ua.VariantType.DateTime, lambda o: datetime.fromtimestamp(o.triggered_at, UTC)),
-    "Cycle": (ua.VariantType.UInt16, lambda o: o.cycle),
-    "RecipeId": (ua.VariantType.UInt16, lambda o: o.recipe),
-    "RecipeName": (ua.VariantType.String, lambda o: o.recipe_name),
-    "IsPass": (ua.VariantType.Boolean, lambda o: o.passed),
-    "ResultState": (ua.VariantType.String, lambda o: _result_state(o)),
-    "ErrorCode": (ua.VariantType.UInt16, lambda o: o.error_code),
-    "ErrorName": (ua.VariantType.String, lambda o: o.error_name),
-    "LengthMm": (ua.VariantType.Double, lambda o: o.length_mm),
-    "HeelHeightMm": (ua.VariantType.Double, lambda o: o.heel_height_mm),
-    "ToeHeightMm": (ua.VariantType.Double, lambda o: o.toe_height_mm),
-    "CycleTimeMs": (ua.VariantType.Double, lambda o: o.cycle_time_ms),
-    "GluePointCount": (ua.VariantType.UInt32, lambda o: o.glue_points),
-    "FailedFeatures": (ua.VariantType.String, lambda o: list(o.failed_features)),
-}
-#: Fields of ResultReadyEventType (each event also has the base fields Time, Message, Severity, SourceNode).
-_EVENT_FIELDS = ("ResultId", "Cycle", "RecipeId", "IsPass", "ResultState", "ErrorCode", "LengthMm",
-                 "HeelHeightMm", "ToeHeightMm")  # fmt: skip
-
-
-def _result_state(outcome: CycleOutcome) -> str:
-    """Pass, Fail (out of tolerance), Measured (no tolerances checked) or Error."""
-    if not outcome.measured:
-        return "Error"
-    return {True: "Pass", False: "Fail", None: "Measured"}[outcome.in_tolerance]
 
 
 def system_state(status: StatusBit, stopping: bool) -> str:
@@ -127,6 +96,7 @@ class OpcUaServer:
         self._started = threading.Event()
         self._start_error: BaseException | None = None
         self._stopping = False
+        self._nodes: CellNodes | None = None  # once the address space is built (server thread)
         self.endpoint = config.endpoint  #: with the port actually bound once started (port 0 picks one)
 
     # ---- lifetime (controller thread) ------------------------------------------------------------
@@ -177,7 +147,8 @@ class OpcUaServer:
     async def _serve(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
-        server = await self._build()
+        server = await _new_server(self.config)
+        nodes = self._nodes = await CellNodes.build(server, self.config, self._recipes)
         try:
             await server.start()
         except Exception as exc:
@@ -195,89 +166,32 @@ class OpcUaServer:
                     await asyncio.wait_for(self._stop.wait(), STATE_PERIOD_S)
                 except TimeoutError:
                     pass
-            await self._state.write_value("Halted")
+            await nodes.state.write_value("Halted")
         finally:
             await server.stop()
 
     async def _follow_state(self) -> None:
-        await self._state.write_value(system_state(self._status(), self._stopping))
-        number, name = self._active_recipe()
-        await self._active_id.write_value(ua.Variant(number, ua.VariantType.UInt16))
-        await self._active_name.write_value(name)
-
-    async def _build(self) -> Server:
-        cfg = self.config
-        password = None if cfg.password_file is None else cfg.password_file.read_text(encoding="utf-8").strip()
-        server = Server(user_manager=_PasswordUsers(cfg.username, password, cfg.allow_anonymous))  # type: ignore[arg-type]
-        await server.init()
-        server.set_endpoint(cfg.endpoint)
-        server.set_server_name(f"cellctl {cfg.cell_name}")
-        tokens: list[type] = [ua.UserNameIdentityToken]
-        if cfg.allow_anonymous:
-            tokens.append(ua.AnonymousIdentityToken)
-        server.set_identity_tokens(tokens)
-        idx = await server.register_namespace(NAMESPACE)
-        self._event_type = await server.create_custom_event_type(
-            idx, "ResultReadyEventType", ua.ObjectIds.BaseEventType,
-            [(name, _RESULT_FIELDS[name][0]) for name in _EVENT_FIELDS],
-        )  # fmt: skip
-        system = await server.nodes.objects.add_object(idx, cfg.cell_name)
-        self._system = system
-        machine = await system.add_object(idx, "VisionStateMachine")
-        self._state = await machine.add_variable(idx, "CurrentState", "Preoperational")
-        recipes = await system.add_object(idx, "RecipeManagement")
-        self._active_id = await recipes.add_variable(idx, "ActiveRecipeId", ua.Variant(0, ua.VariantType.UInt16))
-        self._active_name = await recipes.add_variable(idx, "ActiveRecipeName", "")
-        listing = [f"{number}: {name}" for number, name in self._recipes]
-        await recipes.add_variable(idx, "Recipes", ua.Variant(listing, ua.VariantType.String))
-        results = await system.add_object(idx, "ResultManagement")
-        last = await results.add_object(idx, "LastResult")
-        self._last: dict[str, Node] = {}
-        for name, (kind, _) in _RESULT_FIELDS.items():
-            empty: Any = [] if name == "FailedFeatures" else _empty(kind)
-            self._last[name] = await last.add_variable(idx, name, ua.Variant(empty, kind))
-        self._history_node = await results.add_variable(idx, "ResultHistory", ua.Variant([], ua.VariantType.String))
-        self._count = await results.add_variable(idx, "ResultCount", ua.Variant(0, ua.VariantType.UInt32))
-        # Events are emitted by the Server object (where an MES subscribes, and the only source asyncua's
-        # event history can store) with SourceNode = this cell's object, so they say which cell they are from.
-        self._events = await server.get_event_generator(self._event_type, ua.ObjectIds.Server)
-        self._events.event.SourceNode = system.nodeid
-        self._events.event.SourceName = cfg.cell_name
-        # History reads (HistoryReadRaw / HistoryReadEvents) of the last result and its events, in memory.
-        await server.historize_node_data_change(self._last["ResultId"], period=timedelta(days=7), count=cfg.history)
-        await server.historize_node_event(server.nodes.server, period=timedelta(days=7), count=cfg.history)
-        return server
+        if self._nodes is not None:
+            await self._nodes.show_state(system_state(self._status(), self._stopping), self._active_recipe())
 
     async def _publish(self, outcome: CycleOutcome) -> None:
-        for name, (kind, value_of) in _RESULT_FIELDS.items():
-            await self._last[name].write_value(ua.Variant(value_of(outcome), kind))
         self._history.appendleft(outcome)
-        history = [json.dumps(_jsonable(o)) for o in self._history]
-        await self._history_node.write_value(ua.Variant(history, ua.VariantType.String))
-        count = await self._count.read_value()
-        await self._count.write_value(ua.Variant(count + 1, ua.VariantType.UInt32))
-        event = self._events.event
-        for name in _EVENT_FIELDS:
-            setattr(event, name, _RESULT_FIELDS[name][1](outcome))
-        event.Message = ua.LocalizedText(f"cycle {outcome.cycle}: {_result_state(outcome)}")
-        event.Severity = 100 if outcome.passed else 500
-        await self._events.trigger(datetime.now(UTC))
+        if self._nodes is not None:
+            await self._nodes.show_result(outcome, self._history)
 
 
-def _empty(kind: ua.VariantType) -> Any:
-    return {
-        ua.VariantType.String: "",
-        ua.VariantType.Boolean: False,
-        ua.VariantType.Double: math.nan,
-        ua.VariantType.DateTime: datetime.fromtimestamp(0, UTC),
-    }.get(kind, 0)
-
-
-def _jsonable(outcome: CycleOutcome) -> dict[str, Any]:
-    data = asdict(outcome)
-    data["result_state"] = _result_state(outcome)
-    data["is_pass"] = outcome.passed
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in data.items()}
+async def _new_server(cfg: OpcUaConfig) -> Server:
+    """An asyncua server at the configured endpoint, with its users (nodes not yet added)."""
+    password = None if cfg.password_file is None else cfg.password_file.read_text(encoding="utf-8").strip()
+    server = Server(user_manager=_PasswordUsers(cfg.username, password, cfg.allow_anonymous))  # type: ignore[arg-type]
+    await server.init()
+    server.set_endpoint(cfg.endpoint)
+    server.set_server_name(f"cellctl {cfg.cell_name}")
+    tokens: list[type] = [ua.UserNameIdentityToken]
+    if cfg.allow_anonymous:
+        tokens.append(ua.AnonymousIdentityToken)
+    server.set_identity_tokens(tokens)
+    return server
 
 
 def _bound_endpoint(url: str, port: int | None) -> str:

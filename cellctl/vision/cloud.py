@@ -82,14 +82,15 @@ def cloud_from_disparity(
     xs, ys = xs + x0, ys + y0
     # Only the measured pixels through Q ([X Y Z W] = Q [x y d 1], cv2.reprojectImageTo3D's formula), as
     # a perspective transform of (x, y, d): no H x W x 3 map to build and gather from.
-    pixel_disparity = np.column_stack([xs, ys, disparity]).reshape(-1, 1, 3).astype(np.float64)
+    pixel_disparity = np.empty((len(xs), 3))  # float64, filled in place (no stacked copies)
+    pixel_disparity[:, 0], pixel_disparity[:, 1], pixel_disparity[:, 2] = xs, ys, disparity
     # perspectiveTransform returns None for no points (an all-black or uniform pair: lens cap, lights off);
     # such a pair is a cloud of nothing, refused downstream as a scene error.
-    points = cv2.perspectiveTransform(pixel_disparity, calib.Q) if len(xs) else np.zeros((0, 3))
+    points = cv2.perspectiveTransform(pixel_disparity.reshape(-1, 1, 3), calib.Q) if len(xs) else np.zeros((0, 3))
     return StereoCloud(
         points=points.reshape(-1, 3),
         colors=colours,
-        pixels=np.column_stack([xs, ys]).astype(np.float64),
+        pixels=pixel_disparity[:, :2].copy(),
         disparity=disparity,
         image_size=calib.image_size,
         timings=timings,

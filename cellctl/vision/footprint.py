@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cellctl.stereo.kernels import points_in_polygon
+
 DEFAULT_CELL_MM = 0.5  # ~ the stereo pixel footprint at 550 mm (0.39 mm): most cells receive a point
 
 
@@ -28,8 +30,9 @@ class Footprint:
     def empty_like(cls, xy: np.ndarray, cell_mm: float = DEFAULT_CELL_MM, margin_mm: float = 10.0) -> Footprint:
         """An empty raster covering the points (N x 2) with a margin; cell corners lie on multiples of cell_mm,
         so rasters of the same cell size share their cells whatever they cover."""
-        lo = np.floor((xy.min(axis=0) - margin_mm) / cell_mm) * cell_mm
-        hi = xy.max(axis=0) + margin_mm
+        # Per column: numpy reduces an N x 2 array along its rows ~50 times slower (same values).
+        lo = np.floor((np.array([xy[:, 0].min(), xy[:, 1].min()]) - margin_mm) / cell_mm) * cell_mm
+        hi = np.array([xy[:, 0].max(), xy[:, 1].max()]) + margin_mm
         cols, rows = (np.ceil((hi - lo) / cell_mm).astype(int) + 1).tolist()
         return cls(np.zeros((rows, cols), np.uint8), (float(lo[0]), float(lo[1])), cell_mm)
 
@@ -108,10 +111,8 @@ class Footprint:
         cv2.fillPoly(mask, [np.round(cells * (1 << shift)).astype(np.int32)], 1, cv2.LINE_8, shift)
         # fillPoly also marks cells the edge merely touches: test the centres of the boundary cells exactly.
         rows, cols = np.nonzero((mask > 0) & (cv2.erode(mask, np.ones((3, 3), np.uint8)) == 0))
-        contour = cells.astype(np.float32).reshape(-1, 1, 2)
-        outside = [
-            cv2.pointPolygonTest(contour, (float(c), float(r)), False) < 0 for r, c in zip(rows, cols, strict=True)
-        ]
+        # cv2.pointPolygonTest's answer for all of them in one C call (np.nonzero gives them sorted by row).
+        outside = points_in_polygon(cells, np.column_stack([cols, rows])) < 0
         mask[rows[outside], cols[outside]] = 0
         return Footprint(mask, self.origin, self.cell_mm)
 

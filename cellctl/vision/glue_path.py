@@ -40,7 +40,8 @@ def glue_path(
     path_xy = np.roll(path_xy, -start, axis=0)
     path_inward = -outward_normals(path_xy)
     inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
-    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM)
+    # The patch fits on two threads (SoleSurface.sample(parallel=True)): the same samples as on one.
+    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM, parallel=True)
     missing = np.flatnonzero(~np.isfinite(samples.z[: len(path_xy)]))
     if missing.size:
         x, y = path_xy[missing[0]]

@@ -20,12 +20,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent import futures
 from typing import Any
 
 import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.stereo.kernels import PointGrid
 from cellctl.vision.checks import (
     GLUE_COVER_RADIUS_MM,
     OUTLINE_OUTSIDE_MM,
@@ -123,53 +125,25 @@ def measure_sole(
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
         )
-    surface = SoleSurface(reconstruction)  # one per reconstruction: its k-d tree serves every query below
-    problem = _outline_problem(reconstruction, outline, surface)
-    if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
-        # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
-        return _invalid(
-            FailureKind.SURFACE_NOT_MEASURED,
-            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth (glare "
-            f"or no texture), so its edge cannot be confirmed ({problem.reason})",
-            **base,
-        )
-    if problem is not None:
-        return _invalid(problem.kind, problem.reason, **base)
-    heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
-    toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
-    heights = surface.sample(np.vstack([heel_xy, toe_xy]), HEIGHT_RADIUS_MM)
-    timings["measure"] = time.perf_counter() - start
-    for name, value, xy in (("heel", heights.z[0], heel_xy), ("toe", heights.z[1], toe_xy)):
-        if not np.isfinite(value):
-            return _invalid(
-                FailureKind.SURFACE_NOT_MEASURED,
-                f"no measured surface at the {name} point ({xy[0]:.1f}, {xy[1]:.1f}) mm: fewer than "
-                f"{MIN_CLOUD_POINTS} points within {HEIGHT_RADIUS_MM:g} mm",
-                **base,
-            )
-    heel_z, toe_z = float(heights.z[0]), float(heights.z[1])
-    heel_point, toe_point = np.array([*heel_xy, heel_z]), np.array([*toe_xy, toe_z])
-    base.update(heel_point=heel_point, toe_point=toe_point)
-    start = time.perf_counter()
-    # The line glue_offset_mm inside the edge, from the footprint's distance transform: exact at pointed
-    # and cusped ends too, where moving the outline along its normals would cross itself. Cell centres lie
-    # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
-    # The offset is taken from the outline reported (smoothed against the edge's pixel noise), rasterised
-    # again on the footprint's cells: the glue path keeps its distance from that outline.
-    # A dent in the measured outline narrower than GLUE_EDGE_CLOSE_MM (edge pixels whose depth dropped out)
-    # is no part of a sole's shape: the glue line does not follow it.
-    edge = footprint.filled(outline).closed(GLUE_EDGE_CLOSE_MM)
-    inset = edge.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
-    if len(inset) < 3:
-        return _invalid(
-            FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide", **base
-        )
-    # Smoothing takes the raster's staircase out but pulls sharp corners in: back onto the offset line.
-    glue_line = snap_to_inset(edge, smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
-    path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
-    timings["glue_path"] = time.perf_counter() - start
-    if path is None:
-        return _invalid(FailureKind.SURFACE_NOT_MEASURED, missing or "no glue path", **base)
+    surface = SoleSurface(reconstruction)  # one per reconstruction: its neighbour grid serves every query below
+    # The glue path needs only the footprint, the outline and the surface: it is built on a second thread while
+    # this one checks the outline and takes the heights (numpy, OpenCV and the C kernels release the GIL).
+    # The refusals keep their order: the glue path's come after the outline's and the heights'.
+    glue = _glue_worker().submit(_glue, footprint, outline, surface, centroid, axis, glue_offset_mm, glue_spacing_mm)
+    try:
+        checked = _outline_and_heights(reconstruction, outline, surface, centroid, axis, lo, hi, base)
+        timings["measure"] = time.perf_counter() - start
+        if isinstance(checked, MeasurementRefused):
+            return checked  # as before: whatever the glue path came to does not matter
+        heel_z, toe_z = checked
+        start = time.perf_counter()
+        path, failure, missing = glue.result()
+        timings["glue_path"] = time.perf_counter() - start  # what is left of it after the outline and heights
+    finally:
+        futures.wait([glue])  # never left running into the next cycle
+    if failure is not None:
+        return _invalid(failure, missing or "no glue path", **base)
+    assert path is not None
     problem = check_glue_coverage(
         np.isfinite(surface.coarse_heights(path.points[:, :2], _cover_radius(reconstruction)))
     )
@@ -187,6 +161,82 @@ def measure_sole(
     if implausible:
         return _invalid(FailureKind.MEASUREMENT_INVALID, implausible, **base)
     return SoleMeasurement(length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, **base)
+
+
+def _outline_and_heights(
+    reconstruction: Reconstruction,
+    outline: np.ndarray,
+    surface: SoleSurface,
+    centroid: np.ndarray,
+    axis: np.ndarray,
+    lo: float,
+    hi: float,
+    base: dict[str, Any],
+) -> tuple[float, float] | MeasurementRefused:
+    """The outline's self-checks, then the heel and toe heights (added to `base`), or the refusal."""
+    problem = _outline_problem(reconstruction, outline, surface)
+    if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
+        # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
+        return _invalid(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth (glare "
+            f"or no texture), so its edge cannot be confirmed ({problem.reason})",
+            **base,
+        )
+    if problem is not None:
+        return _invalid(problem.kind, problem.reason, **base)
+    length = hi - lo
+    heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
+    toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)
+    heights = surface.sample(np.vstack([heel_xy, toe_xy]), HEIGHT_RADIUS_MM)
+    for name, value, xy in (("heel", heights.z[0], heel_xy), ("toe", heights.z[1], toe_xy)):
+        if not np.isfinite(value):
+            return _invalid(
+                FailureKind.SURFACE_NOT_MEASURED,
+                f"no measured surface at the {name} point ({xy[0]:.1f}, {xy[1]:.1f}) mm: fewer than "
+                f"{MIN_CLOUD_POINTS} points within {HEIGHT_RADIUS_MM:g} mm",
+                **base,
+            )
+    heel_z, toe_z = float(heights.z[0]), float(heights.z[1])
+    base.update(heel_point=np.array([*heel_xy, heel_z]), toe_point=np.array([*toe_xy, toe_z]))
+    return heel_z, toe_z
+
+
+def _glue(
+    footprint: Footprint,
+    outline: np.ndarray,
+    surface: SoleSurface,
+    centroid: np.ndarray,
+    axis: np.ndarray,
+    glue_offset_mm: float,
+    glue_spacing_mm: float,
+) -> tuple[GluePath | None, FailureKind | None, str | None]:
+    """The glue path, or the failure kind and reason why there is none."""
+    # The line glue_offset_mm inside the edge, from the footprint's distance transform: exact at pointed
+    # and cusped ends too, where moving the outline along its normals would cross itself. Cell centres lie
+    # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
+    # The offset is taken from the outline reported (smoothed against the edge's pixel noise), rasterised
+    # again on the footprint's cells: the glue path keeps its distance from that outline.
+    # A dent in the measured outline narrower than GLUE_EDGE_CLOSE_MM (edge pixels whose depth dropped out)
+    # is no part of a sole's shape: the glue line does not follow it.
+    edge = footprint.filled(outline).closed(GLUE_EDGE_CLOSE_MM)
+    inset = edge.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
+    if len(inset) < 3:
+        return None, FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide"
+    # Smoothing takes the raster's staircase out but pulls sharp corners in: back onto the offset line.
+    glue_line = snap_to_inset(edge, smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
+    path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
+    return path, None if path is not None else FailureKind.SURFACE_NOT_MEASURED, missing
+
+
+_GLUE_WORKER: list[futures.ThreadPoolExecutor] = []
+
+
+def _glue_worker() -> futures.ThreadPoolExecutor:
+    """The thread the glue path is built on (one, started at the first measurement)."""
+    if not _GLUE_WORKER:
+        _GLUE_WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="glue-path"))
+    return _GLUE_WORKER[0]
 
 
 def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> CheckFailure | None:
@@ -262,14 +312,9 @@ def _height_map(reconstruction: Reconstruction) -> Callable[[np.ndarray], np.nda
     """Sole height at table points (NaN off the sole): the median of the sole's points per 1 mm cell."""
     points = reconstruction.sole_points
     raster = Footprint.empty_like(points[:, :2], HEIGHT_MAP_CELL_MM)
-    row, col, _ = raster.cells(points[:, :2])
-    flat = row * raster.mask.shape[1] + col
-    order = np.lexsort((points[:, 2], flat))
-    flat, z = flat[order], points[order, 2]
-    starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
-    counts = np.diff(np.r_[starts, len(flat)])
-    grid = np.full(raster.mask.size, np.nan)
-    grid[flat[starts]] = z[starts + counts // 2]  # the median of each cell's sorted heights
+    # The median of each cell's sorted heights (the upper middle one for an even count), per cell in C.
+    cells = PointGrid(points[:, :2], HEIGHT_MAP_CELL_MM, points[:, 2], raster.origin, raster.mask.shape)
+    grid = cells.cell_upper_medians().ravel()
 
     def height(xy: np.ndarray) -> np.ndarray:
         r, c, inside = raster.cells(xy)

@@ -41,7 +41,7 @@ def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm
     for half in _WINDOW_HALVES:  # larger windows only for the points whose 19 nearest lie farther out
         if others.size == 0:
             break
-        window = np.array([(dx, dy) for dy in range(-half, half + 1) for dx in range(-half, half + 1) if dx or dy])
+        window = _WINDOWS[half]
         neighbours = flat[:, at[others, None] + window[:, 1] * grid.shape[2] + window[:, 0]]  # 3 x P x M
         offset = neighbours - centre[:, others, None]
         distance = np.nan_to_num(np.sqrt(np.einsum("ijk,ijk->jk", offset, offset)), nan=np.inf)
@@ -58,6 +58,11 @@ def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm
 
 
 _WINDOW_HALVES = (7, 15, 31, 63)  # 15 x 15 to 127 x 127 pixels, each for fewer points
+# Each window's (dx, dy) offsets without the centre, row after row (built once: the largest has 16128).
+_WINDOWS = {
+    half: np.array([(dx, dy) for dy in range(-half, half + 1) for dx in range(-half, half + 1) if dx or dy])
+    for half in _WINDOW_HALVES
+}
 _NEAR_BLOCK = [(dx, dy) for dy in range(-2, 3) for dx in range(-2, 3) if 0 < dx * dx + dy * dy <= 5]  # 20
 _NEAR = _NEAR_BLOCK + [(dx, dy) for dy in range(-3, 4) for dx in range(-3, 4) if 5 < dx * dx + dy * dy <= 10]  # + 16
 _NEAR_OFFSETS = np.array(_NEAR, np.int32)

@@ -198,10 +198,11 @@ class Segmentation:
         # cells lie on the same lattice whatever it covers (Footprint.empty_like).
         raster = Footprint.empty_like(xy[high], FOOTPRINT_CELL_MM)
         every = raster.counts(xy)  # all measured points per cell: "most of a cell's points" needs them
-        footprint = _footprint(raster, every, xy[high])
+        high_counts = raster.counts(xy[high])
+        footprint = _footprint(raster, every, high_counts)
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._no_sole(points, no_sole)
-        self.raised, self.measured_cells = depth_step(raster, every, raster.counts(xy[high]))
+        self.raised, self.measured_cells = depth_step(raster, every, high_counts)
         if self.taught is not None:
             change = change_split(self.cloud, self.taught, points, footprint, high, self.min_height)
             if change is None:
@@ -223,7 +224,9 @@ class Segmentation:
             )
         # The colour edge is noisier than the change edge (a black sole's colour noise): it keeps the coarser
         # opening it was tuned with; the change edge keeps a pointed toe's tip.
-        footprint = _footprint(raster, every, xy[keep], FOOTPRINT_OPEN_MM if self.taught else COLOUR_OPEN_MM)
+        footprint = _footprint(
+            raster, every, raster.counts(xy[keep]), FOOTPRINT_OPEN_MM if self.taught else COLOUR_OPEN_MM
+        )
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._refused(
                 FailureKind.NO_SOLE, "no sole in view: the region above the table has the table's colour"
@@ -290,12 +293,9 @@ class Segmentation:
         )
 
 
-def _footprint(
-    raster: Footprint, every: np.ndarray, sole_xy: np.ndarray, open_mm: float = FOOTPRINT_OPEN_MM
-) -> Footprint:
+def _footprint(raster: Footprint, every: np.ndarray, sole: np.ndarray, open_mm: float = FOOTPRINT_OPEN_MM) -> Footprint:
     """Largest region of `raster` where most measured points of a cell (`every`, per cell) are sole points
-    (`sole_xy`), closed and hole-free."""
-    sole = raster.counts(sole_xy)
+    (`sole`, per cell), closed and hole-free."""
     # A cell is sole if most of its own points are; cells without points are decided by the closing.
     mask = ((sole > 0) & (2 * sole >= every)).astype(np.uint8)
     return Footprint(mask, raster.origin, raster.cell_mm).morphology(close_mm=2.0, open_mm=open_mm).largest_region()

@@ -74,12 +74,13 @@ def colour_split(colours: np.ndarray, points: np.ndarray, footprint: Footprint, 
         return ColourSplit(everything, False, 0.0)
     sole_c, table_c = colours[interior].astype(np.float64), colours[outside].astype(np.float64)
     pooled = 0.5 * (np.cov(sole_c.T) + np.cov(table_c.T)) + np.eye(3) * 1e-3
-    difference = sole_c.mean(axis=0) - table_c.mean(axis=0)
+    sole_mean, table_mean = sole_c.mean(axis=0), table_c.mean(axis=0)  # each taken once (~10^5 rows)
+    difference = sole_mean - table_mean
     direction = np.linalg.solve(pooled, difference)
     separation = float(np.sqrt(direction @ difference))
     if separation < MIN_COLOUR_SEPARATION:
         return ColourSplit(everything, False, separation)
-    threshold = direction @ (0.5 * (sole_c.mean(axis=0) + table_c.mean(axis=0)))
+    threshold = direction @ (0.5 * (sole_mean + table_mean))
     return ColourSplit(colours[high].astype(np.float64) @ direction > threshold, True, separation)
 
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cellctl.stereo.kernels import patch_shift, patch_step
+from cellctl.stereo.kernels import patch_sample, patch_shift, patch_step
 
 BLUR_LEVELS: tuple[tuple[float, int], ...] = ((2.0, 4), (1.0, 3), (0.0, 3))  # (Gaussian sigma px, iterations)
 MIN_PATCH_PIXELS = 40
@@ -87,7 +87,39 @@ def refine_patches(
     ids, pixels = disc_pixels(mask, centres, radius_px)
     start = np.asarray(start, np.float64)
     params = start.reshape(-1, 3) if start.ndim == 2 else np.column_stack([start, np.zeros((len(start), 2))])
-    return fit_disparity_planes(left, right, ids, pixels, centres, params)
+    centres = np.asarray(centres, np.float64).reshape(-1, 2)
+    groups = _row_groups(centres[:, 1], radius_px)
+    if len(groups) == 1:
+        return fit_disparity_planes(left, right, ids, pixels, centres, params)
+    # Patches in rows far apart (a heel and a toe): each group filters only its own rows. Every patch is
+    # fitted on its own, so the fits are those of one call over all of them.
+    parts = []
+    for group in groups:
+        chosen = np.flatnonzero(np.isin(ids, group))
+        local = np.searchsorted(group, ids[chosen])
+        parts.append((group, fit_disparity_planes(left, right, local, pixels[chosen], centres[group], params[group])))
+    return merged_fits(parts, len(centres))
+
+
+def _row_groups(rows: np.ndarray, radius_px: float) -> list[np.ndarray]:
+    """Patches (indices, ascending) in groups whose filtered rows (radius and the filters' reach) do not meet."""
+    order = np.argsort(rows, kind="stable")
+    gap = 2.0 * (radius_px + _ROW_MARGIN_PX) + 2.0
+    cuts = np.flatnonzero(np.diff(rows[order]) > gap) + 1
+    return [np.sort(part) for part in np.split(order, cuts)]
+
+
+def merged_fits(parts: list[tuple[np.ndarray, PatchFit]], count: int) -> PatchFit:
+    """One PatchFit of `count` patches from fits of groups of them (global indices, ascending, per group):
+    every patch is fitted on its own, so this is the fit of one call over all of them."""
+    params, ok = np.empty((count, 3)), np.zeros(count, bool)
+    for group, fit in parts:
+        params[group], ok[group] = fit.params, fit.ok
+    ids = np.concatenate([group[fit.ids] for group, fit in parts])
+    order = np.argsort(ids, kind="stable")  # patch after patch, each patch's pixels in their order
+    ids, xy = ids[order], np.concatenate([fit.xy for _, fit in parts])[order]
+    sizes = np.bincount(ids, minlength=count)
+    return PatchFit(params, ok, np.split(xy, np.cumsum(sizes)[:-1]), ids, xy)
 
 
 def disc_pixels(mask: np.ndarray, centres: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
@@ -133,19 +165,26 @@ def fit_disparity_planes(
     last_step = np.full(count, np.inf)
     starts = np.concatenate([[0], np.cumsum(sizes)])
     right_at = _Sampler(y)
+    # Patches of image pixels lie on whole rows: there the right image is sampled in C (ck_patch_sample).
+    rows = y.astype(np.int32) if np.array_equal(y, np.round(y)) and len(y) else None
+    # The left image is sampled where its pixels are: at whole pixels the bicubic sample is the pixel itself.
+    columns = x.astype(np.int64) if rows is not None and np.array_equal(x, np.round(x)) else None
     for sigma, iterations in BLUR_LEVELS:
         l_img = cv2.GaussianBlur(left, (0, 0), sigma) if sigma > 0 else left
         r_img = cv2.GaussianBlur(right, (0, 0), sigma) if sigma > 0 else right
         # The right image and its x gradient as two channels: one remap samples both at the same points.
         r_both = cv2.merge([r_img, cv2.Sobel(r_img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)])
-        l_val = _sample(l_img, x, y)
+        l_val = _sample(l_img, x, y) if columns is None else l_img[rows, columns].astype(np.float64)
         l_dev = l_val - sums.means_at_pixels(l_val)  # the left patch does not move: its statistics are fixed per level
         l_energy = sums(l_dev**2)
         for _ in range(iterations):
             # Where each patch's plane puts its pixels (x - d), the right image there, and the step with its
             # per-patch sums and 3 x 3 solves, in C (csrc/cloud_kernels.c); the numpy formulation the step
             # follows is _gauss_newton_step, the tests' reference.
-            samples = right_at(r_both, patch_shift(starts, params, x, dx, dy, KERNEL_THREADS))
+            if rows is None:
+                samples = right_at(r_both, patch_shift(starts, params, x, dx, dy, KERNEL_THREADS))
+            else:  # on whole rows: shift and bicubic sample in one C pass (cv2.remap's values to ~1e-6)
+                samples = patch_sample(starts, params, x, dx, dy, rows, r_both, KERNEL_THREADS)
             step = patch_step(starts, l_dev, l_energy, samples, dx, dy, KERNEL_THREADS)
             params += np.clip(step, -MAX_STEP_PX, MAX_STEP_PX)
             last_step = np.abs(step[:, 0])

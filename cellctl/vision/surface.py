@@ -8,17 +8,19 @@ the same plane is fitted to the cloud's points near the query.
 
 from __future__ import annotations
 
+from concurrent import futures
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 
+from cellctl.stereo.kernels import PointGrid
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
 
 MIN_CLOUD_POINTS = 12
 MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
 TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
+GRID_CELL_MM = 2.0  # the neighbour grid's cells: a 4 mm query reads 5 x 5 of them
 
 
 @dataclass
@@ -35,19 +37,17 @@ class SoleSurface:
 
     def __init__(self, reconstruction: Reconstruction) -> None:
         self.rec = reconstruction
-        self._tree: o3d.geometry.KDTreeFlann | None = None
+        points = reconstruction.sole_points
+        # Neighbours in the table plane, a cell grid searched in C (cellctl.stereo.kernels.PointGrid: the
+        # neighbours and order a k-d tree's radius search gives, without a Python call per query); built here
+        # (~10^5 points, a few ms), so that threads may query it at once.
+        self.grid = PointGrid(points[:, :2], GRID_CELL_MM, points[:, 2])
 
-    @property
-    def tree(self) -> o3d.geometry.KDTreeFlann:
-        """Neighbours in the table plane: built at the first query (~10^5 points), then kept."""
-        if self._tree is None:
-            points = self.rec.sole_points
-            flat = np.column_stack([points[:, :2], np.zeros(len(points))])
-            self._tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(flat)))
-        return self._tree
+    def sample(self, xy: np.ndarray, radius_mm: float, parallel: bool = False) -> SurfaceSamples:
+        """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each.
 
-    def sample(self, xy: np.ndarray, radius_mm: float) -> SurfaceSamples:
-        """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each."""
+        parallel: the image fits of the first and second half of the queries on two threads (the same
+        result: every patch is fitted on its own, with the patch radius of all the queries)."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
         refined = np.zeros(len(xy), bool)
         if self.rec.rectified is None:
@@ -56,7 +56,7 @@ class SoleSurface:
         z = self.coarse_heights(xy, radius_mm)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
         if np.any(np.isfinite(z)):
-            self._refine(xy, z, normals, refined, radius_mm)
+            self._refine(xy, z, normals, refined, radius_mm, parallel)
         # Where the images gave no fit (too few pixels, no convergence), fall back to the cloud.
         rest = np.flatnonzero(~refined)
         if rest.size:
@@ -65,39 +65,27 @@ class SoleSurface:
 
     def coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
         """Median height of the cloud's points within the radius (NaN where too few): the refinement's start."""
-        points = self.rec.sole_points
-        found = [np.asarray(self.tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)[1]) for x, y in xy]
-        counts = np.array([len(index) for index in found], np.int64)
-        z = np.full(len(xy), np.nan)
-        enough = np.flatnonzero(counts >= MIN_CLOUD_POINTS)
-        if enough.size == 0:
-            return z
-        # All medians at once: each query's heights as a row (padded with inf), sorted along the rows; the
-        # median is the mean of the two middle values (one for odd counts), as np.median takes it.
-        rows = np.full((enough.size, int(counts[enough].max())), np.inf)
-        row = np.repeat(np.arange(enough.size), counts[enough])
-        column = np.arange(len(row)) - np.repeat(np.cumsum(counts[enough]) - counts[enough], counts[enough])
-        rows[row, column] = points[np.concatenate([found[k] for k in enough]), 2]
-        rows.sort(axis=1)
-        n = counts[enough]
-        lower, upper = rows[np.arange(enough.size), (n - 1) // 2], rows[np.arange(enough.size), n // 2]
-        z[enough] = (lower + upper) / 2
-        return z
+        counts, medians = self.grid.radius_medians(xy, radius_mm)
+        return np.where(counts >= MIN_CLOUD_POINTS, medians, np.nan)
 
     def _from_cloud(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
         points = self.rec.sole_points
         z = np.full(len(xy), np.nan)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
-        for k, (x, y) in enumerate(xy):
-            count, index, _ = self.tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius_mm)
-            if count < MIN_CLOUD_POINTS:
+        for k, (index, (x, y)) in enumerate(zip(self.grid.radius_indices(xy, radius_mm), xy, strict=True)):
+            if len(index) < MIN_CLOUD_POINTS:
                 continue
-            near = points[np.asarray(index)]
-            z[k], normals[k] = _robust_plane(near, np.array([x, y]))
+            z[k], normals[k] = _robust_plane(points[index], np.array([x, y]))
         return z, normals
 
     def _refine(
-        self, xy: np.ndarray, z: np.ndarray, normals: np.ndarray, refined: np.ndarray, radius_mm: float
+        self,
+        xy: np.ndarray,
+        z: np.ndarray,
+        normals: np.ndarray,
+        refined: np.ndarray,
+        radius_mm: float,
+        parallel: bool = False,
     ) -> None:
         rec = self.rec
         calib, rectified, to_table, mask = rec.calibration, rec.rectified, rec.camera_to_table, rec.sole_mask
@@ -111,15 +99,46 @@ class SoleSurface:
         centres = guess[:, :2] / guess[:, 2:3] * focal + calib.P1[:2, 2]
         start = focal * calib.baseline_mm / guess[:, 2]
         radius_px = radius_mm * focal / float(np.median(guess[:, 2]))
-        fit = refine_patches(left, right, mask, centres, radius_px, start)
-        homogeneous = np.column_stack([fit.xy, fit.disparities(centres), np.ones(len(fit.ids))]) @ calib.Q.T
-        camera = homogeneous[:, :3] / homogeneous[:, 3:4]
-        table = camera @ to_table[:3, :3].T + to_table[:3, 3]
-        patch_z, patch_normals = _planes_at(table, fit.ids, xy[known])
-        # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the cloud's
-        # plane takes over there.
-        done = fit.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known]) < MAX_REFINE_SHIFT_MM)
-        z[known[done]], normals[known[done]], refined[known[done]] = patch_z[done], patch_normals[done], True
+
+        def fit(part: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """Image fits of the known queries `part`: which succeeded, their heights and normals."""
+            patches = refine_patches(left, right, mask, centres[part], radius_px, start[part])
+            pixel_disparity = np.column_stack(
+                [patches.xy, patches.disparities(centres[part]), np.ones(len(patches.ids))]
+            )
+            homogeneous = pixel_disparity @ calib.Q.T
+            camera = homogeneous[:, :3] / homogeneous[:, 3:4]
+            table = camera @ to_table[:3, :3].T + to_table[:3, 3]
+            patch_z, patch_normals = _planes_at(table, patches.ids, xy[known[part]])
+            # A fit that moved the height far from the cloud's own (a highlight, a mismatch) failed: the
+            # cloud's plane takes over there.
+            done = patches.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known[part]]) < MAX_REFINE_SHIFT_MM)
+            return part[done], patch_z[done], patch_normals[done]
+
+        # parallel: the second half of the queries on a worker thread (numpy, OpenCV and the C kernels release
+        # the GIL). Every query is fitted on its own with the radius of all of them: the same result.
+        half = len(known) // 2
+        if parallel and half > 0:
+            second = _fit_worker().submit(fit, np.arange(half, len(known)))
+            try:
+                results = [fit(np.arange(half))]
+            finally:
+                futures.wait([second])
+            results.append(second.result())
+        else:
+            results = [fit(np.arange(len(known)))]
+        for part, part_z, part_normals in results:
+            z[known[part]], normals[known[part]], refined[known[part]] = part_z, part_normals, True
+
+
+_FIT_WORKER: list[futures.ThreadPoolExecutor] = []
+
+
+def _fit_worker() -> futures.ThreadPoolExecutor:
+    """The thread half of a parallel sample's queries are fitted on (one, started at the first use)."""
+    if not _FIT_WORKER:
+        _FIT_WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="patch-fits"))
+    return _FIT_WORKER[0]
 
 
 def _planes_at(points: np.ndarray, ids: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -208,3 +208,17 @@ def test_the_web_server_names_a_busy_port() -> None:
         server = WebServer(Starlette(), "127.0.0.1", busy.getsockname()[1])
         with pytest.raises(ValueError, match=r"cannot listen on 127\.0\.0\.1.*\[station\]"):
             server.start()
+
+
+def test_image_log_writes_between_cycles_only(tmp_path: Path) -> None:
+    """The image log's writer starts no step while the daemon measures (its CellState is busy): three PNGs
+    beside a cycle took ~0.3 s off it on 2 cores."""
+    log = ImageLog(tmp_path / "images", None, ImageLogConfig(every_nth_good=1))
+    log.on_event(CellState(phase="busy", cycle=7))
+    waited = threading.Event()
+    writer = threading.Thread(target=lambda: (log._wait_between_cycles(), waited.set()))
+    writer.start()
+    assert not waited.wait(0.3)  # held back while the cycle runs
+    log.on_event(CellState(phase="ready"))
+    assert waited.wait(5.0)
+    writer.join()

@@ -6,7 +6,14 @@ import cv2
 import numpy as np
 import pytest
 
-from cellctl.stereo.kernels import neighbour_means, patch_shift, patch_step
+from cellctl.stereo.kernels import (
+    PointGrid,
+    neighbour_means,
+    patch_sample,
+    patch_shift,
+    patch_step,
+    points_in_polygon,
+)
 from cellctl.vision import outliers, subpixel
 
 from ..vision.test_outliers import _stereo_cloud
@@ -143,3 +150,138 @@ def test_patch_fits_through_the_kernels_find_a_known_shift() -> None:
     assert fit.ok.all()
     np.testing.assert_allclose(fit.params[:, 0], 3.0, atol=0.01)
     np.testing.assert_allclose(fit.params[:, 1:], 0.0, atol=0.005)
+
+
+def _plane_points(seed: int, count: int = 20000) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    points = np.column_stack([rng.uniform(-80, 120, count), rng.uniform(-30, 50, count), rng.normal(20, 3, count)])
+    points[:50, :2] = np.round(points[:50, :2])  # points on cell corners and edges too
+    return points
+
+
+@pytest.mark.parametrize("cell", [1.0, 2.0, 3.7])
+def test_point_grid_finds_what_a_kd_tree_finds(cell: float) -> None:
+    """Radius counts, medians and neighbours (in the tree's order) as Open3D's k-d tree over (x, y, 0) gives
+    them (cellctl.vision.surface used the tree before the grid)."""
+    import open3d as o3d
+
+    points = _plane_points(0)
+    grid = PointGrid(points[:, :2], cell, points[:, 2])
+    flat = np.column_stack([points[:, :2], np.zeros(len(points))])
+    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(flat)))
+    rng = np.random.default_rng(1)
+    queries = np.column_stack([rng.uniform(-95, 135, 150), rng.uniform(-45, 65, 150)])
+    queries[:10] = points[:10, :2] + np.array([cell, 0.0])  # a neighbour exactly at the radius (1 mm)
+    for radius in (1.0, 4.0, 10.0):
+        counts, medians = grid.radius_medians(queries, radius)
+        found = grid.radius_indices(queries, radius)
+        np.testing.assert_array_equal(grid.radius_counts(queries, radius), counts)
+        for k, (x, y) in enumerate(queries):
+            index = np.asarray(tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius)[1], np.int64)
+            np.testing.assert_array_equal(found[k], index)
+            assert counts[k] == len(index)
+            if len(index):
+                assert medians[k] == np.median(points[index, 2])
+            else:
+                assert np.isnan(medians[k])
+
+
+def test_point_grid_cell_medians_and_threads() -> None:
+    points = _plane_points(2)
+    grid = PointGrid(points[:, :2], 1.0, points[:, 2], origin=(-81.0, -31.0), shape=(82, 202))
+    medians = grid.cell_upper_medians()
+    col = np.floor(points[:, 0] + 81.0).astype(int)
+    row = np.floor(points[:, 1] + 31.0).astype(int)
+    for r, c in [(row[0], col[0]), (row[7], col[7]), (40, 100)]:
+        z = np.sort(points[(row == r) & (col == c), 2])
+        assert medians[r, c] == z[len(z) // 2]
+    assert np.isnan(medians[0, 0])  # no point there
+    queries = points[:5000, :2]  # enough queries and cells for two threads
+    one, two = (PointGrid(points[:, :2], 1.0, points[:, 2], threads=t) for t in (1, 2))
+    np.testing.assert_array_equal(one.radius_medians(queries, 4.0), two.radius_medians(queries, 4.0))
+    np.testing.assert_array_equal(one.cell_upper_medians(), two.cell_upper_medians())
+
+
+def test_point_grid_refuses_bad_input() -> None:
+    points = _plane_points(3, 100)
+    with pytest.raises(ValueError, match="positive"):
+        PointGrid(points[:, :2], 0.0)
+    with pytest.raises(ValueError, match="finite"):
+        PointGrid(np.array([[0.0, np.nan]]), 1.0)
+    with pytest.raises(ValueError, match="outside its array"):  # a given raster that does not hold the points
+        PointGrid(points[:, :2], 1.0, origin=(0.0, 0.0), shape=(5, 5))
+    with pytest.raises(ValueError, match="without values"):
+        PointGrid(points[:, :2], 1.0).radius_medians(points[:3, :2], 2.0)
+    with pytest.raises(ValueError, match="negative"):
+        PointGrid(points[:, :2], 1.0, points[:, 2]).radius_medians(points[:3, :2], -1.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_points_in_polygon_is_opencvs_point_polygon_test(seed: int) -> None:
+    """Inside, outside and on the boundary exactly as cv2.pointPolygonTest (Footprint.filled used it point by
+    point): vertices on the integer and half-integer grid put many points on edges and vertices, and a
+    polygon from random vertices crosses itself."""
+    rng = np.random.default_rng(seed)
+    if seed % 2:
+        polygon = np.round(rng.uniform(0, 30, (40, 2)) * 2) / 2
+    else:
+        angle = np.sort(rng.uniform(0, 2 * np.pi, 150))
+        polygon = np.round(15 + rng.uniform(4, 14, 150)[:, None] * np.column_stack([np.cos(angle), np.sin(angle)]))
+    polygon = polygon.astype(np.float32)
+    ys, xs = np.mgrid[0:31, 0:31]
+    points = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float32)
+    expected = [cv2.pointPolygonTest(polygon.reshape(-1, 1, 2), (float(x), float(y)), False) for x, y in points]
+    assert 0 in expected and 1 in expected and -1 in expected
+    np.testing.assert_array_equal(points_in_polygon(polygon, points), expected)
+    with pytest.raises(ValueError, match="sorted by y"):
+        points_in_polygon(polygon, points[::-1])
+
+
+def test_patch_sample_is_remap_of_patch_shift() -> None:
+    """Bicubic samples on whole rows where the patch planes put the pixels: what cv2.remap (INTER_CUBIC,
+    BORDER_REPLICATE) gives at patch_shift's positions, to ~1e-6 of the value (OpenCV's arithmetic differs in
+    its order), also past both sides of the image; the same on one and two threads."""
+    p = _patches(5, count=300)
+    rng = np.random.default_rng(6)
+    image = cv2.GaussianBlur(rng.normal(100, 40, (50, 300, 2)).astype(np.float32), (0, 0), 1.0)
+    pixels = len(p["x"])
+    rows = rng.integers(0, 50, pixels)
+    x = rng.uniform(-10, 310, pixels).astype(np.float32)
+    shifted = patch_shift(p["starts"], p["params"], x, p["dx"], p["dy"])
+    expected = cv2.remap(
+        image,
+        shifted.reshape(1, -1),
+        rows.astype(np.float32).reshape(1, -1),
+        cv2.INTER_CUBIC,
+        borderMode=cv2.BORDER_REPLICATE,
+    ).reshape(-1, 2)
+    args = (p["starts"], p["params"], x, p["dx"], p["dy"], rows, image)
+    one, two = patch_sample(*args, threads=1), patch_sample(*args, threads=2)
+    np.testing.assert_allclose(one, expected, rtol=0, atol=1e-5 * np.abs(image).max())
+    np.testing.assert_array_equal(one, two)
+    with pytest.raises(ValueError, match="H x W x 2"):
+        patch_sample(*args[:-1], image[..., 0])
+    with pytest.raises(ValueError, match="outside its array"):
+        patch_sample(*args[:-2], np.full(pixels, 50), image)
+
+
+def test_patch_fits_in_row_groups_are_the_fits_of_one_call() -> None:
+    """refine_patches fits patches whose rows lie far apart (a heel and a toe) group by group, each filtering
+    only its own rows: the same parameters, flags and pixels, bit for bit, as one call over all patches."""
+    rng = np.random.default_rng(7)
+    left = cv2.GaussianBlur(rng.normal(100, 30, (400, 200)).astype(np.float32), (0, 0), 1.2)
+    right = np.roll(left, -3, axis=1)
+    centres = np.array([[60.0, 40.0], [100.0, 350.0], [80.0, 55.0], [140.0, 330.0], [100.0, 200.0]])
+    mask = np.ones(left.shape, bool)
+    start = np.full(len(centres), 2.7)
+    assert len(subpixel._row_groups(centres[:, 1], 10.0)) == 3
+    grouped = subpixel.refine_patches(left, right, mask, centres, 10.0, start)
+    ids, pixels = subpixel.disc_pixels(mask, centres, 10.0)
+    params = np.column_stack([start, np.zeros((len(start), 2))])
+    whole = subpixel.fit_disparity_planes(left, right, ids, pixels, centres, params)
+    np.testing.assert_array_equal(grouped.params, whole.params)
+    np.testing.assert_array_equal(grouped.ok, whole.ok)
+    np.testing.assert_array_equal(grouped.ids, whole.ids)
+    np.testing.assert_array_equal(grouped.xy, whole.xy)
+    for a, b in zip(grouped.pixels, whole.pixels, strict=True):
+        np.testing.assert_array_equal(a, b)

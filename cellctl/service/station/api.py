@@ -94,10 +94,7 @@ class Api:
         )
 
     async def capture_preview(self, request: Request) -> Response:
-        last = self.ctx.actions.last_capture
-        if last is None:
-            return PlainTextResponse("no pair captured yet", status_code=404)
-        return Response(last[1], media_type="image/jpeg", headers=NO_STORE)
+        return _last_jpeg(self.ctx.actions.last_capture, "no pair captured yet")
 
     async def rectification_check(self, request: Request) -> Response:
         """Open to all: it only reads (a grab between cycles and a picture), like the live view."""
@@ -108,10 +105,7 @@ class Api:
         return JSONResponse({"summary": summary})
 
     async def rectified_picture(self, request: Request) -> Response:
-        check = self.ctx.actions.last_rectification
-        if check is None:
-            return PlainTextResponse("no rectification check run yet", status_code=404)
-        return Response(check[1], media_type="image/jpeg", headers=NO_STORE)
+        return _last_jpeg(self.ctx.actions.last_rectification, "no rectification check run yet")
 
     async def metrics(self, request: Request) -> Response:
         body = await run_in_threadpool(self.ctx.metrics.exposition)
@@ -132,3 +126,10 @@ class Api:
 def _side(request: Request) -> str:
     side = request.path_params["side"]
     return side if side in ("left", "right") else "left"
+
+
+def _last_jpeg(last: tuple[object, bytes] | None, missing: str) -> Response:
+    """The JPEG of the last capture or check (its second item), or 404 with `missing` before there is one."""
+    if last is None:
+        return PlainTextResponse(missing, status_code=404)
+    return Response(last[1], media_type="image/jpeg", headers=NO_STORE)
