@@ -13,22 +13,20 @@ heavy noise, and the right camera's gain and gamma.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import open3d as o3d
 
 from cellctl.sim.appearance import SOLE_MATERIALS, TABLES, ColourScheme, Texture, lights, sole_material, table_texture
 from cellctl.sim.look import SceneLook
+from cellctl.sim.raycast import SOLE_GEOMETRY, TABLE_GEOMETRY, RayCaster
 from cellctl.sim.sole import SoleModel
 from cellctl.vision.calibration import Calibration
 
 RIG_HEIGHT_MM = 550.0  # rig (baseline mid-point) above the table
 RIG_TILT_DEG = (2.0, -1.0)  # a rig is never mounted perfectly level: about its x and y axes
 
-TABLE_GEOMETRY, SOLE_GEOMETRY = 0, 1
 PART_TOP, PART_WALL, PART_UNDERSIDE, PART_EDGE = 0, 1, 2, 3  # PART_EDGE: top surface within the edge profile
 
 
@@ -36,11 +34,9 @@ AMBIENT = 0.35
 EXPOSURE_DN = 255.0  # pixel value of a white (albedo 1) horizontal surface at the table centre
 # Read noise (DN) and variance added per DN of signal (the sensor's conversion gain), per SceneLook.noise.
 SENSOR_NOISE: dict[str, tuple[float, float]] = {"normal": (1.0, 0.02), "heavy": (6.0, 0.15)}
-SHADOW_RAY_LIFT_MM = 0.05  # shadow rays start this far off the surface, so they do not hit it again
 LENS_BLUR_PX = 0.5
 VIGNETTING = 0.12  # relative fall-off at the image corners
 SUPERSAMPLE = 4
-_CPU = o3d.core.Device("CPU:0")  # every tensor of the renderer lives on the CPU
 
 
 def rig_pose(
@@ -120,15 +116,7 @@ class SceneRenderer:
         )
         # The sensor noise may come from its own seed: the same table (textures from `seed`) shot again.
         self._noise_rng = np.random.default_rng([seed if noise_seed is None else noise_seed, 11])
-        self._scene = o3d.t.geometry.RaycastingScene()
-        self._scene.add_triangles(_table_mesh())  # geometry id 0 = TABLE_GEOMETRY
-        self._parts = np.zeros(0, np.int32)
-        if sole is not None:
-            vertices, triangles, self._parts = sole.mesh()
-            mesh = o3d.t.geometry.TriangleMesh()
-            mesh.vertex.positions = _tensor(vertices, o3d.core.float32)
-            mesh.triangle.indices = _tensor(triangles, o3d.core.int32)
-            self._scene.add_triangles(mesh)  # geometry id 1 = SOLE_GEOMETRY
+        self.rays = RayCaster(calib.image_size, sole)
 
     def render(self) -> RenderedPair:
         """Render both cameras."""
@@ -156,9 +144,9 @@ class SceneRenderer:
         width, height = self.calib.image_size
         pose = self.camera_pose if side == "left" else right_pose(self.calib, self.camera_pose)
         K, D = (self.calib.K1, self.calib.D1) if side == "left" else (self.calib.K2, self.calib.D2)
-        hits = self._cast(None, K, D, pose)
+        hits = self.rays.cast(None, K, D, pose)
         radiance = self._shade(hits, pose)
-        edges = self._edge_pixels(hits, (height, width))
+        edges = self.rays.edge_pixels(hits, (height, width))
         if edges.size:
             pixels = np.column_stack([edges % width, edges // width]).astype(np.float64)
             radiance[edges] = self._supersample(pixels, K, D, pose)
@@ -171,35 +159,6 @@ class SceneRenderer:
         K = self.calib.K1 if side == "left" else self.calib.K2
         gain, gamma = (1.0, 1.0) if side == "left" else (self.look.right_gain, self.look.right_gamma)
         return self._sensor(radiance * gain, self.calib.image_size, K, gamma)
-
-    def _cast(self, pixels: np.ndarray | None, K: np.ndarray, D: np.ndarray, pose: np.ndarray) -> dict[str, np.ndarray]:
-        """Trace the rays of the given pixel positions (all pixel centres when None)."""
-        if pixels is None:
-            normalised = _pixel_rays(K.tobytes(), D.tobytes(), self.calib.image_size)
-        else:
-            normalised = _undistort(pixels, K, D)
-        # Direction (x, y, 1) in the camera frame: the hit distance t is then the camera z-depth.
-        rotation = pose[:3, :3].astype(np.float32)
-        directions = normalised @ rotation[:, :2].T + rotation[:, 2]
-        rays = np.empty((len(directions), 6), np.float32)
-        rays[:, :3] = pose[:3, 3]
-        rays[:, 3:] = directions
-        result = self._scene.cast_rays(_tensor(rays, o3d.core.float32))
-        t = result["t_hit"].numpy()
-        hit = np.isfinite(t)
-        geometry = np.where(hit, result["geometry_ids"].numpy().astype(np.int32), -1)
-        part = np.full(len(t), -1, np.int32)
-        on_sole = geometry == SOLE_GEOMETRY
-        part[on_sole] = self._parts[result["primitive_ids"].numpy()[on_sole]]
-        # Positions in float64: the texture and the sole's height field need better than 0.01 mm.
-        points = pose[:3, 3] + directions.astype(np.float64) * np.where(hit, t, 0.0)[:, None]
-        return {
-            "t": t,
-            "geometry": geometry,
-            "part": part,
-            "points": points,
-            "facet_normals": result["primitive_normals"].numpy(),
-        }
 
     def _shade(self, hits: dict[str, np.ndarray], pose: np.ndarray) -> np.ndarray:
         """Linear radiance (BGR, exposure-scaled DN before sensor effects) of every ray's hit."""
@@ -219,7 +178,7 @@ class SceneRenderer:
         if np.any(sole):
             albedo[sole] = self._shade_sole(hits, sole, normals, texture)
             specular[sole], shininess[sole] = self.material.specular, self.material.shininess
-        lit = self._unshadowed(points, normals, hits["geometry"] >= 0) if self.look.shadows else None
+        lit = self.rays.unshadowed(points, normals, hits["geometry"] >= 0, self.lights) if self.look.shadows else None
         diffuse, highlight = _lighting(points, normals, pose[:3, 3], shininess, self.lights, self.light_power, lit)
         radiance = albedo * (texture * (AMBIENT + diffuse))[:, None] + (specular * highlight)[:, None]
         radiance[hits["geometry"] < 0] = 0.0
@@ -243,32 +202,11 @@ class SceneRenderer:
         texture[sole] = self._sole_texture.sample(uv[:, 0], tex_v)
         return self._colours.albedo(shape, uv, part == PART_WALL)
 
-    def _unshadowed(self, points: np.ndarray, normals: np.ndarray, hit: np.ndarray) -> np.ndarray:
-        """Per light (L x N, bool): whether the straight line from each hit point to the light is free."""
-        lit = np.zeros((len(self.lights), len(points)), bool)
-        start = (points + SHADOW_RAY_LIFT_MM * normals)[hit].astype(np.float32)
-        for k, light in enumerate(self.lights):
-            # Ray direction = the full vector to the light: anything hit at t < 1 lies between point and light.
-            rays = np.hstack([start, light.astype(np.float32) - start])
-            t = self._scene.cast_rays(_tensor(rays, o3d.core.float32))["t_hit"].numpy()
-            lit[k, hit] = ~(t < 1.0)
-        return lit
-
-    def _edge_pixels(self, hits: dict[str, np.ndarray], shape: tuple[int, int]) -> np.ndarray:
-        """Indices of pixels next to a change of surface or a depth step: these get supersampled."""
-        label = (hits["geometry"] * 4 + np.maximum(hits["part"], 0)).reshape(shape).astype(np.int32)
-        depth = np.nan_to_num(hits["t"], nan=1e6).reshape(shape)
-        kernel = np.ones((3, 3), np.uint8)
-        label_f = label.astype(np.float32)
-        changes = cv2.dilate(label_f, kernel) != cv2.erode(label_f, kernel)
-        steps = (cv2.dilate(depth.astype(np.float32), kernel) - cv2.erode(depth.astype(np.float32), kernel)) > 2.0
-        return np.flatnonzero(changes | steps)
-
     def _supersample(self, pixels: np.ndarray, K: np.ndarray, D: np.ndarray, pose: np.ndarray) -> np.ndarray:
         offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
         ox, oy = np.meshgrid(offsets, offsets)
         sub = (pixels[:, None, :] + np.column_stack([ox.ravel(), oy.ravel()])[None]).reshape(-1, 2)
-        radiance = self._shade(self._cast(sub, K, D, pose), pose)
+        radiance = self._shade(self.rays.cast(sub, K, D, pose), pose)
         return radiance.reshape(len(pixels), SUPERSAMPLE * SUPERSAMPLE, 3).mean(axis=1)
 
     def _sensor(self, radiance: np.ndarray, size: tuple[int, int], K: np.ndarray, gamma: float) -> np.ndarray:
@@ -322,37 +260,3 @@ def _lighting(
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
     return vectors / np.maximum(np.sqrt(np.einsum("ij,ij->i", vectors, vectors)), 1e-9)[:, None]
-
-
-def _undistort(pixels: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:
-    """Normalised image coordinates (N x 2, float32) of distorted pixel positions."""
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-    points = np.ascontiguousarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
-    return cv2.undistortPoints(points, K, D, criteria=criteria).reshape(-1, 2).astype(np.float32)
-
-
-@functools.lru_cache(maxsize=4)
-def _pixel_rays(K_bytes: bytes, D_bytes: bytes, size: tuple[int, int]) -> np.ndarray:
-    """Normalised coordinates of every pixel centre of a camera; cached because it is the slow part of a render."""
-    K = np.frombuffer(K_bytes, np.float64).reshape(3, 3)
-    D = np.frombuffer(D_bytes, np.float64).reshape(1, -1)
-    width, height = size
-    xs, ys = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    rays = _undistort(np.column_stack([xs.ravel(), ys.ravel()]), K, D)
-    rays.setflags(write=False)
-    return rays
-
-
-def _tensor(array: np.ndarray, dtype: o3d.core.Dtype) -> o3d.core.Tensor:
-    """A copy of `array` as an Open3D tensor of `dtype` on the CPU (Open3D's stubs want both spelled out)."""
-    return o3d.core.Tensor(array, dtype, _CPU)
-
-
-def _table_mesh() -> o3d.t.geometry.TriangleMesh:
-    half = 2000.0
-    mesh = o3d.t.geometry.TriangleMesh()
-    mesh.vertex.positions = _tensor(
-        np.array([[-half, -half, 0.0], [half, -half, 0.0], [half, half, 0.0], [-half, half, 0.0]]), o3d.core.float32
-    )
-    mesh.triangle.indices = _tensor(np.array([[0, 1, 2], [0, 2, 3]]), o3d.core.int32)
-    return mesh

@@ -144,6 +144,21 @@ class Footprint:
         mask[rows, cols] = outside <= distance_mm
         return Footprint(mask, self.origin, self.cell_mm)
 
+    def closed(self, radius_mm: float) -> Footprint:
+        """The region closed with a disc of `radius_mm`: notches and dents narrower than the disc filled, the
+        rest of the edge unchanged (cells exactly as cv2's closing with that disc of cells marks them)."""
+        # Padded so that the dilation is not cut by the raster's border (the erosion would keep what it cut).
+        pad = int(np.ceil(radius_mm / self.cell_mm)) + 2
+        padded = Footprint(
+            cv2.copyMakeBorder(self.mask, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=0),
+            (self.origin[0] - pad * self.cell_mm, self.origin[1] - pad * self.cell_mm),
+            self.cell_mm,
+        )
+        # Erosion keeps the cells whose disc lies inside: farther than the radius from any unmarked cell
+        # (strictly; the distances are float32 square roots of whole cell counts).
+        closed = padded.dilated(radius_mm).eroded(radius_mm + _STRICT_MM).mask[pad:-pad, pad:-pad]
+        return Footprint(np.ascontiguousarray(closed), self.origin, self.cell_mm)
+
     def _box(self, margin: int) -> tuple[slice, slice]:
         """Rows and columns of the region's bounding box plus `margin` cells, within the raster."""
         x, y, width, height = cv2.boundingRect(self.mask)
@@ -152,6 +167,7 @@ class Footprint:
         return slice(max(y - margin, 0), y + height + margin), slice(max(x - margin, 0), x + width + margin)
 
 
+_STRICT_MM = 1e-3  # far below a cell, far above float32 rounding of the distances
 _SMALL_REACH_CELLS = 4  # up to a 9 x 9 disc a dilation is cheaper than the distance transform
 
 

@@ -32,11 +32,13 @@ from cellctl.vision.checks import (
     GLUE_COVER_RADIUS_MM,
     OUTLINE_OUTSIDE_MM,
     CheckFailure,
+    check_edge_offsets,
     check_edge_profile,
     check_glue_coverage,
     check_glue_path,
     check_outline_depth,
     check_outline_right,
+    edge_offsets,
     hidden_from,
 )
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_closed
@@ -73,6 +75,11 @@ OUTLINE_SMOOTHING_MM = 0.75
 # Without a taught table the edge comes from the colour test, whose noise on black soles biases the extreme
 # projections (the length) outward by 0.3-0.5 mm at 0.75 mm: the 2 mm it was tuned with.
 COLOUR_OUTLINE_SMOOTHING_MM = 2.0
+# Radius of the disc the glue line's edge is closed with: a sole's outline curves inward nowhere tighter
+# (simulated soles: 28 mm at least; a nozzle could not follow a tight notch either), while the measured
+# outline has dents of 1-2 mm depth and 4-8 mm width where edge pixels lost their depth. A disc of radius R
+# leaves R - sqrt(R^2 - w^2 / 4) of a dent w wide: 0.4 mm of a 6 mm dent at 12 mm.
+GLUE_EDGE_CLOSE_MM = 12.0
 GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
@@ -210,7 +217,9 @@ def _glue(
     # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
     # The offset is taken from the outline reported (smoothed against the edge's pixel noise), rasterised
     # again on the footprint's cells: the glue path keeps its distance from that outline.
-    edge = footprint.filled(outline)
+    # A dent in the measured outline narrower than GLUE_EDGE_CLOSE_MM (edge pixels whose depth dropped out)
+    # is no part of a sole's shape: the glue line does not follow it.
+    edge = footprint.filled(outline).closed(GLUE_EDGE_CLOSE_MM)
     inset = edge.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
     if len(inset) < 3:
         return None, FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide"
@@ -270,7 +279,30 @@ def _outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surfac
             reconstruction.raised.origin,
             reconstruction.raised.cell_mm,
         )
-    return check_outline_right(ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level)
+    problem = check_outline_right(
+        ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level
+    )
+    if problem is not None or reconstruction.changed_left is None:
+        return problem
+
+    def left_pixel(table: np.ndarray) -> np.ndarray:
+        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
+        return np.column_stack([f * camera[:, 0] / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy])
+
+    offsets = []
+    for changed, to_pixel, camera_centre in (
+        (reconstruction.changed_left, left_pixel, reconstruction.camera_to_table[:3, 3]),
+        (changed_right, right_pixel, centre[:3]),
+    ):
+        # From the inward side of a (vertical) wall the silhouette is the top edge, at the edge's height. A
+        # camera on the outward side sees the wall, and the change mask ends at its foot on the table, or
+        # at the top edge where the wall is lit so that it hardly differs from the table: either is the edge.
+        top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
+        foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
+        sees_wall = np.sum(outward * (camera_centre[:2] - ring), axis=1) > 0
+        nearer = np.where(np.abs(np.nan_to_num(foot, nan=np.inf)) < np.abs(np.nan_to_num(top, nan=np.inf)), foot, top)
+        offsets.append(np.where(sees_wall, nearer, top))
+    return check_edge_offsets(offsets)
 
 
 HEIGHT_MAP_CELL_MM = 1.0

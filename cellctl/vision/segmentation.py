@@ -30,12 +30,14 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.sole_region import (
+    MAX_IMAGE_NOISE_DN,
     MIN_COLOUR_SEPARATION,
     MIN_SOLE_AREA_MM2,
     change_split,
     colour_split,
     cut_by_border,
     depth_step,
+    image_noise_dn,
     sole_mask,
     unmeasured_fraction,
     why_no_sole,
@@ -90,6 +92,7 @@ class Reconstruction(_SolePoints):
     measured_cells: Footprint | None = None  # cells with any measured point
     taught: TaughtTable | None = None  # the taught table the sole was found against, if any
     changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
+    changed_left: np.ndarray | None = None  # the same for the left image
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
 
     @property
@@ -155,6 +158,14 @@ class Segmentation:
                 f"too few measured points: {self.measured} ({100 * self.fraction:.1f} % of the image, need "
                 f"{100 * MIN_VALID_FRACTION:.0f} %); check lighting, focus, the calibration and the depth range",
             )
+        if self.cloud.rectified is not None:
+            noise = image_noise_dn(self.cloud.rectified[0])
+            if noise > MAX_IMAGE_NOISE_DN:
+                return self._refused(
+                    FailureKind.SURFACE_NOT_MEASURED,
+                    f"the image is too noisy to measure the surface within tolerance: sensor noise {noise:.1f} DN "
+                    f"(at most {MAX_IMAGE_NOISE_DN:g}); check exposure, gain and lighting",
+                )
         start = time.perf_counter()
         if self.plane is None:
             self.plane = find_and_refine_table(self.cloud)
@@ -277,6 +288,7 @@ class Segmentation:
             measured_cells=self.measured_cells,
             taught=self.taught,
             changed_right=self.changed_right,
+            changed_left=self._changed_left,
             **sole,
         )
 

@@ -214,7 +214,7 @@ def test_side_light_casts_the_soles_shadow() -> None:
     beyond = outline + 3.0 * direction
     points = np.column_stack([beyond, np.zeros(len(beyond))])
     normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
-    lit = renderer._unshadowed(points, normals, np.ones(len(points), bool))
+    lit = renderer.rays.unshadowed(points, normals, np.ones(len(points), bool), renderer.lights)
     # The outline is concave at the arch, so only the clearest cases are asserted: the point most facing the
     # light is lit, the one most turned away is not, and the far side is mostly in shadow.
     assert lit[-1][np.argmax(facing)] and not lit[-1][np.argmin(facing)]

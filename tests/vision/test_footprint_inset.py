@@ -8,6 +8,7 @@ import numpy as np
 
 from cellctl.vision.closed_path import smooth_closed
 from cellctl.vision.footprint import Footprint, snap_to_inset
+from cellctl.vision.measurement import GLUE_EDGE_CLOSE_MM
 
 CELL = 0.25
 
@@ -64,3 +65,20 @@ def test_a_polygon_filled_on_the_cells_marks_exactly_the_cells_whose_centres_it_
     assert np.abs(true_inset(polygon, centres)).max(initial=0.0) < 0.02  # only ties on the edge differ
     shifted = Footprint(np.zeros_like(exact.mask), exact.origin, CELL).filled(polygon + np.array([CELL, 0.0]))
     assert np.count_nonzero(shifted.mask != exact.mask) > 100
+
+
+def test_closing_fills_a_narrow_dent_and_keeps_the_rest_of_the_edge_and_a_pointed_tip() -> None:
+    whole = raster(wedge_polygon())
+    dented = Footprint(whole.mask.copy(), whole.origin, whole.cell_mm)
+    # A dent 1.5 mm deep and 6 mm wide in the straight side at y = +30 mm (cells are 0.25 mm).
+    row = int((30.0 - 1.5 - whole.origin[1]) / CELL)
+    col = int((-20.0 - whole.origin[0]) / CELL)
+    dented.mask[row:, col : col + int(6.0 / CELL)] = 0
+    radius = GLUE_EDGE_CLOSE_MM
+    assert np.array_equal(whole.closed(radius).mask, whole.mask)  # convex: the edge and the 35 degree tip stay
+    closed = dented.closed(radius)
+    assert not np.any(closed.mask & ~whole.mask)  # nothing beyond the true edge
+    # A disc of radius R dips R - sqrt(R^2 - 3^2) into a 6 mm wide dent's mouth: only that sliver stays open.
+    sliver = radius - np.sqrt(radius**2 - 9.0)
+    missing_rows = np.nonzero(whole.mask & ~closed.mask)[0]
+    assert missing_rows.size and whole.origin[1] + (missing_rows.min() + 0.5) * CELL > 30.0 - sliver - CELL

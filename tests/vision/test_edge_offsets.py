@@ -1,0 +1,77 @@
+"""The outline against where the camera's change mask ends along its normal (checks.edge_offsets), on a
+synthetic round sole (a cylinder) seen by a pinhole camera with the real rig's pixel size, off to one side."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cellctl.errors import FailureKind
+from cellctl.vision.checks import check_edge_offsets, edge_offsets
+from cellctl.vision.footprint import Footprint
+
+RADIUS = 50.0
+HEIGHT = 20.0
+CAMERA = np.array([120.0, 0.0, 550.0])  # off to +x: it sees the wall at +x, the wall at -x faces away
+FOCAL = 1400.0  # 0.39 mm per pixel on the table, as the simulated rig
+SIZE = 900
+
+
+def project(points: np.ndarray) -> np.ndarray:
+    rel = points - CAMERA
+    return np.column_stack([FOCAL * rel[:, 0] / -rel[:, 2], FOCAL * rel[:, 1] / -rel[:, 2]]) + SIZE / 2
+
+
+@pytest.fixture(scope="module")
+def changed() -> np.ndarray:
+    """Pixels whose ray meets the cylinder (changed against the empty table), and a shadow past its +y side."""
+    v, u = np.mgrid[0:SIZE, 0:SIZE].astype(np.float64)
+    direction = np.column_stack([(u.ravel() - SIZE / 2) / FOCAL, (v.ravel() - SIZE / 2) / FOCAL])
+    hit = np.zeros(u.size, bool)
+    for z in np.linspace(0.0, HEIGHT, 81):
+        xy = CAMERA[:2] + direction * (CAMERA[2] - z)
+        hit |= np.linalg.norm(xy, axis=1) <= RADIUS
+    table_xy = CAMERA[:2] + direction * CAMERA[2]
+    shadow = (table_xy[:, 1] > RADIUS) & (table_xy[:, 1] < RADIUS + 8.0) & (np.abs(table_xy[:, 0]) < 20.0)
+    return (hit | shadow).reshape(SIZE, SIZE)
+
+
+def table_level() -> Footprint:
+    """Where depth shows the table's own height: off the sole (the shadow included)."""
+    cells = np.mgrid[0:800, 0:800]
+    xy = (np.stack([cells[1], cells[0]], -1) + 0.5) * 0.25 - 100.0
+    return Footprint((np.linalg.norm(xy, axis=-1) > RADIUS + 0.5).astype(np.uint8), (-100.0, -100.0), 0.25)
+
+
+def offsets(outline_radius: np.ndarray, changed: np.ndarray) -> np.ndarray:
+    """Edge offsets along an outline at `outline_radius` (per point, 1 mm apart on the true circle)."""
+    angle = np.linspace(0.0, 2 * np.pi, int(2 * np.pi * RADIUS), endpoint=False)
+    outward = np.column_stack([np.cos(angle), np.sin(angle)])
+    outline = outline_radius[:, None] * outward
+    sees_wall = np.sum(outward * (CAMERA[:2] - outline), axis=1) > 0
+    level = np.where(sees_wall, 0.0, HEIGHT)  # the wall's foot where it is seen, else the top edge
+    return edge_offsets(outline, outward, level, changed, project, table_level())
+
+
+def test_the_true_outline_lies_on_the_edge_seen_also_past_a_shadow(changed: np.ndarray) -> None:
+    found = offsets(np.full(314, RADIUS), changed)
+    assert np.mean(np.isfinite(found)) > 0.8  # the outline past the shadow shows no table: unknown
+    assert np.nanmax(np.abs(found)) <= 0.5  # a pixel (0.39 mm) and the search's step
+    assert check_edge_offsets([found]) is None
+
+
+@pytest.mark.parametrize("dent", [-1.5, 1.5])
+def test_a_local_dent_or_bulge_of_the_outline_is_refused(changed: np.ndarray, dent: float) -> None:
+    radius = np.full(314, RADIUS)
+    radius[100:110] -= dent  # 10 mm of outline 1.5 mm inside (or outside) the edge: the glue line follows it
+    found = offsets(radius, changed)
+    assert np.nanmedian(found[102:108]) == pytest.approx(dent, abs=0.4)
+    problem = check_edge_offsets([found])
+    assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
+    assert ("beyond" if dent > 0 else "inside") in problem.reason
+
+
+def test_an_outline_with_no_edge_near_it_is_refused(changed: np.ndarray) -> None:
+    found = offsets(np.full(314, RADIUS - 10.0), changed)  # the edge is beyond the search everywhere
+    problem = check_edge_offsets([found])
+    assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
