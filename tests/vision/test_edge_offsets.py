@@ -1,4 +1,4 @@
-"""The outline against where the camera's change mask ends along its normal (checks.edge_offsets), on a
+"""The outline against where the camera's change mask ends along its normal (edge_checks.edge_offsets), on a
 synthetic round sole (a cylinder) seen by a pinhole camera with the real rig's pixel size, off to one side."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cellctl.errors import FailureKind
-from cellctl.vision.checks import check_edge_offsets, edge_offsets
+from cellctl.vision.edge_checks import check_edge_offsets, edge_offsets
 from cellctl.vision.footprint import Footprint
 
 RADIUS = 50.0

@@ -8,7 +8,8 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.vision.checks import check_edge_profile, check_outline_right
+from cellctl.vision.checks import check_outline_right
+from cellctl.vision.edge_checks import check_edge_profile
 from cellctl.vision.footprint import Footprint
 
 RADIUS = 50.0

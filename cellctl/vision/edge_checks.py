@@ -1,0 +1,154 @@
+"""Self-checks of the sole's edge itself (docs/measurements.md, Validity): the measured surface across the
+outline (a rounded top edge falls away before it) and where each camera's change mask ends along the
+outline's normal (a dent or bulge of 1-2 mm that the depth-step and right-image tests of
+cellctl.vision.checks pass). Each returns None or a `CheckFailure`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+
+from cellctl.errors import FailureKind
+from cellctl.vision.checks import MIN_TESTABLE, CheckFailure
+from cellctl.vision.footprint import Footprint
+
+# The surface across the edge: sampled EDGE_OUTER_MM inside the outline and fitted as a line over
+# EDGE_INNER_MM. Next to a sharp top edge the surface runs on as it does further in (the median departure round
+# a sole with a sharp edge: 0.0-0.2 mm, the height noise); a top edge rounded with a few mm of radius falls
+# away before the outline (0.7-0.9 mm where depth ends), and there the edge lies further out than the depth
+# reaches while the glue path sits on the curve (heights and normals from a flat-top fit are wrong).
+EDGE_OUTER_MM = 0.75
+EDGE_INNER_MM = (3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+# Medians on matrix soles (taught): sharp edges -0.06..+0.15 mm (18 soles, black ones the noisiest); rounded
+# 0.38 (a 3-5 mm fillet on a grey table, whose dark curve the change mask also left out) to 0.9 mm.
+EDGE_MAX_DROP_MM = 0.25
+# The outline against where each camera's change mask ends along the outline's normal. The depth-step and
+# right-image tests (cellctl.vision.checks) look 1.5-7 mm either side of the outline: a local error of 1-2 mm (an edge whose
+# depth dropped out, a dent, a bulge) passes them and puts the glue line 1-2 mm off its offset. Here the
+# edge is located in each image's change mask (half-contrast threshold: a pixel half on the sole) along
+# the normal, EDGE_SEARCH_MM either side, at the height where that camera's silhouette lies: the table
+# (z = 0) where the camera sees the wall's foot, the top edge's height where the sole hides it. The
+# offsets of both cameras, a median over EDGE_OFFSET_WINDOW_MM of outline, must stay within
+# MAX_EDGE_OFFSET_MM (the glue tolerance is 1 mm; a sharp edge's offsets scatter by ~0.2 mm).
+EDGE_SEARCH_MM = 4.0
+EDGE_SEARCH_STEP_MM = 0.25
+EDGE_PROFILE_MIN_KNOWN = 0.7  # of a profile's samples in the image and not excused (table-level shadow)
+EDGE_PROFILE_MAX_MISFIT = 0.2  # of the known samples on the wrong side of the best step: no clear edge
+EDGE_OFFSET_WINDOW_MM = 5
+MAX_EDGE_OFFSET_MM = 0.8
+
+
+def check_edge_profile(
+    outline: np.ndarray, outward: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> CheckFailure | None:
+    """The surface across the edge: does the top run on flat to the outline, or fall away before it?
+
+    `surface_height(xy N x 2) -> N` is the measured height (NaN where none). Per outline point the height
+    EDGE_OUTER_MM inside is compared with the line through the heights further in; the median over the
+    outline (a rounded edge runs round the sole, a single bad patch does not move the median) must not fall
+    more than EDGE_MAX_DROP_MM below it.
+    """
+    inner = np.array(EDGE_INNER_MM)
+    heights = np.column_stack([surface_height(outline - d * outward) for d in inner])
+    outer = surface_height(outline - EDGE_OUTER_MM * outward)
+    weight = np.isfinite(heights).astype(np.float64)
+    z = np.nan_to_num(heights)
+    # Per-row least-squares line z = a + b d over the finite samples (sums of products).
+    s0, s1, s2 = weight.sum(1), (weight * inner).sum(1), (weight * inner**2).sum(1)
+    t0, t1 = (weight * z).sum(1), (weight * z * inner).sum(1)
+    det = s0 * s2 - s1 * s1
+    usable = (s0 >= 4) & np.isfinite(outer) & (np.abs(det) > 1e-9)
+    if np.count_nonzero(usable) < MIN_TESTABLE * len(outline):
+        return None  # too little surface measured near the edge: the other checks and the glue path speak
+    b = (s0 * t1 - s1 * t0)[usable] / det[usable]
+    a = (t0[usable] - b * s1[usable]) / s0[usable]
+    drop = float(np.median(a + b * EDGE_OUTER_MM - outer[usable]))
+    if drop > EDGE_MAX_DROP_MM:
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the sole's top falls {drop:.1f} mm (median round the outline) over the last few mm before its "
+            "outline: its top edge is rounded or bevelled, so the edge lies beyond where its depth was measured "
+            "and the glue path near it is on a curve, not a flat top",
+        )
+    return None
+
+
+def edge_offsets(
+    outline: np.ndarray,
+    outward: np.ndarray,
+    level: np.ndarray,
+    changed: np.ndarray,
+    table_to_pixel: Callable[[np.ndarray], np.ndarray],
+    table_level: Footprint | None = None,
+) -> np.ndarray:
+    """Per outline point: where the camera's changed region ends along the outward normal, in mm from the
+    outline (+: beyond it), NaN where the profile shows no clear single edge.
+
+    The profile runs EDGE_SEARCH_MM either side at height `level` (per point); `table_to_pixel(points N x 3)
+    -> N x 2` projects into the camera's rectified image whose change mask is `changed`. Samples outside the
+    image, and changed outside samples on `table_level` cells (a shadow on the measured table), are unknown. The
+    edge is the step (changed, then unchanged) with the fewest samples on the wrong side.
+    """
+    steps = np.arange(-EDGE_SEARCH_MM, EDGE_SEARCH_MM + 1e-9, EDGE_SEARCH_STEP_MM)
+    n, k = len(outline), len(steps)
+    xy = outline[:, None, :] + steps[None, :, None] * outward[:, None, :]
+    points = np.concatenate([xy.reshape(-1, 2), np.repeat(level, k)[:, None]], axis=1)
+    px = np.round(table_to_pixel(points)).astype(np.int64)
+    height, width = changed.shape
+    ok = (px[:, 0] >= 0) & (px[:, 0] < width) & (px[:, 1] >= 0) & (px[:, 1] < height)
+    flat = np.zeros(len(points), bool)
+    flat[ok] = changed[px[ok, 1], px[ok, 0]]
+    known = ok.reshape(n, k)
+    value = flat.reshape(n, k)
+    if table_level is not None:  # a changed pixel on the measured table outside: a shadow, no evidence
+        known &= ~(value & table_level.contains(xy.reshape(-1, 2)).reshape(n, k) & (steps > 0)[None, :])
+    on = value & known
+    off = ~value & known
+    # Misfit of a step between samples j-1 and j: unchanged before it plus changed from it on.
+    before = np.concatenate([np.zeros((n, 1)), np.cumsum(off, axis=1)], axis=1)
+    after = np.concatenate([np.cumsum(on[:, ::-1], axis=1)[:, ::-1], np.zeros((n, 1))], axis=1)
+    misfit = before + after
+    best = np.argmin(misfit, axis=1)
+    count = known.sum(axis=1)
+    offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
+    clear = (count >= EDGE_PROFILE_MIN_KNOWN * k) & (
+        misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1)
+    )
+    # A step at either end of the search is no edge found within it.
+    clear &= (best > 0) & (best < k)
+    return np.where(clear, offset, np.nan)
+
+
+def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
+    """The outline (points 1 mm apart, closed) against the edges the cameras' change masks show there.
+
+    `offsets`: per camera, `edge_offsets` along the outline. Their mean per point, a running median over
+    EDGE_OFFSET_WINDOW_MM, must stay within MAX_EDGE_OFFSET_MM of the outline everywhere it is known.
+    """
+    stacked = np.vstack(offsets)
+    known = np.isfinite(stacked)
+    mean = np.where(known.any(axis=0), np.nansum(stacked, axis=0) / np.maximum(known.sum(axis=0), 1), np.nan)
+    if np.count_nonzero(np.isfinite(mean)) < MIN_TESTABLE * len(mean):
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the sole's edge is not clear in the images: only {np.count_nonzero(np.isfinite(mean))} of "
+            f"{len(mean)} outline points show one within {EDGE_SEARCH_MM:g} mm",
+        )
+    half = EDGE_OFFSET_WINDOW_MM // 2
+    window = np.stack([np.roll(mean, s) for s in range(-half, half + 1)])
+    enough = np.isfinite(window).sum(axis=0) > half
+    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
+        warnings.simplefilter("ignore", RuntimeWarning)
+        local = np.where(enough, np.nanmedian(window, axis=0), 0.0)
+    worst = int(np.argmax(np.abs(local)))
+    if abs(local[worst]) > MAX_EDGE_OFFSET_MM:
+        where = "beyond" if local[worst] > 0 else "inside"
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the sole's edge in the images lies {abs(local[worst]):.1f} mm {where} the outline at outline point "
+            f"{worst} (limit {MAX_EDGE_OFFSET_MM:g} mm): the outline there is not the sole's edge",
+        )
+    return None
