@@ -126,8 +126,9 @@ class ReconstructionRefused(_SolePoints):
 ReconstructionResult = Reconstruction | ReconstructionRefused
 
 
-class Segmentation:
-    """One run of the segmentation; a class only to keep the steps short and their shared state named."""
+class _RunState:
+    """What one run of the segmentation has learnt so far (table, transform, filters, the depth step and the
+    change masks), and the result types built from it: the state the steps of `Segmentation` share."""
 
     def __init__(
         self,
@@ -150,6 +151,50 @@ class Segmentation:
         self.measured_cells: Footprint | None = None  # cells with any measured point
         self.changed_right: np.ndarray | None = None
         self._changed_left: np.ndarray | None = None
+
+    def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
+        """A refusal with what this run found about the table and the cloud, plus the sole's points if any."""
+        return ReconstructionRefused(
+            failure=failure,
+            reason=reason,
+            measured_points=self.measured,
+            measured_fraction=self.fraction,
+            table_plane=self.plane,
+            camera_to_table=self.transform,
+            colour_filter=self.colour_filter,
+            colour_separation=self.separation,
+            timings=self.timings,
+            **sole,
+        )
+
+    def _result(self, failure: FailureKind | None, reason: str | None, **sole: Any) -> ReconstructionResult:
+        """The sole found (or refused with `failure`), with what this run found about the table and the cloud."""
+        if failure is not None or reason is not None:
+            refused = ("sole_points", "sole_colors", "footprint")
+            return self._refused(
+                failure or FailureKind.NO_SOLE, reason or "no sole", **{k: sole[k] for k in refused if k in sole}
+            )
+        assert self.plane is not None and self.transform is not None  # a sole is only found on a table
+        return Reconstruction(
+            camera_to_table=self.transform,
+            table_plane=self.plane,
+            colour_filter=self.colour_filter,
+            colour_separation=self.separation,
+            measured_points=self.measured,
+            measured_fraction=self.fraction,
+            timings=self.timings,
+            calibration=self.cloud.calibration,
+            raised=self.raised,
+            measured_cells=self.measured_cells,
+            taught=self.taught,
+            changed_right=self.changed_right,
+            changed_left=self._changed_left,
+            **sole,
+        )
+
+
+class Segmentation(_RunState):
+    """One run of the segmentation; a class only to keep the steps short and their shared state named."""
 
     def run(self) -> ReconstructionResult:
         if self.fraction < MIN_VALID_FRACTION:
@@ -251,46 +296,6 @@ class Segmentation:
 
     def _no_sole(self, points: np.ndarray, reason: str) -> ReconstructionRefused:
         return self._refused(*why_no_sole(self.cloud, self.taught, self.plane, points, reason))
-
-    def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
-        """A refusal with what this run found about the table and the cloud, plus the sole's points if any."""
-        return ReconstructionRefused(
-            failure=failure,
-            reason=reason,
-            measured_points=self.measured,
-            measured_fraction=self.fraction,
-            table_plane=self.plane,
-            camera_to_table=self.transform,
-            colour_filter=self.colour_filter,
-            colour_separation=self.separation,
-            timings=self.timings,
-            **sole,
-        )
-
-    def _result(self, failure: FailureKind | None, reason: str | None, **sole: Any) -> ReconstructionResult:
-        """The sole found (or refused with `failure`), with what this run found about the table and the cloud."""
-        if failure is not None or reason is not None:
-            refused = ("sole_points", "sole_colors", "footprint")
-            return self._refused(
-                failure or FailureKind.NO_SOLE, reason or "no sole", **{k: sole[k] for k in refused if k in sole}
-            )
-        assert self.plane is not None and self.transform is not None  # a sole is only found on a table
-        return Reconstruction(
-            camera_to_table=self.transform,
-            table_plane=self.plane,
-            colour_filter=self.colour_filter,
-            colour_separation=self.separation,
-            measured_points=self.measured,
-            measured_fraction=self.fraction,
-            timings=self.timings,
-            calibration=self.cloud.calibration,
-            raised=self.raised,
-            measured_cells=self.measured_cells,
-            taught=self.taught,
-            changed_right=self.changed_right,
-            changed_left=self._changed_left,
-            **sole,
-        )
 
 
 def _footprint(raster: Footprint, every: np.ndarray, sole: np.ndarray, open_mm: float = FOOTPRINT_OPEN_MM) -> Footprint:
