@@ -38,6 +38,7 @@ from cellctl.vision.defaults import (
 )
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.glue_path import glue_path
+from cellctl.vision.image_edge import onto_image_edge
 from cellctl.vision.outline_checks import outline_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
@@ -96,7 +97,8 @@ def measure_sole(
     start = time.perf_counter()
     footprint = reconstruction.footprint
     smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
-    outline = smooth_closed(footprint.outline(), smoothing)
+    surface = SoleSurface(reconstruction)  # one per reconstruction: its neighbour grid serves every query below
+    outline = onto_image_edge(reconstruction, smooth_closed(footprint.outline(), smoothing), surface)
     centroid, axis = _principal_axis(outline)
     proj = (outline - centroid) @ axis
     lo, hi = float(proj.min()), float(proj.max())
@@ -112,7 +114,6 @@ def measure_sole(
             f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
             **base,
         )
-    surface = SoleSurface(reconstruction)  # one per reconstruction: its neighbour grid serves every query below
     # The glue path needs only the footprint, the outline and the surface: it is built on a second thread while
     # this one checks the outline and takes the heights (numpy, OpenCV and the C kernels release the GIL).
     # The refusals keep their order: the glue path's come after the outline's and the heights'.

@@ -1,0 +1,123 @@
+"""The sole's edge placed from the images: the depth-based outline moved onto the edge both cameras'
+silhouettes (change masks against the taught table) show, each projected at the height where that camera's
+silhouette lies (docs/measurements.md, Outline). Off by default (PLACE_EDGE_FROM_IMAGES): see
+docs/sole-benchmark.md for what it measured and why it is not on.
+
+A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
+the edge lies where the silhouette's ray meets the top edge's measured height, and a vertical wall's top edge is
+the sole's edge. Where a camera sees the wall, its silhouette is the foot or, for a wall lit like the table, the
+top edge, which one camera cannot tell apart: such points are not placed from it. The outline is moved only
+outward, where both cameras give an edge, agree, and the move is larger than the edge's own scatter in the
+images; elsewhere it stays where the depth put it, and the self-checks judge the result.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+
+from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
+from cellctl.vision.edge_checks import EDGE_OFFSET_WINDOW_MM, edge_offsets
+from cellctl.vision.footprint import Footprint
+from cellctl.vision.reconstruction import Reconstruction
+from cellctl.vision.surface import SoleSurface
+
+PLACE_EDGE_FROM_IMAGES = False
+EDGE_MOVE_MIN_MM = 0.5  # a sharp edge's offsets scatter by ~0.2 mm in the images: smaller is no evidence
+EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a texture line fools one mask)
+EDGE_MOVE_SMOOTHING_MM = 1.5
+
+
+def camera_views(
+    reconstruction: Reconstruction,
+) -> list[tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], np.ndarray]] | None:
+    """Per camera (left, right): its change mask, table -> rectified pixel, centre in the table frame."""
+    calib, left, right = reconstruction.calibration, reconstruction.changed_left, reconstruction.changed_right
+    if calib is None or left is None or right is None:
+        return None
+    to_camera = np.linalg.inv(reconstruction.camera_to_table)
+    f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
+
+    def pixel(shift: float) -> Callable[[np.ndarray], np.ndarray]:
+        def project(table: np.ndarray) -> np.ndarray:
+            camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
+            return np.column_stack(
+                [f * (camera[:, 0] - shift) / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy]
+            )
+
+        return project
+
+    right_centre = (reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0]))[:3]
+    return [
+        (left, pixel(0.0), reconstruction.camera_to_table[:3, 3]),
+        (right, pixel(baseline), right_centre),
+    ]
+
+
+def silhouette_offsets(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    edge_height: np.ndarray,
+    changed: np.ndarray,
+    to_pixel: Callable[[np.ndarray], np.ndarray],
+    centre: np.ndarray,
+    table_level: Footprint | None = None,
+) -> np.ndarray:
+    """Where one camera's silhouette puts the top edge, in mm along the outward normal from each outline point
+    where the sole hides its wall from the camera (NaN where the camera sees the wall).
+
+    A silhouette gives a ray, not a point: the edge lies where the ray meets the height of whatever part of the
+    sole makes the silhouette. Where the sole hides the wall, that is the top edge, at its measured height. Where
+    the camera sees the wall it is the wall's foot on the table, or the top edge again if the wall is lit like
+    the table; the two are the same ray at two heights, so one camera cannot tell them apart (the edge-offset
+    check takes the one nearer the outline: right for a check, it cannot place an outline).
+    """
+    sees_wall = np.sum(outward * (centre[:2] - ring), axis=1) > 0
+    top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
+    return np.where(sees_wall, np.nan, top)
+
+
+def _local(offsets: np.ndarray) -> np.ndarray:
+    """Running median over EDGE_OFFSET_WINDOW_MM of outline (points 1 mm apart); NaN without enough."""
+    half = EDGE_OFFSET_WINDOW_MM // 2
+    window = np.stack([np.roll(offsets, s) for s in range(-half, half + 1)])
+    enough = np.isfinite(window).sum(axis=0) > half
+    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.where(enough, np.nanmedian(window, axis=0), np.nan)
+
+
+def edge_shift(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """How far to move each outline point out along its normal: both cameras' local edge where they agree
+    within EDGE_MOVE_AGREE_MM and their mean is more than EDGE_MOVE_MIN_MM beyond the outline, else 0;
+    smoothed along the outline. Never inward: the change masks' own errors (a wall lit like the table, the
+    change test's blur at a top edge) put the edge inside the sole in both cameras alike, so their agreement
+    on an inward edge is no evidence (the self-check refuses there instead)."""
+    local_left, local_right = _local(left), _local(right)
+    mean = 0.5 * (local_left + local_right)
+    move = (np.abs(local_left - local_right) <= EDGE_MOVE_AGREE_MM) & (mean > EDGE_MOVE_MIN_MM)
+    return smooth_along(np.where(move, mean, 0.0), EDGE_MOVE_SMOOTHING_MM)
+
+
+def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:
+    """The outline (closed, table mm) moved onto the edge both cameras show (1 mm spacing), or as it was."""
+    views = camera_views(reconstruction)
+    if not PLACE_EDGE_FROM_IMAGES or views is None:
+        return outline
+    ring = resample_closed(outline, 1.0)
+    outward = outward_normals(ring)
+    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
+    if not np.any(np.isfinite(edge_height)):
+        return outline
+    edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
+    table_level = None
+    if reconstruction.raised is not None and reconstruction.measured_cells is not None:
+        raised = reconstruction.raised
+        table_level = Footprint(reconstruction.measured_cells.mask & (1 - raised.mask), raised.origin, raised.cell_mm)
+    left, right = (silhouette_offsets(ring, outward, edge_height, *view, table_level) for view in views)
+    shift = edge_shift(left, right)
+    if not np.any(shift):
+        return outline
+    return ring + shift[:, None] * outward
