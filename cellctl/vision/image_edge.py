@@ -4,11 +4,11 @@ silhouette lies (docs/measurements.md, Outline). Off by default (PLACE_EDGE_FROM
 docs/sole-benchmark.md for what it measured and why it is not on.
 
 A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
-the edge lies where the silhouette's ray meets the top edge's measured height, and a vertical wall's top edge is
-the sole's edge. Where a camera sees the wall, its silhouette is the foot or, for a wall lit like the table, the
-top edge, which one camera cannot tell apart: such points are not placed from it. The outline is moved only
-outward, where both cameras give an edge, agree, and the move is larger than the edge's own scatter in the
-images; elsewhere it stays where the depth put it, and the self-checks judge the result.
+the edge lies where the silhouette's ray meets the top edge's measured height. Where a camera sees the wall,
+its silhouette is the foot or, for a wall lit like the table, the top edge, which one camera cannot tell
+apart: the reading nearer the outline is taken. The outline is moved only outward, where both cameras give
+an edge, agree, and the move is larger than the edge's own scatter in the images; elsewhere it stays where
+the depth put it, and the self-checks judge the result.
 """
 
 from __future__ import annotations
@@ -65,18 +65,20 @@ def silhouette_offsets(
     centre: np.ndarray,
     table_level: Footprint | None = None,
 ) -> np.ndarray:
-    """Where one camera's silhouette puts the top edge, in mm along the outward normal from each outline point
-    where the sole hides its wall from the camera (NaN where the camera sees the wall).
+    """Where one camera's silhouette puts the edge, in mm along the outward normal from each outline point.
 
     A silhouette gives a ray, not a point: the edge lies where the ray meets the height of whatever part of the
-    sole makes the silhouette. Where the sole hides the wall, that is the top edge, at its measured height. Where
-    the camera sees the wall it is the wall's foot on the table, or the top edge again if the wall is lit like
-    the table; the two are the same ray at two heights, so one camera cannot tell them apart (the edge-offset
-    check takes the one nearer the outline: right for a check, it cannot place an outline).
+    sole makes the silhouette. Where the sole hides the wall from the camera, that is the top edge, at its
+    measured height. Where the camera sees the wall it is the wall's foot on the table, or the top edge again if
+    the wall is lit like the table (no change); one camera cannot tell the two apart (the same ray at two
+    heights), so there the reading nearer the outline is taken (the edge-offset check's rule): with outward
+    moves only, the smaller claim.
     """
     sees_wall = np.sum(outward * (centre[:2] - ring), axis=1) > 0
+    foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
     top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
-    return np.where(sees_wall, np.nan, top)
+    nearer = np.where(np.abs(np.nan_to_num(foot, nan=np.inf)) < np.abs(np.nan_to_num(top, nan=np.inf)), foot, top)
+    return np.where(sees_wall, nearer, top)
 
 
 def _local(offsets: np.ndarray) -> np.ndarray:
