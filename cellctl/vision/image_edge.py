@@ -1,6 +1,6 @@
 """The sole's edge placed from the images: the depth-based outline moved onto the edge both cameras'
 silhouettes (change masks against the taught table) show, each projected at the height where that camera's
-silhouette lies (docs/measurements.md, Outline). Off by default (PLACE_EDGE_FROM_IMAGES): see
+silhouette lies (docs/measurements.md, Footprint). Off by default (PLACE_EDGE_FROM_IMAGES): see
 docs/sole-benchmark.md for what it measured and why it is not on.
 
 A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
@@ -9,6 +9,9 @@ its silhouette is the foot or, for a wall lit like the table, the top edge, whic
 apart: the reading nearer the outline is taken. The outline is moved only outward, where both cameras give
 an edge, agree, and the move is larger than the edge's own scatter in the images; elsewhere it stays where
 the depth put it, and the self-checks judge the result.
+
+The camera projections, the table-level cells and the per-camera reading (`silhouette_offsets`) are also what
+the edge-offset check of cellctl.vision.outline_checks reads the images with.
 """
 
 from __future__ import annotations
@@ -30,13 +33,15 @@ EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a 
 EDGE_MOVE_SMOOTHING_MM = 1.5
 
 
-def camera_views(
+def projections(
     reconstruction: Reconstruction,
-) -> list[tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], np.ndarray]] | None:
-    """Per camera (left, right): its change mask, table -> rectified pixel, centre in the table frame."""
-    calib, left, right = reconstruction.calibration, reconstruction.changed_left, reconstruction.changed_right
-    if calib is None or left is None or right is None:
-        return None
+) -> tuple[
+    tuple[Callable[[np.ndarray], np.ndarray], np.ndarray], tuple[Callable[[np.ndarray], np.ndarray], np.ndarray]
+]:
+    """Per camera (left, right): table points (N x 3) -> rectified pixels (N x 2), and its centre in the table
+    frame. The reconstruction must come from a stereo cloud (a calibration)."""
+    calib = reconstruction.calibration
+    assert calib is not None
     to_camera = np.linalg.inv(reconstruction.camera_to_table)
     f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
 
@@ -50,10 +55,21 @@ def camera_views(
         return project
 
     right_centre = (reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0]))[:3]
-    return [
-        (left, pixel(0.0), reconstruction.camera_to_table[:3, 3]),
-        (right, pixel(baseline), right_centre),
-    ]
+    return (pixel(0.0), reconstruction.camera_to_table[:3, 3]), (pixel(baseline), right_centre)
+
+
+def table_level(reconstruction: Reconstruction) -> Footprint | None:
+    """Cells whose measured points lie at the table's height (measured, not raised), if the depth step is known."""
+    raised, measured = reconstruction.raised, reconstruction.measured_cells
+    if raised is None or measured is None:
+        return None
+    return Footprint(measured.mask & (1 - raised.mask), raised.origin, raised.cell_mm)
+
+
+def edge_heights(surface: SoleSurface, ring: np.ndarray, outward: np.ndarray) -> np.ndarray:
+    """The sole's height near each outline point (3 mm inside; the median of the others where none)."""
+    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
+    return np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
 
 
 def silhouette_offsets(
@@ -105,20 +121,21 @@ def edge_shift(left: np.ndarray, right: np.ndarray) -> np.ndarray:
 
 def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:
     """The outline (closed, table mm) moved onto the edge both cameras show (1 mm spacing), or as it was."""
-    views = camera_views(reconstruction)
-    if not PLACE_EDGE_FROM_IMAGES or views is None:
+    changed_left, changed_right = reconstruction.changed_left, reconstruction.changed_right
+    if not PLACE_EDGE_FROM_IMAGES or changed_left is None or changed_right is None:
+        return outline
+    if reconstruction.calibration is None:
         return outline
     ring = resample_closed(outline, 1.0)
     outward = outward_normals(ring)
-    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
-    if not np.any(np.isfinite(edge_height)):
+    if not np.any(np.isfinite(surface.coarse_heights(ring - 3.0 * outward, 3.0))):
         return outline
-    edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
-    table_level = None
-    if reconstruction.raised is not None and reconstruction.measured_cells is not None:
-        raised = reconstruction.raised
-        table_level = Footprint(reconstruction.measured_cells.mask & (1 - raised.mask), raised.origin, raised.cell_mm)
-    left, right = (silhouette_offsets(ring, outward, edge_height, *view, table_level) for view in views)
+    edge_height = edge_heights(surface, ring, outward)
+    level = table_level(reconstruction)
+    left, right = (
+        silhouette_offsets(ring, outward, edge_height, changed, to_pixel, centre, level)
+        for changed, (to_pixel, centre) in zip((changed_left, changed_right), projections(reconstruction), strict=True)
+    )
     shift = edge_shift(left, right)
     if not np.any(shift):
         return outline

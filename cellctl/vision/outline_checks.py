@@ -19,8 +19,9 @@ from cellctl.vision.checks import (
     hidden_from,
 )
 from cellctl.vision.closed_path import outward_normals, resample_closed
-from cellctl.vision.edge_checks import check_edge_offsets, check_edge_profile, edge_offsets
+from cellctl.vision.edge_checks import check_edge_offsets, check_edge_profile
 from cellctl.vision.footprint import Footprint
+from cellctl.vision.image_edge import edge_heights, projections, silhouette_offsets, table_level
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import SoleSurface
 
@@ -43,51 +44,25 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
     problem = check_edge_profile(ring, outward, heights)
     if problem is not None:
         return problem
-    changed_right, calib = reconstruction.changed_right, reconstruction.calibration
-    if changed_right is None or calib is None:
+    changed_right = reconstruction.changed_right
+    if changed_right is None or reconstruction.calibration is None:
         return None
-    to_camera = np.linalg.inv(reconstruction.camera_to_table)
-    f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
-
-    def right_pixel(table: np.ndarray) -> np.ndarray:
-        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
-        return np.column_stack(
-            [f * (camera[:, 0] - baseline) / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy]
-        )
-
-    centre = reconstruction.camera_to_table @ np.array([baseline, 0.0, 0.0, 1.0])
-    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
-    edge_height = np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
-    table_level = None
-    if reconstruction.raised is not None and reconstruction.measured_cells is not None:
-        table_level = Footprint(
-            reconstruction.measured_cells.mask & (1 - reconstruction.raised.mask),
-            reconstruction.raised.origin,
-            reconstruction.raised.cell_mm,
-        )
-    problem = check_outline_right(
-        ring, outward, edge_height, changed_right, right_pixel, centre[:3], heights, table_level
-    )
+    (left_pixel, left_centre), (right_pixel, right_centre) = projections(reconstruction)
+    edge_height = edge_heights(surface, ring, outward)
+    level = table_level(reconstruction)
+    problem = check_outline_right(ring, outward, edge_height, changed_right, right_pixel, right_centre, heights, level)
     if problem is not None or reconstruction.changed_left is None:
         return problem
-
-    def left_pixel(table: np.ndarray) -> np.ndarray:
-        camera = table @ to_camera[:3, :3].T + to_camera[:3, 3]
-        return np.column_stack([f * camera[:, 0] / camera[:, 2] + cx, f * camera[:, 1] / camera[:, 2] + cy])
-
-    offsets = []
-    for changed, to_pixel, camera_centre in (
-        (reconstruction.changed_left, left_pixel, reconstruction.camera_to_table[:3, 3]),
-        (changed_right, right_pixel, centre[:3]),
-    ):
-        # From the inward side of a (vertical) wall the silhouette is the top edge, at the edge's height. A
-        # camera on the outward side sees the wall, and the change mask ends at its foot on the table, or
-        # at the top edge where the wall is lit so that it hardly differs from the table: either is the edge.
-        top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
-        foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
-        sees_wall = np.sum(outward * (camera_centre[:2] - ring), axis=1) > 0
-        nearer = np.where(np.abs(np.nan_to_num(foot, nan=np.inf)) < np.abs(np.nan_to_num(top, nan=np.inf)), foot, top)
-        offsets.append(np.where(sees_wall, nearer, top))
+    # Per camera, its silhouette's edge at the height where it lies (cellctl.vision.image_edge): the top edge
+    # from the inward side of a wall; from the outward side the foot on the table or the top edge where the
+    # wall is lit so that it hardly differs from the table, the nearer.
+    offsets = [
+        silhouette_offsets(ring, outward, edge_height, changed, to_pixel, centre, level)
+        for changed, to_pixel, centre in (
+            (reconstruction.changed_left, left_pixel, left_centre),
+            (changed_right, right_pixel, right_centre),
+        )
+    ]
     return check_edge_offsets(offsets)
 
 
