@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.stereo.kernels import PointGrid
+from cellctl.stereo.pointgrid import PointGrid
 from cellctl.vision.checks import (
     GLUE_COVER_RADIUS_MM,
     OUTLINE_OUTSIDE_MM,
