@@ -22,6 +22,7 @@ import numpy as np
 
 from cellctl.eval.methods import opencv_sgbm
 from cellctl.sim.scene import SoleScene
+from cellctl.vision.blas import one_blas_thread
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.measurement import MeasurementResult, SoleMeasurement, measure_sole
@@ -128,6 +129,7 @@ def bench_cycles(
     """
     if cycles < 1:
         raise ValueError(f"cycles must be at least 1, got {cycles}")
+    one_blas_thread()  # as the service does (cellctl.service.measuring)
     scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
     pairs = [scene.render() for scene in scenes]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]

@@ -22,6 +22,7 @@ from cellctl.service.codes import CycleFailed
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
 from cellctl.service.recipes import Recipe
+from cellctl.vision.blas import one_blas_thread
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.teach import TaughtTable, TeachError, load_taught
@@ -36,6 +37,9 @@ class CellMeasurer:
 
     def __init__(self, config: CellConfig) -> None:
         self.config = config
+        # numpy's BLAS on one thread: its thread team made single products of a cycle take up to 30 x their
+        # time when a core was busy (cellctl.vision.blas); the same numbers on one thread.
+        one_blas_thread()
         self.calib, self.calibration_problem = load_calibration(config)
         self.reconstructor = (
             None
