@@ -125,18 +125,24 @@ def image_noise_dn(grey: np.ndarray) -> float:
     texture lines of a scene do not count). The kernel spans every 2nd row (rectification's interpolation
     correlates neighbouring rows and hides part of the noise from adjacent ones) and is evaluated at every
     2nd of its rows and columns (an eighth of the pixels: a few ms)."""
-    g = np.asarray(grey, np.float32)[::2]
+    g = np.asarray(np.asarray(grey)[::2], np.float32)
     height, width = g.shape
 
     def at(dy: int, dx: int) -> np.ndarray:
         return g[1 + dy : height - 1 + dy : 2, 1 + dx : width - 1 + dx : 2]
 
-    response = (
-        4.0 * at(0, 0)
-        - 2.0 * (at(-1, 0) + at(1, 0) + at(0, -1) + at(0, 1))
-        + (at(-1, -1) + at(-1, 1) + at(1, -1) + at(1, 1))
-    )
-    return float(np.median(np.abs(response))) / 0.6745 / 6.0
+    # 4 a - 2 (b + c + d + e) + (f + g + h + i), the same float32 operations in the same order, in place.
+    cross = np.add(at(-1, 0), at(1, 0))
+    cross += at(0, -1)
+    cross += at(0, 1)
+    cross *= 2.0
+    response = np.multiply(at(0, 0), 4.0)
+    response -= cross
+    corners = np.add(at(-1, -1), at(-1, 1), out=cross)
+    corners += at(1, -1)
+    corners += at(1, 1)
+    response += corners
+    return float(np.median(np.abs(response, out=response))) / 0.6745 / 6.0
 
 
 def why_no_sole(
