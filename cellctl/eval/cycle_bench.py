@@ -12,6 +12,7 @@ table and warmed up as the daemon does before READY); `HH4Reference` is the Open
 
 from __future__ import annotations
 
+import gc
 import statistics
 import time
 from collections.abc import Callable
@@ -144,6 +145,8 @@ def bench_cycles(
 
     for which in range(len(pairs)):
         cycle(which)  # the warm-up
+    gc.collect()  # as the service does after its warm-up (cellctl.service.measuring.settle_garbage_collector)
+    gc.freeze()
     reference = HH4Reference(calib, pairs[0].left, pairs[0].right, disparities)
     bench = CycleBench(calib.image_size, disparities)
     for index in range(cycles):
