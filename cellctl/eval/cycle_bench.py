@@ -12,6 +12,7 @@ table and warmed up as the daemon does before READY); `HH4Reference` is the Open
 
 from __future__ import annotations
 
+import gc
 import statistics
 import time
 from collections.abc import Callable
@@ -22,6 +23,7 @@ import numpy as np
 
 from cellctl.eval.methods import opencv_sgbm
 from cellctl.sim.scene import SoleScene
+from cellctl.vision.blas import one_blas_thread
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.measurement import MeasurementResult, SoleMeasurement, measure_sole
@@ -128,6 +130,7 @@ def bench_cycles(
     """
     if cycles < 1:
         raise ValueError(f"cycles must be at least 1, got {cycles}")
+    one_blas_thread()  # as the service does (cellctl.service.measuring)
     scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
     pairs = [scene.render() for scene in scenes]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]
@@ -142,6 +145,8 @@ def bench_cycles(
 
     for which in range(len(pairs)):
         cycle(which)  # the warm-up
+    gc.collect()  # as the service does after its warm-up (cellctl.service.measuring.settle_garbage_collector)
+    gc.freeze()
     reference = HH4Reference(calib, pairs[0].left, pairs[0].right, disparities)
     bench = CycleBench(calib.image_size, disparities)
     for index in range(cycles):

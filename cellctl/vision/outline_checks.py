@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from cellctl.stereo.kernels import PointGrid
+from cellctl.stereo.pointgrid import PointGrid
 from cellctl.vision.checks import (
     OUTLINE_OUTSIDE_MM,
     CheckFailure,

@@ -125,18 +125,24 @@ def image_noise_dn(grey: np.ndarray) -> float:
     texture lines of a scene do not count). The kernel spans every 2nd row (rectification's interpolation
     correlates neighbouring rows and hides part of the noise from adjacent ones) and is evaluated at every
     2nd of its rows and columns (an eighth of the pixels: a few ms)."""
-    g = np.asarray(grey, np.float32)[::2]
+    g = np.asarray(np.asarray(grey)[::2], np.float32)
     height, width = g.shape
 
     def at(dy: int, dx: int) -> np.ndarray:
         return g[1 + dy : height - 1 + dy : 2, 1 + dx : width - 1 + dx : 2]
 
-    response = (
-        4.0 * at(0, 0)
-        - 2.0 * (at(-1, 0) + at(1, 0) + at(0, -1) + at(0, 1))
-        + (at(-1, -1) + at(-1, 1) + at(1, -1) + at(1, 1))
-    )
-    return float(np.median(np.abs(response))) / 0.6745 / 6.0
+    # 4 a - 2 (b + c + d + e) + (f + g + h + i), the same float32 operations in the same order, in place.
+    cross = np.add(at(-1, 0), at(1, 0))
+    cross += at(0, -1)
+    cross += at(0, 1)
+    cross *= 2.0
+    response = np.multiply(at(0, 0), 4.0)
+    response -= cross
+    corners = np.add(at(-1, -1), at(-1, 1), out=cross)
+    corners += at(1, -1)
+    corners += at(1, 1)
+    response += corners
+    return float(np.median(np.abs(response, out=response))) / 0.6745 / 6.0
 
 
 def why_no_sole(
@@ -216,15 +222,22 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
     if changed_left is None or index.size == 0:
         return 0.0
     width, height = cloud.image_size
-    sole = np.zeros((height, width), np.uint8)
     x, y = np.round(cloud.pixels[index]).astype(int).T
-    sole[y, x] = 1
+    # Only the sole's box and a margin of twice the disc's reach: outside it the whole image's closing is
+    # empty, and inside it the same (a cell within the disc's reach of the box's edge is farther than the
+    # reach from the sole, so unmarked after the dilation, and the erosion keeps it unmarked).
+    margin = UNMEASURED_CLOSE_PX + 1
+    top, left = max(int(y.min()) - margin, 0), max(int(x.min()) - margin, 0)
+    bottom, right = min(int(y.max()) + margin + 1, height), min(int(x.max()) + margin + 1, width)
+    sole = np.zeros((bottom - top, right - left), np.uint8)
+    sole[y - top, x - left] = 1
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (UNMEASURED_CLOSE_PX, UNMEASURED_CLOSE_PX))
     region = cv2.morphologyEx(sole, cv2.MORPH_CLOSE, kernel) > 0
-    measured = np.zeros((height, width), bool)
+    measured = np.zeros(region.shape, bool)
     mx, my = np.round(cloud.pixels).astype(int).T
-    measured[my, mx] = True
-    lost = region & changed_left & ~measured
+    inside = (mx >= left) & (mx < right) & (my >= top) & (my < bottom)
+    measured[my[inside] - top, mx[inside] - left] = True
+    lost = region & changed_left[top:bottom, left:right] & ~measured
     return float(np.count_nonzero(lost)) / max(float(np.count_nonzero(region)), 1.0)
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cellctl.stereo.kernels import PointGrid
+from cellctl.stereo.pointgrid import PointGrid
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
 
@@ -38,7 +38,7 @@ class SoleSurface:
     def __init__(self, reconstruction: Reconstruction) -> None:
         self.rec = reconstruction
         points = reconstruction.sole_points
-        # Neighbours in the table plane, a cell grid searched in C (cellctl.stereo.kernels.PointGrid: the
+        # Neighbours in the table plane, a cell grid searched in C (cellctl.stereo.pointgrid.PointGrid: the
         # neighbours and order a k-d tree's radius search gives, without a Python call per query); built here
         # (~10^5 points, a few ms), so that threads may query it at once.
         self.grid = PointGrid(points[:, :2], GRID_CELL_MM, points[:, 2])

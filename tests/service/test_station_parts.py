@@ -8,6 +8,7 @@ import socket
 import threading
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
@@ -21,6 +22,7 @@ from cellctl.service.imagelog import ImageLog
 from cellctl.service.journal import CycleRecord
 from cellctl.service.metrics import CellMetrics
 from cellctl.service.operator_text import OPERATOR_TEXT, describe_code
+from cellctl.service.png_bands import BAND_ROWS, write_png_in_bands
 from cellctl.service.station.history import HistoryFilter, trend_svg
 from cellctl.service.station.live import LiveView, Preview, measured_region
 from cellctl.service.station.server import WebServer
@@ -222,3 +224,15 @@ def test_image_log_writes_between_cycles_only(tmp_path: Path) -> None:
     log.on_event(CellState(phase="ready"))
     assert waited.wait(5.0)
     writer.join()
+
+
+@pytest.mark.parametrize("shape", [(70, 50), (130, 40, 3), (64, 9, 4), (1, 1)])
+def test_png_in_bands_reads_back_the_same_pixels_and_pauses_before_every_band(tmp_path: Path, shape: tuple) -> None:
+    """The image log's PNG writer: any reader gets the pixels back, and it pauses before each band of rows."""
+    image = np.random.default_rng(len(shape)).integers(0, 256, shape, dtype=np.uint8)
+    pauses: list[int] = []
+    write_png_in_bands(tmp_path / "x.png", image, lambda: pauses.append(1))
+    assert np.array_equal(cv2.imread(str(tmp_path / "x.png"), cv2.IMREAD_UNCHANGED), image)
+    assert len(pauses) == -(-shape[0] // BAND_ROWS)
+    with pytest.raises(ValueError, match="8-bit"):
+        write_png_in_bands(tmp_path / "y.png", image.astype(np.uint16), lambda: None)

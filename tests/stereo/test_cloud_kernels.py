@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from cellctl.stereo.kernels import (
-    PointGrid,
     neighbour_means,
     patch_sample,
     patch_shift,
     patch_step,
     points_in_polygon,
 )
+from cellctl.stereo.pointgrid import PointGrid
 from cellctl.vision import outliers, subpixel
 
 from ..vision.test_outliers import _stereo_cloud
