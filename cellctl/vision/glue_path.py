@@ -80,7 +80,10 @@ def without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) ->
     kept: that is the surface, or a fault the self-check must see (cellctl.vision.checks).
     """
     window = np.stack([np.roll(z, k) for k in (-2, -1, 0, 1, 2)])
-    median = np.nanmedian(window, axis=0)
+    # NaN where a window has no height at all (nanmedian would warn, from a worker thread, into the log)
+    some = np.isfinite(window).any(axis=0)
+    median = np.full(z.shape, np.nan)
+    median[some] = np.nanmedian(window[:, some], axis=0)
     bad = ~(np.abs(z - median) <= limit_mm)  # NaN counts as bad
     lone = bad & ~np.roll(bad, 1) & ~np.roll(bad, -1)
     return np.where(lone, median, z)
