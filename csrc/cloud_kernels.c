@@ -99,6 +99,82 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
     return CK_OK;
 }
 
+/* Keeps the 19 smallest distances seen so far in best[] (ascending): d goes in where it belongs. */
+static inline void keep_nearest(float best[19], float d) {
+    if (!(d < best[18]))
+        return;
+    int k = 18;
+    for (; k > 0 && best[k - 1] > d; --k)
+        best[k] = best[k - 1];
+    best[k] = d;
+}
+
+/* The float32 distance from the point at pixel c to the one at pixel o, infinite where o has none. */
+static inline float grid_distance(const float *grid, int64_t c, int64_t o) {
+    float ox = grid[3 * o] - grid[3 * c], oy = grid[3 * o + 1] - grid[3 * c + 1];
+    float oz = grid[3 * o + 2] - grid[3 * c + 2];
+    float squared = ox * ox + oy * oy + oz * oz;
+    return isnan(squared) ? INFINITY : sqrtf(squared);
+}
+
+int ck_window_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
+                    const double *spacing, const int32_t *halves, int n_halves, float *mean, uint8_t *settled,
+                    int threads) {
+    if (!grid || !at || !spacing || !halves || !mean || !settled)
+        return CK_ERR_NULL;
+    if (height <= 0 || width <= 0 || count < 0 || threads < 0 || n_halves < 1 || n_halves > 16)
+        return CK_ERR_SIZE;
+    for (int k = 0; k < n_halves; ++k)
+        if (halves[k] < 1 || halves[k] > CK_MAX_HALF || (k > 0 && halves[k] <= halves[k - 1]))
+            return CK_ERR_SIZE;
+    const int64_t reach = halves[n_halves - 1];
+    if (2 * reach >= height || 2 * reach >= width)
+        return CK_ERR_SIZE;
+    const int64_t plane = (int64_t)height * width;
+    /* Every read stays inside the grid (the caller keeps points the widest half off its sides). */
+    const int64_t lowest = reach * width + reach;
+    for (int64_t i = 0; i < count; ++i)
+        if (at[i] < lowest || at[i] >= plane - lowest)
+            return CK_ERR_RANGE;
+    /* Few points, each costly and unequal (an isolated one reads every window): small dynamic chunks. */
+#pragma omp parallel for schedule(dynamic, 4) num_threads(thread_count(threads)) if (count >= 64)
+    for (int64_t i = 0; i < count; ++i) {
+        const int64_t c = at[i];
+        float best[19];
+        for (int j = 0; j < 19; ++j)
+            best[j] = INFINITY;
+        int done = 0; /* the ring radius searched so far */
+        settled[i] = 0;
+        for (int k = 0; k < n_halves; ++k) {
+            const int h = halves[k];
+            for (int r = done + 1; r <= h; ++r) {
+                /* the ring at Chebyshev radius r: its top and bottom rows whole, then the two side columns */
+                const int64_t top = c - (int64_t)r * width, bottom = c + (int64_t)r * width;
+                for (int dx = -r; dx <= r; ++dx) {
+                    keep_nearest(best, grid_distance(grid, c, top + dx));
+                    keep_nearest(best, grid_distance(grid, c, bottom + dx));
+                }
+                for (int dy = -r + 1; dy <= r - 1; ++dy) {
+                    const int64_t row = c + (int64_t)dy * width;
+                    keep_nearest(best, grid_distance(grid, c, row - r));
+                    keep_nearest(best, grid_distance(grid, c, row + r));
+                }
+            }
+            done = h;
+            const double beyond = (h + 1) * spacing[i];
+            double total = 0.0;
+            for (int j = 0; j < 19; ++j)
+                total += min_d((double)best[j], beyond);
+            mean[i] = (float)(total / 20.0);
+            if ((double)best[18] <= 0.95 * beyond) {
+                settled[i] = 1;
+                break;
+            }
+        }
+    }
+    return CK_OK;
+}
+
 /* Solves the 3 x 3 system a x = b by elimination with partial pivoting (as LAPACK's dgesv). */
 static void solve3(double a[3][3], double b[3], double x[3]) {
     for (int col = 0; col < 3; ++col) {

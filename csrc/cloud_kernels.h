@@ -35,6 +35,21 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
                        const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact, int threads);
 
 /*
+ * The wider windows of cellctl.vision.outliers (for the points ck_neighbour_means leaves inexact): per point,
+ * for each window half h in halves (increasing, 1..CK_MAX_HALF), the 19 nearest of the (2h + 1)^2 - 1
+ * pixels around it (float32 distances as ck_neighbour_means takes them, NaN = none = infinite), each capped
+ * at (h + 1) spacings (what lies outside the window is at least that far), summed in double over 20 and
+ * stored as float32 in mean; the point is settled (settled[i] 1, no wider window) once its 19 nearest lie
+ * within 0.95 x (h + 1) spacings. An unsettled point keeps the widest window's mean (settled 0: its
+ * neighbours lie anywhere, a k-d tree must decide). Each window is searched as the previous one plus its
+ * ring, keeping the 19 smallest so far. at[i]: flat pixel index of point i, its widest window inside the grid.
+ */
+#define CK_MAX_HALF 255
+int ck_window_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
+                    const double *spacing, const int32_t *halves, int n_halves, float *mean, uint8_t *settled,
+                    int threads);
+
+/*
  * One Gauss-Newton step of affine disparity patches (cellctl.vision.subpixel._gauss_newton_step):
  * pixels stored patch after patch, patch k = [starts[k], starts[k+1]). Per pixel: l_dev (left minus its
  * patch mean), right[2 i], right[2 i + 1] (right image and its x gradient at x - d, float32 pairs as a

@@ -74,6 +74,47 @@ def neighbour_means(
     return mean, exact.astype(bool)
 
 
+def window_means(
+    grid: np.ndarray,
+    at: np.ndarray,
+    spacing_mm: np.ndarray,
+    halves: tuple[int, ...],
+    threads: int = ALL_THREADS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: mean distance to its 19 nearest in the narrowest of the windows (2 half + 1 px square) that
+    settles it, each capped at half + 1 spacings (float32), and whether one did (bool; else the widest one's).
+
+    grid: 3 x H x W float32 points (NaN where none); at: flat index of each point in one plane, at least the
+    widest half inside the grid; spacing_mm: mm between pixels at each point; halves: increasing window halves
+    (cellctl.vision.outliers defines the rule); threads: OpenMP threads (0: all), the same result on any number.
+    """
+    if grid.ndim != 3 or grid.shape[0] != 3:
+        raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
+    points = np.ascontiguousarray(np.moveaxis(grid, 0, -1), np.float32)
+    at = np.ascontiguousarray(at, np.int64)
+    spacing = np.ascontiguousarray(np.broadcast_to(spacing_mm, at.shape), np.float64)
+    half = np.ascontiguousarray(halves, np.int32)
+    if half.ndim != 1:
+        raise ValueError(f"halves must be a sequence of window halves, got shape {half.shape}")
+    mean = np.empty(len(at), np.float32)
+    settled = np.empty(len(at), np.uint8)
+    rc = lib.ck_window_means(
+        _ptr("const float *", points),
+        grid.shape[1],
+        grid.shape[2],
+        _ptr("const int64_t *", at),
+        len(at),
+        _ptr("const double *", spacing),
+        _ptr("const int32_t *", half),
+        len(half),
+        _ptr("float *", mean),
+        _ptr("uint8_t *", settled),
+        _threads(threads),
+    )
+    _check(rc, "window means")
+    return mean, settled.astype(bool)
+
+
 def _starts(starts: np.ndarray) -> tuple[np.ndarray, int, int]:
     starts = np.ascontiguousarray(starts, np.int64)
     if starts.ndim != 1 or len(starts) < 1:

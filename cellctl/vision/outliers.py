@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 
-from cellctl.stereo.kernels import neighbour_means
+from cellctl.stereo.kernels import neighbour_means, window_means
 
 
 def statistical_inliers(pixels: np.ndarray, points: np.ndarray, spacing_mm: np.ndarray) -> np.ndarray:
@@ -26,30 +26,20 @@ def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm
     height field seen from above, so a point's nearest points are among its nearest pixels. Mostly they are
     the 20 pixels within 2.3 px (5 x 5 without the corners); where that block is not complete or one of the
     16 pixels within 3.2 px is nearer (the sole's edge, holes, steep flanks), the 19 nearest of those 36;
-    for the few whose 19 nearest lie farther still, of a 15 x 15 window; for isolated points (spikes, specks;
-    rarely any on the sole) a k-d tree. The means agree with Open3D's to 10^-5 mm (float32 sums).
+    for the few whose 19 nearest lie farther still, of a 15 x 15 window, then 31, 63 and 127 px wide (in C,
+    cellctl.stereo.kernels.window_means; its numpy rule is the reference in tests/stereo/test_cloud_kernels.py);
+    for isolated points (spikes, specks; rarely any on the sole) a k-d tree. The means agree with Open3D's to 10^-5 mm (float32 sums).
     """
     grid, rows, cols = _point_grid(pixels, points, margin=_WINDOW_HALVES[-1])
-    flat = grid.reshape(3, -1)
     at = rows * grid.shape[2] + cols
     # The first two cases, one pass over the points in C (cellctl.stereo.kernels; the numpy rule they
     # follow is the reference in tests/vision/test_outliers.py): mostly the 19 nearest are the block's 20
     # (within 2.3 px) but its farthest; else the 19 nearest of the 36 within 3.2 px, capped at 3.6 px.
     mean, exact = neighbour_means(grid, at, spacing_mm, _NEAR_OFFSETS)
-    centre = flat[:, at]
     others = np.flatnonzero(~exact)
-    for half in _WINDOW_HALVES:  # larger windows only for the points whose 19 nearest lie farther out
-        if others.size == 0:
-            break
-        window = _WINDOWS[half]
-        neighbours = flat[:, at[others, None] + window[:, 1] * grid.shape[2] + window[:, 0]]  # 3 x P x M
-        offset = neighbours - centre[:, others, None]
-        distance = np.nan_to_num(np.sqrt(np.einsum("ijk,ijk->jk", offset, offset)), nan=np.inf)
-        # Pixels outside the window are at least half + 1 px away: that bounds what was not seen.
-        beyond = (half + 1) * spacing_mm[others, None]
-        nearest = np.partition(distance, 18, axis=1)[:, :19]
-        mean[others] = np.sum(np.fmin(nearest, beyond), axis=1) / 20.0
-        others = others[np.max(nearest, axis=1) > 0.95 * beyond[:, 0]]  # 5 % margin for perspective
+    if others.size:  # wider windows, in C too, for the points whose 19 nearest lie farther out
+        mean[others], settled = window_means(grid, at[others], spacing_mm[others], _WINDOW_HALVES)
+        others = others[~settled]
     if others.size:  # isolated points (spikes, specks): their neighbours lie anywhere, ask a k-d tree
         tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)))
         for k in others:
@@ -57,12 +47,7 @@ def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm
     return mean
 
 
-_WINDOW_HALVES = (7, 15, 31, 63)  # 15 x 15 to 127 x 127 pixels, each for fewer points
-# Each window's (dx, dy) offsets without the centre, row after row (built once: the largest has 16128).
-_WINDOWS = {
-    half: np.array([(dx, dy) for dy in range(-half, half + 1) for dx in range(-half, half + 1) if dx or dy])
-    for half in _WINDOW_HALVES
-}
+_WINDOW_HALVES = (7, 15, 31, 63)  # 15 x 15 to 127 x 127 pixels, each for fewer points (in C)
 _NEAR_BLOCK = [(dx, dy) for dy in range(-2, 3) for dx in range(-2, 3) if 0 < dx * dx + dy * dy <= 5]  # 20
 _NEAR = _NEAR_BLOCK + [(dx, dy) for dy in range(-3, 4) for dx in range(-3, 4) if 5 < dx * dx + dy * dy <= 10]  # + 16
 _NEAR_OFFSETS = np.array(_NEAR, np.int32)

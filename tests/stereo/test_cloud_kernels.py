@@ -12,11 +12,12 @@ from cellctl.stereo.kernels import (
     patch_shift,
     patch_step,
     points_in_polygon,
+    window_means,
 )
 from cellctl.stereo.pointgrid import PointGrid
 from cellctl.vision import outliers, subpixel
 
-from ..vision.test_outliers import _stereo_cloud
+from ..vision.test_outliers import BASELINE_MM, FOCAL_PX, _stereo_cloud
 
 
 def _numpy_neighbour_means(grid: np.ndarray, at: np.ndarray, spacing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -63,6 +64,86 @@ def test_neighbour_means_refuse_points_at_the_grid_edge() -> None:
         neighbour_means(grid, rows * grid.shape[2] + cols, spacing, outliers._NEAR_OFFSETS[:20])
     with pytest.raises(ValueError, match="3 x H x W"):
         neighbour_means(grid[:2], rows * grid.shape[2] + cols, spacing, outliers._NEAR_OFFSETS)
+
+
+def _numpy_window_means(
+    grid: np.ndarray, at: np.ndarray, spacing: np.ndarray, halves: tuple[int, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The wider windows' rule as numpy passes (cellctl.vision.outliers before the kernel): per window, the 19
+    nearest of its pixels, each capped at half + 1 spacings; a point leaves once they lie within 0.95 of that."""
+    flat = grid.reshape(3, -1)
+    centre = flat[:, at]
+    mean = np.full(len(at), np.nan, np.float32)
+    settled = np.zeros(len(at), bool)
+    others = np.arange(len(at))
+    for half in halves:
+        window = np.array([(dx, dy) for dy in range(-half, half + 1) for dx in range(-half, half + 1) if dx or dy])
+        neighbours = flat[:, at[others, None] + window[:, 1] * grid.shape[2] + window[:, 0]]  # 3 x P x M
+        offset = neighbours - centre[:, others, None]
+        distance = np.nan_to_num(np.sqrt(np.einsum("ijk,ijk->jk", offset, offset)), nan=np.inf)
+        beyond = (half + 1) * spacing[others, None]
+        nearest = np.partition(distance, 18, axis=1)[:, :19]
+        mean[others] = np.sum(np.fmin(nearest, beyond), axis=1) / 20.0
+        leaving = np.max(nearest, axis=1) <= 0.95 * beyond[:, 0]
+        settled[others[leaving]] = True
+        others = others[~leaving]
+    return mean, settled
+
+
+def _sparse_cloud(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The stereo-like cloud with a thinned band (points 2-12 px apart), a far cluster and lone specks."""
+    pixels, points, spacing = _stereo_cloud(seed)
+    rng = np.random.default_rng(100 + seed)
+    x, y = pixels.T
+    keep = ~((x > 600) & (x < 640) & (rng.random(len(x)) > 0.08))  # a band where few points are left
+    pixels, points, spacing = pixels[keep], points[keep], spacing[keep]
+    far = np.column_stack([rng.integers(700, 760, 40), rng.integers(250, 260, 40)]).astype(np.float64)  # 60 px off
+    lone = np.array([[480.0, 290.0], [520.0, 460.0], [690.0, 430.0], [900.0, 600.0]])  # isolated, one beyond 63 px
+    extra = np.unique(np.vstack([far, lone]), axis=0)
+    z = 540.0 + rng.normal(0.0, 3.0, len(extra))
+    extra_points = np.column_stack([(extra[:, 0] - 640) * z / FOCAL_PX, (extra[:, 1] - 512) * z / FOCAL_PX, z])
+    return (
+        np.vstack([pixels, extra]),
+        np.vstack([points, extra_points]),
+        np.concatenate([spacing, BASELINE_MM / (FOCAL_PX * BASELINE_MM / z)]),
+    )
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_window_means_follow_the_numpy_rule(seed: int) -> None:
+    pixels, points, spacing = _sparse_cloud(seed)
+    halves = outliers._WINDOW_HALVES
+    grid, rows, cols = outliers._point_grid(pixels, points, margin=halves[-1])
+    at = rows * grid.shape[2] + cols
+    _, exact = neighbour_means(grid, at, spacing, outliers._NEAR_OFFSETS)
+    rest = np.flatnonzero(~exact)
+    mean, settled = window_means(grid, at[rest], spacing[rest], halves)
+    expected_mean, expected_settled = _numpy_window_means(grid, at[rest], spacing[rest], halves)
+    assert 0 < np.count_nonzero(~expected_settled)  # isolated points: some reach past the widest window
+    for half in halves[1:]:  # and some settle in each wider window
+        narrower = _numpy_window_means(grid, at[rest], spacing[rest], tuple(h for h in halves if h < half))[1]
+        assert np.count_nonzero(expected_settled & ~narrower) > 0, half
+    np.testing.assert_array_equal(settled, expected_settled)
+    np.testing.assert_array_equal(mean, expected_mean)  # float32 of the double sums
+    one = window_means(grid, at[rest], spacing[rest], halves, threads=1)
+    two = window_means(grid, at[rest], spacing[rest], halves, threads=2)
+    for a, b in zip(one, two, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_window_means_refuse_bad_input() -> None:
+    pixels, points, spacing = _stereo_cloud(0)
+    grid, rows, cols = outliers._point_grid(pixels, points, margin=15)
+    at = rows * grid.shape[2] + cols
+    with pytest.raises(ValueError, match="outside its array"):  # the 31 px window reaches past the grid
+        window_means(grid, at, spacing, (7, 31))
+    for halves in [(), (7, 7), (15, 7), (0,), (300,)]:
+        with pytest.raises(ValueError, match="out of range"):
+            window_means(grid, at, spacing, halves)
+    with pytest.raises(ValueError, match="3 x H x W"):
+        window_means(grid[:2], at, spacing, (7,))
+    with pytest.raises(ValueError, match="halves"):
+        window_means(grid, at, spacing, ((7, 15),))  # type: ignore[arg-type]
 
 
 def _patches(seed: int, count: int = 40) -> dict[str, np.ndarray]:
