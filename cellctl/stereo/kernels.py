@@ -47,12 +47,7 @@ def neighbour_means(
     2.3 px first (cellctl.vision.outliers defines the rule); threads: OpenMP threads (0: all), the same
     result on any number.
     """
-    if grid.ndim != 3 or grid.shape[0] != 3:
-        raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
-    # Each pixel's x y z side by side: one cache line per neighbour instead of three.
-    points = np.ascontiguousarray(np.moveaxis(grid, 0, -1), np.float32)
-    at = np.ascontiguousarray(at, np.int64)
-    spacing = np.ascontiguousarray(np.broadcast_to(spacing_mm, at.shape), np.float64)
+    points, at, spacing = _grid_arguments(grid, at, spacing_mm)
     offsets = np.ascontiguousarray(offsets, np.int32)
     if offsets.shape != (36, 2):
         raise ValueError(f"offsets must be 36 x 2, got shape {offsets.shape}")
@@ -88,11 +83,7 @@ def window_means(
     widest half inside the grid; spacing_mm: mm between pixels at each point; halves: increasing window halves
     (cellctl.vision.outliers defines the rule); threads: OpenMP threads (0: all), the same result on any number.
     """
-    if grid.ndim != 3 or grid.shape[0] != 3:
-        raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
-    points = np.ascontiguousarray(np.moveaxis(grid, 0, -1), np.float32)
-    at = np.ascontiguousarray(at, np.int64)
-    spacing = np.ascontiguousarray(np.broadcast_to(spacing_mm, at.shape), np.float64)
+    points, at, spacing = _grid_arguments(grid, at, spacing_mm)
     half = np.ascontiguousarray(halves, np.int32)
     if half.ndim != 1:
         raise ValueError(f"halves must be a sequence of window halves, got shape {half.shape}")
@@ -256,3 +247,15 @@ def patch_sample(
     )
     _check(rc, "patch sample")
     return out
+
+
+def _grid_arguments(
+    grid: np.ndarray, at: np.ndarray, spacing_mm: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixel-grid kernels' common arguments as C wants them: each pixel's x y z side by side (one cache
+    line per neighbour instead of three), the points' flat indices, and a spacing per point."""
+    if grid.ndim != 3 or grid.shape[0] != 3:
+        raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
+    points = np.ascontiguousarray(np.moveaxis(grid, 0, -1), np.float32)
+    at = np.ascontiguousarray(at, np.int64)
+    return points, at, np.ascontiguousarray(np.broadcast_to(spacing_mm, at.shape), np.float64)
