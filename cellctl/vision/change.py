@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cellctl.vision.workers import worker
+
 CHANGE_SIGMAS = 4.0  # gain fit: residuals beyond this many sigmas are not table
 PIXEL_SIGMAS = 3.0  # a pixel is changed beyond this many sigmas (0.3 % false flags, removed by the majority)
 MIN_TABLE_PIXELS = 2000  # table pixels needed to estimate the gain and the noise
@@ -79,7 +81,7 @@ class ChangeTest:
         """
         # The texture votes on a worker thread beside the contrast (numpy and OpenCV release the GIL): the
         # same arrays either way, in about half the time where a core is free.
-        texture = _worker().submit(self._texture, current, reference)
+        texture = worker("change-texture").submit(self._texture, current, reference)
         try:
             magnitude = np.abs(self.residual(current, reference))
             floor = PIXEL_SIGMAS * self.sigma
@@ -143,13 +145,3 @@ class ChangeTest:
         gone = agree < np.multiply(share, 1.0 - UNANIMOUS, out=scratch)
         gone &= enough
         return still, gone
-
-
-_WORKER: list[futures.ThreadPoolExecutor] = []
-
-
-def _worker() -> futures.ThreadPoolExecutor:
-    """The thread the texture votes run on (one, started at the first change test)."""
-    if not _WORKER:
-        _WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="change-texture"))
-    return _WORKER[0]

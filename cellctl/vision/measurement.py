@@ -43,6 +43,7 @@ from cellctl.vision.outline_checks import outline_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
+from cellctl.vision.workers import worker
 
 __all__ = [
     "GluePath",
@@ -117,7 +118,9 @@ def measure_sole(
     # The glue path needs only the footprint, the outline and the surface: it is built on a second thread while
     # this one checks the outline and takes the heights (numpy, OpenCV and the C kernels release the GIL).
     # The refusals keep their order: the glue path's come after the outline's and the heights'.
-    glue = _glue_worker().submit(_glue, footprint, outline, surface, centroid, axis, glue_offset_mm, glue_spacing_mm)
+    glue = worker("glue-path").submit(
+        _glue, footprint, outline, surface, centroid, axis, glue_offset_mm, glue_spacing_mm
+    )
     try:
         checked = _outline_and_heights(reconstruction, outline, surface, centroid, axis, lo, hi, base)
         timings["measure"] = time.perf_counter() - start
@@ -215,16 +218,6 @@ def _glue(
     glue_line = snap_to_inset(edge, smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
     path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     return path, None if path is not None else FailureKind.SURFACE_NOT_MEASURED, missing
-
-
-_GLUE_WORKER: list[futures.ThreadPoolExecutor] = []
-
-
-def _glue_worker() -> futures.ThreadPoolExecutor:
-    """The thread the glue path is built on (one, started at the first measurement)."""
-    if not _GLUE_WORKER:
-        _GLUE_WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="glue-path"))
-    return _GLUE_WORKER[0]
 
 
 def _cover_radius(reconstruction: Reconstruction) -> float:

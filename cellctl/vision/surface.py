@@ -16,6 +16,7 @@ import numpy as np
 from cellctl.stereo.pointgrid import PointGrid
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
+from cellctl.vision.workers import worker
 
 MIN_CLOUD_POINTS = 12
 MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
@@ -119,7 +120,7 @@ class SoleSurface:
         # the GIL). Every query is fitted on its own with the radius of all of them: the same result.
         half = len(known) // 2
         if parallel and half > 0:
-            second = _fit_worker().submit(fit, np.arange(half, len(known)))
+            second = worker("patch-fits").submit(fit, np.arange(half, len(known)))
             try:
                 results = [fit(np.arange(half))]
             finally:
@@ -129,16 +130,6 @@ class SoleSurface:
             results = [fit(np.arange(len(known)))]
         for part, part_z, part_normals in results:
             z[known[part]], normals[known[part]], refined[known[part]] = part_z, part_normals, True
-
-
-_FIT_WORKER: list[futures.ThreadPoolExecutor] = []
-
-
-def _fit_worker() -> futures.ThreadPoolExecutor:
-    """The thread half of a parallel sample's queries are fitted on (one, started at the first use)."""
-    if not _FIT_WORKER:
-        _FIT_WORKER.append(futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="patch-fits"))
-    return _FIT_WORKER[0]
 
 
 def _planes_at(points: np.ndarray, ids: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
