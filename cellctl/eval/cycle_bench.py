@@ -12,7 +12,6 @@ table and warmed up as the daemon does before READY); `HH4Reference` is the Open
 
 from __future__ import annotations
 
-import gc
 import statistics
 import time
 from collections.abc import Callable
@@ -23,11 +22,11 @@ import numpy as np
 
 from cellctl.eval.methods import opencv_sgbm
 from cellctl.sim.scene import SoleScene
-from cellctl.vision.blas import one_blas_thread
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.measurement import MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
+from cellctl.vision.runtime import one_blas_thread, settle_garbage_collector
 
 DEFAULT_SOLES: tuple[tuple[int, str], ...] = ((1, "white"), (2, "black"), (3, "white"), (4, "black"))
 
@@ -145,8 +144,7 @@ def bench_cycles(
 
     for which in range(len(pairs)):
         cycle(which)  # the warm-up
-    gc.collect()  # as the service does after its warm-up (cellctl.service.measuring.settle_garbage_collector)
-    gc.freeze()
+    settle_garbage_collector()  # as the service does after its warm-up
     reference = HH4Reference(calib, pairs[0].left, pairs[0].right, disparities)
     bench = CycleBench(calib.image_size, disparities)
     for index in range(cycles):

@@ -10,7 +10,6 @@ so the first trigger of any recipe costs what every other one does.
 
 from __future__ import annotations
 
-import gc
 import logging
 import time
 from collections.abc import Iterable
@@ -23,9 +22,9 @@ from cellctl.service.codes import CycleFailed
 from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
 from cellctl.service.recipes import Recipe
-from cellctl.vision.blas import one_blas_thread
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.runtime import one_blas_thread, settle_garbage_collector
 from cellctl.vision.teach import TaughtTable, TeachError, load_taught
 from firmware_io.handshake import Trigger
 from firmware_io.registers import ErrorCode
@@ -39,7 +38,7 @@ class CellMeasurer:
     def __init__(self, config: CellConfig) -> None:
         self.config = config
         # numpy's BLAS on one thread: its thread team made single products of a cycle take up to 30 x their
-        # time when a core was busy (cellctl.vision.blas); the same numbers on one thread.
+        # time when a core was busy (cellctl.vision.runtime); the same numbers on one thread.
         one_blas_thread()
         self.calib, self.calibration_problem = load_calibration(config)
         self.reconstructor = (
@@ -129,17 +128,6 @@ class CellMeasurer:
             taught=None if own is None else own.taught,
         )
         return self._recipe_reconstructor
-
-
-def settle_garbage_collector() -> None:
-    """Collect once, then leave every object alive now out of later collections (gc.freeze).
-
-    After start-up and a warm-up the process holds ~10^5 objects the collector tracks (modules, Open3D,
-    the servers), and a full pass over them took 75-100 ms on the cell PC: whenever Python's allocation
-    counts started one inside a cycle, that cycle was the slowest. Frozen, a pass only sees what was made
-    since: well under a millisecond. Called once, before READY."""
-    gc.collect()
-    gc.freeze()
 
 
 def load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None]:

@@ -1,11 +1,11 @@
-"""numpy's OpenBLAS set to one thread (cellctl.vision.blas): found, set, and the products unchanged."""
+"""numpy's OpenBLAS set to one thread (cellctl.vision.runtime): found, set, and the products unchanged."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cellctl.vision.blas import blas_threads, one_blas_thread
+from cellctl.vision.runtime import blas_threads, one_blas_thread
 
 
 def test_one_blas_thread_sets_numpys_openblas_to_one_thread_with_the_same_products() -> None:

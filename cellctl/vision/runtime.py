@@ -1,0 +1,47 @@
+"""Process settings that keep every measurement cycle as fast as the median, set once before READY.
+
+The service (cellctl.service.measuring) and the cycle bench (cellctl.eval.cycle_bench) call the same two.
+"""
+
+from __future__ import annotations
+
+import gc
+import logging
+
+import numpy  # noqa: F401  threadpoolctl sees only the libraries loaded: numpy's BLAS must be
+from threadpoolctl import threadpool_info, threadpool_limits
+
+log = logging.getLogger(__name__)
+
+
+def one_blas_thread() -> bool:
+    """numpy's BLAS on one thread for the whole process; False (logged) where numpy's BLAS is not found.
+
+    The measurement's matrix products are thin (points x 3 or 4 times a 3 x 3 or 4 x 4 matrix): one thread
+    does each in a few ms. On OpenBLAS's default thread team the same products took 2.5-3.5 x longer in sum
+    on the 2-core cell PC under load, single ones up to 358 ms instead of ~10 ms, because the team waits for a
+    core the measurement's other threads (or any other process) hold. The numbers are the same on one thread
+    (each element is computed whole by one thread). threadpoolctl finds numpy's BLAS and sets it.
+    """
+    if blas_threads() is None:
+        log.info("numpy's BLAS was not found in this process: its threads are left as they are")
+        return False
+    threadpool_limits(limits=1, user_api="blas")  # kept: not used as a context manager
+    return True
+
+
+def blas_threads() -> int | None:
+    """The most threads any BLAS loaded in this process uses (None where none is found)."""
+    counts = [int(pool["num_threads"]) for pool in threadpool_info() if pool.get("user_api") == "blas"]
+    return max(counts) if counts else None
+
+
+def settle_garbage_collector() -> None:
+    """Collect once, then leave every object alive now out of later collections (gc.freeze).
+
+    After start-up and a warm-up the process holds ~10^5 objects the collector tracks (modules, Open3D,
+    the servers), and a full pass over them took 75-100 ms on the cell PC: whenever Python's allocation
+    counts started one inside a cycle, that cycle was the slowest. Frozen, a pass only sees what was made
+    since: well under a millisecond. Called once, after the warm-up."""
+    gc.collect()
+    gc.freeze()
