@@ -127,9 +127,17 @@ def edge_offsets(
     changed: np.ndarray,
     table_to_pixel: Callable[[np.ndarray], np.ndarray],
     table_level: Footprint | None = None,
+    worst_case: bool = False,
 ) -> np.ndarray:
     """Per outline point: where the camera's changed region ends along the outward normal, in mm from the
     outline (+: beyond it), NaN where the profile shows no clear single edge.
+
+    worst_case: where several steps fit equally well (samples between them unknown: out of the image, or
+    changed on `table_level` cells), the one farthest from the outline instead of the innermost. For a check,
+    evidence that is not there must not be read in the outline's favour: stereo drags a textured table's
+    depth 1-2 mm onto the edge of a weakly textured (black) sole, so the sole's own edge band is on
+    `table_level` cells, and the innermost step would put the edge on an outline that stops short with it
+    (1.4 mm inside the true edge over 65 mm, glue line 1.4 mm off, on a held-out matrix sole).
 
     The profile runs EDGE_SEARCH_MM either side at height `level` (per point); `table_to_pixel(points N x 3)
     -> N x 2` projects into the camera's rectified image whose change mask is `changed`. Samples outside the
@@ -158,6 +166,10 @@ def edge_offsets(
     best = np.argmin(misfit, axis=1)
     count = known.sum(axis=1)
     offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
+    if worst_case:
+        last = k - np.argmin(misfit[:, ::-1], axis=1)  # the outermost step of the same (least) misfit
+        far = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + last * EDGE_SEARCH_STEP_MM
+        offset = np.where(np.abs(far) > np.abs(offset), far, offset)
     clear = (count >= EDGE_PROFILE_MIN_KNOWN * k) & (
         misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1)
     )

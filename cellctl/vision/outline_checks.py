@@ -73,7 +73,7 @@ def _check_outline_images(
     # from the inward side of a wall; from the outward side the foot on the table or the top edge where the
     # wall is lit so that it hardly differs from the table, the nearer.
     offsets = [
-        silhouette_offsets(ring, outward, edge_height, changed, to_pixel, centre, level)
+        silhouette_offsets(ring, outward, edge_height, changed, to_pixel, centre, level, worst_case=True)
         for changed, to_pixel, centre in (
             (reconstruction.changed_left, left_pixel, left_centre),
             (changed_right, right_pixel, right_centre),
