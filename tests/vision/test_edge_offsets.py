@@ -82,9 +82,7 @@ def dragged_table_level(depth_drag_mm: float) -> Footprint:
     over the weakly textured edge of a black sole)."""
     cells = np.mgrid[0:800, 0:800]
     xy = (np.stack([cells[1], cells[0]], -1) + 0.5) * 0.25 - 100.0
-    return Footprint(
-        (np.linalg.norm(xy, axis=-1) > RADIUS - depth_drag_mm).astype(np.uint8), (-100.0, -100.0), 0.25
-    )
+    return Footprint((np.linalg.norm(xy, axis=-1) > RADIUS - depth_drag_mm).astype(np.uint8), (-100.0, -100.0), 0.25)
 
 
 def offsets_on(level_cells: Footprint, outline_radius: np.ndarray, changed: np.ndarray, worst: bool) -> np.ndarray:
