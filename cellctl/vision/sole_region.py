@@ -25,6 +25,9 @@ SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels
 WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
 EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare
+# The change masks are computed this far round the sole's high points (~40 mm: past fattening, a leaning
+# wall's foot, the outline checks' 7 mm and the unmeasured-pixel closing's 24 mm).
+CHANGE_MARGIN_PX = 100
 MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 # Noise of the rectified left grey image (DN of 8 bits, `image_noise_dn`) above which the surface is not
@@ -106,17 +109,35 @@ def change_split(
     test = ChangeTest.fit(current, reference, np.round(cloud.pixels[outside]).astype(np.int64))
     if test is None:
         return None
-    changed = test.changed(current, reference)
+    # The masks are read near the sole only (its points, the outline's checks, the image edge): computed in
+    # the box of the high points and CHANGE_MARGIN_PX round it, the rest of the image is left unchanged.
+    left_box, right_box = _change_boxes(cloud, high, current.shape)
+    changed = test.changed(current, reference, left_box)
     # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
     right_table = cloud.pixels[outside] - np.column_stack([cloud.disparity[outside], np.zeros(len(outside))])
     right_test = ChangeTest.fit(cloud.rectified[1], taught.right, np.round(right_table).astype(np.int64))
-    changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right)
+    changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right, right_box)
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
     near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
     candidates = np.concatenate([high, near])
     x, y = np.round(cloud.pixels[candidates]).astype(np.int64).T
     return ChangeSplit(np.sort(candidates[changed[y, x]]), changed, changed_right)
+
+
+def _change_boxes(
+    cloud: StereoCloud, high: np.ndarray, shape: tuple[int, ...]
+) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+    """(rows, columns) of the left and right images round the high points, CHANGE_MARGIN_PX out (the right
+    one shifted by their disparities)."""
+    height, width = shape[:2]
+    x, y = cloud.pixels[high].T
+    d = cloud.disparity[high]
+    m = CHANGE_MARGIN_PX
+    rows = slice(max(int(y.min()) - m, 0), min(int(y.max()) + m + 1, height))
+    left = slice(max(int(x.min()) - m, 0), min(int(x.max()) + m + 1, width))
+    right = slice(max(int((x - d).min()) - m, 0), min(int((x - d).max()) + m + 1, width))
+    return (rows, left), (rows, right)
 
 
 def image_noise_dn(grey: np.ndarray) -> float:
