@@ -6,13 +6,10 @@ more than the sensor noise allows. This replaces a colour discriminant between "
 colour": a sole with a black rim on a dark table, a patterned table, or two-tone soles all differ from the
 table's own recorded texture, and the decision is per pixel, so no window moves the edge.
 
-Two things depart from the taught picture without being the sole, and two pixel tests alone get wrong:
-- light: a cast shadow or another lamp scales the table's brightness and its texture by one factor. Windows
-  whose texture the reference explains at such a factor are still table, and that factor is carried to the
-  pixels beside them, so the sole's edge in a shadow is placed against the shadowed table, not the taught one;
-- chance: a sole of about the table's brightness (grey on grey, a rim on a dark table) matches the
-  prediction at scattered pixels. A pixel whose whole neighbourhood departs from the prediction is changed
-  even where its own residual is small; that fill stops short of the edge.
+A cast shadow departs from the taught picture without being the sole: it darkens the table's brightness and
+its texture by one factor. Windows whose texture the reference explains at such a factor are still table,
+and that factor is carried to the pixels beside them, so the sole's edge in a shadow is placed against the
+shadowed table, not the taught one.
 """
 
 from __future__ import annotations
@@ -49,19 +46,13 @@ NOISE_FLOOR_DN = 0.5  # a quantised 8-bit image never has less residual noise th
 FIT_SIGMAS = 1.5
 MIN_TEXTURE_GAIN = 0.3
 SCALE_AGREEMENT = 0.4  # texture gain within this share of the brightness ratio (both are the shadow's factor)
+# The fit's vote and the carried factor are for shadows only (darker than taught): a black sole on a dark
+# table is 1.2-1.5 times its brightness with faint texture, and a lamp's factor would let it pass as table.
+MAX_SHADOW_FACTOR = 0.95
 STILL_TEXTURE_SIGMAS = 1.0
 # Shadow-corrected residual: the illumination factor of the still table is carried over ILLUMINATION_WINDOW_PX
 # (~12 mm; half that where the still table is near) to the pixels next to it, so the edge of a sole in a shadow is placed against the shadowed table.
 ILLUMINATION_WINDOW_PX = 31
-# Interior fill: a pixel whose whole FILL_WINDOW_PX neighbourhood has a residual energy (mean square over the
-# same window) above the square of FILL_CONTRAST of the local contrast (and of FILL_SIGMAS sigma) is changed even where its own residual happens to be small (a grey
-# sole on a grey table matches the table's brightness at scattered pixels). The energy window reaches the
-# sole from at most 2 px out, and the erosion takes those 2 px back: the fill never passes the edge.
-FILL_WINDOW_PX = 5
-FILL_SIGMAS = 2.0
-# The light on the table beside a tall white wall changes by a few sigma, smoothly, a few per cent of the
-# wall's own contrast: it is not filled. A grey sole on a grey table leaves a residual of about its contrast.
-FILL_CONTRAST = 0.25
 
 
 @dataclass(frozen=True)
@@ -134,9 +125,6 @@ class ChangeTest:
         window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
         contrast = cv2.blur(magnitude * clear, window)
         contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
-        # The fill's threshold (its square, for the energy) before the pixel test's, from the same contrast.
-        fill_level = np.maximum(np.multiply(contrast, FILL_CONTRAST), FILL_SIGMAS * self.sigma)
-        np.square(fill_level, out=fill_level)
         half_contrast = np.multiply(contrast, 0.5, out=clear)
         raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
         faint = contrast < FAINT_CONTRAST_SIGMAS * self.sigma
@@ -144,9 +132,6 @@ class ChangeTest:
         # poorly: the texture vote would move the edge out. It only speaks where the change is faint.
         texture_gone &= faint
         raw |= texture_gone
-        fill = (FILL_WINDOW_PX, FILL_WINDOW_PX)
-        energy = cv2.blur(np.multiply(residual, residual, out=residual), fill) > fill_level
-        raw |= cv2.erode(energy.view(np.uint8), np.ones(fill, np.uint8)) > 0
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         return cv2.medianBlur(mask, 3) > 0
 
@@ -213,6 +198,7 @@ class ChangeTest:
         fitted &= texture_gain > MIN_TEXTURE_GAIN
         fitted &= in_scale
         fitted &= np.abs(texture_gain - brightness) < SCALE_AGREEMENT * brightness
+        fitted &= brightness < MAX_SHADOW_FACTOR
         fit_share = cv2.blur(fitted.astype(np.float32), window)
         still |= fit_share > UNANIMOUS
         # The illumination factor over the still table, carried to its neighbours.
@@ -221,8 +207,8 @@ class ChangeTest:
         ratio = np.divide(cur, np.maximum(predicted, 1.0), out=predicted)
         # Near still table from a window of half the size (a shadow's own edge stays sharp), farther out
         # from the whole window (the band beside the sole, whose windows do not vote).
-        # Only a shadow's or a lamp's factor is carried: a stray still pixel on a white sole (ratio ~5) is not.
-        plausible = (ratio > MIN_TEXTURE_GAIN) & (ratio < MAX_TEXTURE_GAIN)
+        # Only a shadow's factor is carried: a stray still pixel on a white sole (ratio ~5) is not.
+        plausible = (ratio > MIN_TEXTURE_GAIN) & (ratio < MAX_SHADOW_FACTOR)
         weight = (still & plausible).astype(np.float32)
         weighted = ratio * weight
         illumination = np.ones_like(ratio)
