@@ -49,6 +49,8 @@ SCALE_AGREEMENT = 0.4  # texture gain within this share of the brightness ratio 
 # The fit's vote and the carried factor are for shadows only (darker than taught): a black sole on a dark
 # table is 1.2-1.5 times its brightness with faint texture, and a lamp's factor would let it pass as table.
 MAX_SHADOW_FACTOR = 0.95
+GONE_WINDOW_PX = 9  # ~3.5 mm
+GONE_INSIDE = 0.6
 STILL_TEXTURE_SIGMAS = 1.0
 # Shadow-corrected residual: the illumination factor of the still table is carried over ILLUMINATION_WINDOW_PX
 # (~12 mm; half that where the still table is near) to the pixels next to it, so the edge of a sole in a shadow is placed against the shadowed table.
@@ -130,8 +132,16 @@ class ChangeTest:
         faint = contrast < FAINT_CONTRAST_SIGMAS * self.sigma
         # Next to a strong step every window covering a table pixel also covers the step and correlates
         # poorly: the texture vote would move the edge out. It only speaks where the change is faint.
+        # Inside a changed region, though, a pixel whose texture is gone is changed whatever the contrast: a
+        # sole of about the table's brightness matches the prediction at scattered pixels. Inside: most of
+        # its GONE_WINDOW_PX neighbourhood passed the pixel test, which a table pixel beside the edge (half
+        # its neighbourhood at most) never has, even where the windows along a step of the table's texture
+        # lost its correlation.
+        inside = cv2.blur(raw.astype(np.float32), (GONE_WINDOW_PX, GONE_WINDOW_PX)) > GONE_INSIDE
+        inside &= texture_gone
         texture_gone &= faint
         raw |= texture_gone
+        raw |= inside
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         return cv2.medianBlur(mask, 3) > 0
 

@@ -87,3 +87,21 @@ def test_a_box_gives_the_whole_images_pixels_inside_it_and_none_outside() -> Non
     whole, boxed = test.changed(current, reference), test.changed(current, reference, box)
     assert not boxed[:20].any() and not boxed[:, 170:].any()
     assert np.array_equal(whole[40:120, 50:150], boxed[40:120, 50:150])
+
+
+def test_inside_a_grey_sole_on_a_grey_table_pixels_whose_texture_is_gone_are_changed_and_none_outside() -> None:
+    rng = np.random.default_rng(6)
+    shape = (160, 200)
+    reference = 110.0 + 6.0 * _smooth_noise(rng, shape)
+    current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current[40:120, 40:160] = 110.0 + 5.0 * _smooth_noise(rng, (80, 120))  # the table's mean brightness
+    table = np.ones(shape, bool)
+    table[30:130, 30:170] = False
+    test = ChangeTest.fit(current, reference, table)
+    assert test is not None
+    changed = test.changed(current, reference)
+    # The pixel test alone finds 79 % (a fifth of the pixels match the table's brightness by chance).
+    assert changed[43:117, 43:157].mean() > 0.85
+    outside = np.ones(shape, bool)
+    outside[39:121, 39:161] = False
+    assert not changed[outside].any()
