@@ -49,6 +49,7 @@ SCALE_AGREEMENT = 0.4  # texture gain within this share of the brightness ratio 
 # The fit's vote and the carried factor are for shadows only (darker than taught): a black sole on a dark
 # table is 1.2-1.5 times its brightness with faint texture, and a lamp's factor would let it pass as table.
 MAX_SHADOW_FACTOR = 0.95
+MAX_CARRIED_FACTOR = 1.1  # the unshadowed table: 1 within its noise
 GONE_WINDOW_PX = 9  # ~3.5 mm
 GONE_INSIDE = 0.6
 STILL_TEXTURE_SIGMAS = 1.0
@@ -217,8 +218,9 @@ class ChangeTest:
         ratio = np.divide(cur, np.maximum(predicted, 1.0), out=predicted)
         # Near still table from a window of half the size (a shadow's own edge stays sharp), farther out
         # from the whole window (the band beside the sole, whose windows do not vote).
-        # Only a shadow's factor is carried: a stray still pixel on a white sole (ratio ~5) is not.
-        plausible = (ratio > MIN_TEXTURE_GAIN) & (ratio < MAX_SHADOW_FACTOR)
+        # A shadow's factor or the unshadowed table's (~1) is carried, so the table beside a shadow keeps its
+        # own; a stray still pixel on a white sole (ratio ~5) or a black one on the dark table (1.2-1.5) is not.
+        plausible = (ratio > MIN_TEXTURE_GAIN) & (ratio < MAX_CARRIED_FACTOR)
         weight = (still & plausible).astype(np.float32)
         weighted = ratio * weight
         illumination = np.ones_like(ratio)
