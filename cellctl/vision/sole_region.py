@@ -236,24 +236,44 @@ def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:
 def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, index: np.ndarray) -> float:
     """Share of the sole's changed pixels (taught table only) without a measured point: glare, no texture.
 
-    The sole's image region is its measured pixels closed over UNMEASURED_CLOSE_PX; where that holds
-    many changed pixels without depth, an outline that disagrees with the depth step has lost part of
-    the sole to unmeasured pixels, and that is the reason to give (cellctl.vision.measurement).
+    The sole's image region is its measured pixels closed over UNMEASURED_CLOSE_PX, and every changed region
+    those pixels touch: a glossy toe whose whole tip lost its depth is changed but lies beyond any closing
+    of the measured pixels. Where that region holds many changed pixels without depth, an outline that
+    disagrees with the depth step has lost part of the sole to unmeasured pixels, and that is the reason to
+    give (cellctl.vision.measurement).
     """
     if changed_left is None or index.size == 0:
         return 0.0
     width, height = cloud.image_size
     x, y = np.round(cloud.pixels[index]).astype(int).T
-    # Only the sole's box and a margin of twice the disc's reach: outside it the whole image's closing is
-    # empty, and inside it the same (a cell within the disc's reach of the box's edge is farther than the
-    # reach from the sole, so unmarked after the dilation, and the erosion keeps it unmarked).
+    # The changed regions the sole's measured pixels lie in (8-connected), as a mask and their box; labelled
+    # within the box of the changed pixels only (the change masks are computed round the sole).
+    changed_rows = np.flatnonzero(np.any(changed_left, axis=1))
+    changed_columns = np.flatnonzero(np.any(changed_left, axis=0))
+    changed_sole = np.zeros(changed_left.shape, bool)
+    if changed_rows.size:
+        box = (slice(changed_rows[0], changed_rows[-1] + 1), slice(changed_columns[0], changed_columns[-1] + 1))
+        count, labels = cv2.connectedComponents(changed_left[box].view(np.uint8), connectivity=8)
+        touched = np.zeros(count, bool)
+        within = (y >= box[0].start) & (y < box[0].stop) & (x >= box[1].start) & (x < box[1].stop)
+        touched[labels[y[within] - box[0].start, x[within] - box[1].start]] = True
+        touched[0] = False  # the unchanged background
+        changed_sole[box] = touched[labels]
+    rows, columns = np.flatnonzero(np.any(changed_sole, axis=1)), np.flatnonzero(np.any(changed_sole, axis=0))
+    # Only the box of the sole and its changed regions and a margin of twice the disc's reach: outside it the
+    # whole image's closing is empty, and inside it the same (a cell within the disc's reach of the box's
+    # edge is farther than the reach from the sole, so unmarked after the dilation, and the erosion keeps it
+    # unmarked).
     margin = UNMEASURED_CLOSE_PX + 1
-    top, left = max(int(y.min()) - margin, 0), max(int(x.min()) - margin, 0)
-    bottom, right = min(int(y.max()) + margin + 1, height), min(int(x.max()) + margin + 1, width)
+    top = max(min(int(y.min()), int(rows[0]) if rows.size else height) - margin, 0)
+    left = max(min(int(x.min()), int(columns[0]) if columns.size else width) - margin, 0)
+    bottom = min(max(int(y.max()), int(rows[-1]) if rows.size else 0) + margin + 1, height)
+    right = min(max(int(x.max()), int(columns[-1]) if columns.size else 0) + margin + 1, width)
     sole = np.zeros((bottom - top, right - left), np.uint8)
     sole[y - top, x - left] = 1
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (UNMEASURED_CLOSE_PX, UNMEASURED_CLOSE_PX))
     region = cv2.morphologyEx(sole, cv2.MORPH_CLOSE, kernel) > 0
+    region |= changed_sole[top:bottom, left:right]
     measured = np.zeros(region.shape, bool)
     mx, my = np.round(cloud.pixels).astype(int).T
     inside = (mx >= left) & (mx < right) & (my >= top) & (my < bottom)
