@@ -169,9 +169,11 @@ def edge_offsets(
     if worst_case:
         last = k - np.argmin(misfit[:, ::-1], axis=1)  # the outermost step of the same (least) misfit
         far = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + last * EDGE_SEARCH_STEP_MM
-        offset = np.where(np.abs(far) > np.abs(offset), far, offset)
-        # unknown all the way to the end of the search (a shadow wider than it): no edge found within it
-        best = np.where(last == k, k, best)
+        # Unknown all the way to the end of the search (a shadow wider than it): no edge found within it, unless
+        # the innermost reading already lies inside the outline (that reading is kept: it tells against it).
+        to_end = last == k
+        offset = np.where(~to_end & (np.abs(far) > np.abs(offset)), far, offset)
+        best = np.where(to_end & (offset >= 0), k, best)
     clear = (count >= EDGE_PROFILE_MIN_KNOWN * k) & (
         misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1)
     )

@@ -66,6 +66,9 @@ def test_a_local_dent_or_bulge_of_the_outline_is_refused(changed: np.ndarray, de
     radius[100:110] -= dent  # 10 mm of outline 1.5 mm inside (or outside) the edge: the glue line follows it
     found = offsets(radius, changed)
     assert np.nanmedian(found[102:108]) == pytest.approx(dent, abs=0.4)
+    # a clear single edge reads the same in the worst case (it only differs where evidence is missing)
+    worst = offsets_on(table_level(), radius, changed, worst=True)
+    assert np.array_equal(worst[95:115], found[95:115], equal_nan=True)
     problem = check_edge_offsets([found])
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert ("beyond" if dent > 0 else "inside") in problem.reason
