@@ -66,7 +66,7 @@ def test_a_local_dent_or_bulge_of_the_outline_is_refused(changed: np.ndarray, de
     radius[100:110] -= dent  # 10 mm of outline 1.5 mm inside (or outside) the edge: the glue line follows it
     found = offsets(radius, changed)
     assert np.nanmedian(found[102:108]) == pytest.approx(dent, abs=0.4)
-    # a clear single edge reads the same in the worst case (it only differs where evidence is missing)
+    # a clear single edge reads the same outermost (the readings differ only where evidence is missing)
     worst = offsets_on(table_level(), radius, changed, worst=True)
     assert np.array_equal(worst[95:115], found[95:115], equal_nan=True)
     problem = check_edge_offsets([found])
@@ -94,7 +94,7 @@ def offsets_on(level_cells: Footprint, outline_radius: np.ndarray, changed: np.n
     outline = outline_radius[:, None] * outward
     sees_wall = np.sum(outward * (CAMERA[:2] - outline), axis=1) > 0
     level = np.where(sees_wall, 0.0, HEIGHT)
-    return edge_offsets(outline, outward, level, changed, project, level_cells, worst_case=worst)
+    return edge_offsets(outline, outward, level, changed, project, level_cells, outermost=worst)
 
 
 def test_an_outline_short_with_the_depth_is_refused_when_the_missing_evidence_counts_against_it(
@@ -114,7 +114,9 @@ def test_an_outline_short_with_the_depth_is_refused_when_the_missing_evidence_co
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT and "beyond" in problem.reason
 
 
-def test_the_worst_case_still_passes_the_true_outline_past_a_shadow_and_a_dragged_depth(changed: np.ndarray) -> None:
+def test_the_outermost_reading_still_passes_the_true_outline_past_a_shadow_and_a_dragged_depth(
+    changed: np.ndarray,
+) -> None:
     cells = dragged_table_level(1.6)
     found = offsets_on(cells, np.full(314, RADIUS), changed, worst=True)
     assert np.mean(np.isfinite(found)) > 0.8  # the 8 mm shadow runs past the search: unknown there, not an edge
