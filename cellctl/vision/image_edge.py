@@ -154,12 +154,21 @@ def depth_silent(ring: np.ndarray, outward: np.ndarray, table_points: Footprint)
 
     def silent(proposed: np.ndarray) -> np.ndarray:
         result = np.zeros(len(ring), bool)
-        for k in np.flatnonzero(proposed > 0):
-            reach = max(float(proposed[k]) - SILENT_SHORT_OF_EDGE_MM, SILENT_STEP_MM)
-            along = np.arange(0.0, reach + 1e-9, SILENT_STEP_MM)
-            xy = (ring[k] + along[:, None, None] * outward[k] + across[None, :, None] * tangent[k]).reshape(-1, 2)
-            row, col, inside = table_points.cells(xy)
-            result[k] = bool(np.all(inside)) and not np.any(table_points.mask[row, col])
+        moving = np.flatnonzero(proposed > 0)
+        if moving.size == 0:
+            return result
+        reach = np.maximum(proposed[moving] - SILENT_SHORT_OF_EDGE_MM, SILENT_STEP_MM)
+        along = np.arange(0.0, float(reach.max()) + 1e-9, SILENT_STEP_MM)
+        xy = (
+            ring[moving, None, None]
+            + along[None, :, None, None] * outward[moving, None, None]
+            + across[None, None, :, None] * tangent[moving, None, None]
+        )  # moving x along x across x 2
+        row, col, inside = table_points.cells(xy.reshape(-1, 2))
+        shape = xy.shape[:3]
+        within = np.broadcast_to((along[None, :] <= reach[:, None] + 1e-9)[:, :, None], shape)
+        table = table_points.mask[row, col].reshape(shape).astype(bool) | ~inside.reshape(shape)
+        result[moving] = ~np.any(table & within, axis=(1, 2))
         return result
 
     return silent

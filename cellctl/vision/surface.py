@@ -209,9 +209,15 @@ def path_heights(xy: np.ndarray, z: np.ndarray) -> np.ndarray:
     (cellctl.vision.local_fit) of a width that grows with the local noise (`path_smoothing_widths`)."""
     widths = path_smoothing_widths(z)
     steps = np.asarray(PATH_SMOOTHING_STEPS_MM)
-    fits = np.stack([local_planes(xy, xy, z, w)[0] for w in steps])
     upper = np.clip(np.searchsorted(steps, widths), 1, len(steps) - 1)
     lower = upper - 1
     share = (widths - steps[lower]) / (steps[upper] - steps[lower])
+    # Each width's fit only where it is used (a light sole's path needs the narrowest alone).
+    fits = np.full((len(steps), len(z)), np.nan)
+    for i, width in enumerate(steps):
+        used = np.flatnonzero(((lower == i) & (share < 1.0)) | ((upper == i) & (share > 0.0)))
+        if used.size:
+            fits[i, used] = local_planes(xy[used], xy, z, float(width))[0]
     columns = np.arange(len(z))
-    return (1.0 - share) * fits[lower, columns] + share * fits[upper, columns]
+    low = np.where(share < 1.0, (1.0 - share) * fits[lower, columns], 0.0)
+    return low + np.where(share > 0.0, share * fits[upper, columns], 0.0)
