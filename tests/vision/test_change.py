@@ -37,3 +37,48 @@ def test_a_shadow_along_the_same_step_stays_table() -> None:
     test = ChangeTest.fit(current, reference, table)
     assert test is not None
     assert test.changed(current, reference)[:60, 40:120].mean() < 0.1
+
+
+def _textured_scene(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A textured table with noise, a shadow and a bright and a dark object: every branch of the test is taken."""
+    rng = np.random.default_rng(seed)
+    shape = (150, 210)
+    stripes = np.where(np.arange(shape[1]) % 9 < 4, 35.0, 60.0)
+    reference = (np.tile(stripes, (shape[0], 1)) + rng.normal(0.0, 2.0, shape)).astype(np.float32)
+    current = (reference + rng.normal(0.0, 1.0, shape)).astype(np.float32)
+    current[20:70, 30:100] = 200.0 + rng.normal(0.0, 3.0, (50, 70)).astype(np.float32)  # a white sole
+    current[80:140, 120:200] = 45.0 + rng.normal(0.0, 0.5, (60, 80)).astype(np.float32)  # the table's mean
+    current[90:150, 10:80] *= 0.6  # a shadow
+    table = np.ones(shape, bool)
+    table[10:150, 20:205] = False
+    table[100:, :90] = True
+    return current, reference, table
+
+
+def test_the_change_test_on_a_box_marks_the_boxs_pixels_as_on_the_whole_image() -> None:
+    for seed in range(3):
+        current, reference, table = _textured_scene(seed)
+        test = ChangeTest.fit(current, reference, table)
+        assert test is not None
+        whole = test.changed(current, reference)
+        assert 0.1 < whole.mean() < 0.9
+        # Sides just inside and just outside the objects' edges (where a filter cut at the box would see
+        # another neighbourhood), inside, touching one side of the image, touching two, the whole image, a box
+        # past the image, an empty box.
+        for rows, cols in (
+            (slice(22, 68), slice(32, 98)),
+            (slice(18, 72), slice(28, 102)),
+            (slice(83, 137), slice(123, 197)),
+            (slice(77, 143), slice(117, 203)),
+            (slice(30, 100), slice(40, 150)),
+            (slice(0, 60), slice(50, 120)),
+            (slice(90, 150), slice(150, 210)),
+            (slice(0, 150), slice(0, 210)),
+            (slice(-20, 400), slice(5, 300)),
+            (slice(40, 40), slice(10, 20)),
+        ):
+            boxed = test.changed(current, reference, (rows, cols))
+            inside = np.zeros(whole.shape, bool)
+            inside[rows, cols] = True
+            np.testing.assert_array_equal(boxed[inside], whole[inside])
+            assert not boxed[~inside].any()
