@@ -116,14 +116,13 @@ class SoleSurface:
             done = patches.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known[part]]) < MAX_REFINE_SHIFT_MM)
             return part[done], patch_z[done], patch_normals[done]
 
-        # parallel: every second query on a worker thread (numpy, OpenCV and the C kernels release the GIL).
-        # Every query is fitted on its own with the radius of all of them: the same result. Alternate queries
-        # rather than halves: the glue path asks for its path and then its inner ring, whose patches hold
-        # ~40 % more pixels (none cut off by the sole's edge), and the longer half was the wait.
-        if parallel and len(known) > 1:
-            second = worker("patch-fits").submit(fit, np.arange(1, len(known), 2))
+        # parallel: the second half of the queries on a worker thread (numpy, OpenCV and the C kernels release
+        # the GIL). Every query is fitted on its own with the radius of all of them: the same result.
+        half = len(known) // 2
+        if parallel and half > 0:
+            second = worker("patch-fits").submit(fit, np.arange(half, len(known)))
             try:
-                results = [fit(np.arange(0, len(known), 2))]
+                results = [fit(np.arange(half))]
             finally:
                 futures.wait([second])
             results.append(second.result())
