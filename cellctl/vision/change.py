@@ -32,9 +32,6 @@ MIN_TEXTURED_SHARE = 0.3  # of the windows covering a pixel: fewer with texture 
 FAINT_CONTRAST_SIGMAS = 8.0  # a change fainter than this (local contrast) may be found by texture alone
 TEXTURE_SIGMAS = 2.0  # the reference has texture where its local spread exceeds this many residual sigmas
 NOISE_FLOOR_DN = 0.5  # a quantised 8-bit image never has less residual noise than this
-# How far `changed`'s filters reach (texture: two 7 x 7 boxes, 6 px; contrast: one 11 x 11, 5 px; then the 3 x 3
-# median, 1 px), rounded up: a box computed this much wider gives every pixel of the box the whole image's value.
-FILTER_REACH_PX = 16
 
 
 @dataclass(frozen=True)
@@ -72,9 +69,8 @@ class ChangeTest:
         predicted += self.offset
         return np.subtract(np.asarray(current, np.float32), predicted, out=predicted)
 
-    def changed(self, current: np.ndarray, reference: np.ndarray, box: tuple[slice, slice] | None = None) -> np.ndarray:
-        """Bool image: pixels that no longer show the taught table (box: only those of rows x columns, the
-        rest False; each pixel of the box as the whole image's test marks it).
+    def changed(self, current: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        """Bool image: pixels that no longer show the taught table.
 
         A pixel is changed when its residual exceeds half the local contrast of the change around it (the
         mean residual of the clearly changed pixels within CONTRAST_WINDOW_PX), and at least PIXEL_SIGMAS
@@ -83,8 +79,6 @@ class ChangeTest:
         it a pixel out on strong contrast and cut a weakly contrasting rim off. A 3 x 3 majority (median)
         then removes isolated flags and misses; a straight edge stays where it is.
         """
-        if box is not None:
-            return self._changed_in(current, reference, box)
         # The texture votes on a worker thread beside the contrast (numpy and OpenCV release the GIL): the
         # same arrays either way, in about half the time where a core is free.
         texture = worker("change-texture").submit(self._texture, current, reference)
@@ -107,24 +101,6 @@ class ChangeTest:
         raw |= texture_gone
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         return cv2.medianBlur(mask, 3) > 0
-
-    def _changed_in(self, current: np.ndarray, reference: np.ndarray, box: tuple[slice, slice]) -> np.ndarray:
-        """`changed` on rows x columns only: the test on that box widened by the filters' reach, where the image
-        allows (at the image's own border the filters see the same border either way). The box filters sum in
-        double, exactly for these values, so a pixel's sums do not depend on where the image starts: the box's
-        pixels are the whole image's, bit for bit (tests/vision/test_change.py)."""
-        height, width = current.shape[:2]
-        top, bottom, _ = box[0].indices(height)
-        left, right, _ = box[1].indices(width)
-        out = np.zeros((height, width), bool)
-        if top >= bottom or left >= right:
-            return out
-        outer_top, outer_left = max(top - FILTER_REACH_PX, 0), max(left - FILTER_REACH_PX, 0)
-        rows = slice(outer_top, min(bottom + FILTER_REACH_PX, height))
-        cols = slice(outer_left, min(right + FILTER_REACH_PX, width))
-        part = self.changed(np.ascontiguousarray(current[rows, cols]), np.ascontiguousarray(reference[rows, cols]))
-        out[top:bottom, left:right] = part[top - outer_top : bottom - outer_top, left - outer_left : right - outer_left]
-        return out
 
     def _texture(self, current: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(still table, texture gone): the table's own texture is still there, only darker or lighter (a

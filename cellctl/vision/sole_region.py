@@ -25,10 +25,6 @@ SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels
 WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
 EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare
-# The change masks are computed over the measured cloud's box and this margin (~12 mm) only: a sole lies in
-# the cloud, and every reader of the masks (outline checks, image edge, unmeasured share) looks within a few
-# mm of the sole's outline; a sole within 15 mm of a search region's side is matched again on the whole pair.
-CHANGE_BOX_MARGIN_PX = 32
 MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 # Noise of the rectified left grey image (DN of 8 bits, `image_noise_dn`) above which the surface is not
@@ -110,26 +106,17 @@ def change_split(
     test = ChangeTest.fit(current, reference, np.round(cloud.pixels[outside]).astype(np.int64))
     if test is None:
         return None
-    x, y = cloud.pixels.T
-    changed = test.changed(current, reference, _box(x, y, current.shape))
+    changed = test.changed(current, reference)
     # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
     right_table = cloud.pixels[outside] - np.column_stack([cloud.disparity[outside], np.zeros(len(outside))])
     right_test = ChangeTest.fit(cloud.rectified[1], taught.right, np.round(right_table).astype(np.int64))
-    right_box = _box(x - cloud.disparity, y, cloud.rectified[1].shape)
-    changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right, right_box)
+    changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right)
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
     near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
     candidates = np.concatenate([high, near])
     x, y = np.round(cloud.pixels[candidates]).astype(np.int64).T
     return ChangeSplit(np.sort(candidates[changed[y, x]]), changed, changed_right)
-
-
-def _box(x: np.ndarray, y: np.ndarray, shape: tuple[int, ...]) -> tuple[slice, slice]:
-    """Rows and columns of the pixels' (x, y; not empty) bounding box and CHANGE_BOX_MARGIN_PX, within the image."""
-    m = CHANGE_BOX_MARGIN_PX
-    rows = slice(max(int(np.floor(y.min())) - m, 0), min(int(np.ceil(y.max())) + m + 1, shape[0]))
-    return rows, slice(max(int(np.floor(x.min())) - m, 0), min(int(np.ceil(x.max())) + m + 1, shape[1]))
 
 
 def image_noise_dn(grey: np.ndarray) -> float:
