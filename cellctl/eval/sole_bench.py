@@ -18,6 +18,7 @@ import numpy as np
 from cellctl.sim.render_cache import RenderCache
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.checks import MIN_GLUE_NZ
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.measurement import MeasurementRefused, MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
@@ -43,6 +44,10 @@ class SoleBenchRow:
     variations: str = "plain"  # matrix variations of the scene, "+"-joined (cellctl.sim.look)
     failure: str | None = None  # FailureKind value of a refusal
     half_area_difference_true: float | None = None  # the truth's (toe half - heel half) / area
+    # Share of the true glue line (GLUE_OFFSET_MM inside the true outline) on a surface steeper than the glue
+    # contract allows (checks.MIN_GLUE_NZ: 60 degrees from vertical), e.g. a sloped side wall: no valid result
+    # can hold the true glue path there.
+    glue_line_steep_true: float | None = None
 
 
 def bench_soles(
@@ -124,6 +129,7 @@ def measure_scene(
         variations,
         failure,
         truth.half_area_difference,
+        glue_line_steep(scene),
     )
     if isinstance(result, SoleMeasurement):
         row.length_error_mm = result.length_mm - truth.length_mm
@@ -146,6 +152,32 @@ def glue_truth(scene: SoleScene, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray
     outline = scene.sole.footprint_table().astype(np.float32).reshape(-1, 1, 2)
     inset = np.array([cv2.pointPolygonTest(outline, (float(x), float(y)), True) for x, y in xy])
     return inset, scene.sole.top_height_at(xy), scene.sole.top_normal_at(xy)
+
+
+GLUE_LINE_TRUTH_STEP_MM = 0.5  # spacing of the true glue line's samples
+
+
+def glue_line_steep(scene: SoleScene) -> float:
+    """Share of the true glue line (GLUE_OFFSET_MM inside the true outline) whose true surface normal is more
+    than the glue contract allows from vertical (checks.MIN_GLUE_NZ): from the model, not the measuring code.
+
+    The line's samples are the outline's points moved GLUE_OFFSET_MM along the inward normal; those that do not
+    land GLUE_OFFSET_MM inside (where the offset crosses itself at a pointed end) are left out.
+    """
+    assert scene.sole is not None
+    outline = scene.sole.footprint_table().astype(np.float64)
+    step = np.linalg.norm(np.diff(outline, axis=0), axis=1).mean()
+    outline = outline[:: max(1, int(round(GLUE_LINE_TRUTH_STEP_MM / step)))]
+    tangent = np.roll(outline, -1, axis=0) - np.roll(outline, 1, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    inward = np.column_stack([-tangent[:, 1], tangent[:, 0]])  # left of travel on a counter-clockwise outline
+    line = outline + GLUE_OFFSET_MM * inward
+    polygon = outline.astype(np.float32).reshape(-1, 1, 2)
+    inset = np.array([cv2.pointPolygonTest(polygon, (float(x), float(y)), True) for x, y in line])
+    line = line[np.abs(inset - GLUE_OFFSET_MM) < 0.1 * GLUE_OFFSET_MM]
+    if not len(line):
+        return 0.0
+    return float(np.mean(scene.sole.top_normal_at(line)[:, 2] < MIN_GLUE_NZ))
 
 
 def _row_text(row: SoleBenchRow) -> str:

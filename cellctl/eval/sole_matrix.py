@@ -6,7 +6,8 @@ Every sole of `cellctl.sim.matrix.matrix_soles` is rendered with its variations,
 * measured but outside a tolerance: WRONG, the worst outcome (a silent wrong number for the robot);
 * the measurement raised an exception: CRASH (a defect: the cell would stop, not answer);
 * refused with a reason its variations make fair (`cellctl.sim.look`, e.g. "too few points" under heavy
-  noise): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
+  noise), or by the truth (toe and heel too close to call; a glue line on a wall steeper than the glue
+  contract): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
 
 The table prints, per variation (every sole that has it), soles measured / refused (with reasons), the length, heel and toe
 errors (mean and max of |error|), the glue path's worst inset, height and normal errors, and the time.
@@ -27,6 +28,7 @@ from cellctl.sim.render_cache import RenderCache
 from cellctl.sim.rig import rig_for
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.checks import MAX_GLUE_UNCOVERED
 from cellctl.vision.measurement import MIN_HALF_AREA_DIFFERENCE
 from cellctl.vision.reconstruction import SoleReconstructor
 
@@ -43,6 +45,16 @@ MIN_MEASURED_FRACTION = 0.9
 # A sole whose true half-areas differ by less than the measurement's threshold plus this may fairly be
 # refused as "too close to call": the measured footprint's halves scatter by a per cent or so.
 ENDS_CALL_MARGIN = 0.02
+# A sole whose true glue line lies on a surface steeper than the glue contract allows (more than 60 degrees
+# from vertical: a sloped side wall that the line 2 mm inside the footprint's edge runs up) over more than the
+# share of the path the coverage check lets go unmeasured has no valid result: its true glue normals fail the
+# contract, and its heights there change 3-7 mm per mm of inset on a wall that one camera cannot see. A
+# refusal by the self-checks that such a wall trips is then the correct answer: the outline cannot reach the
+# wall's foot (the footprint's edge), the wall is not measured, or the path's normals leave the contract.
+STEEP_GLUE_LINE_SHARE = MAX_GLUE_UNCOVERED
+STEEP_GLUE_LINE_REFUSALS = frozenset(
+    {FailureKind.OUTLINE_INCONSISTENT, FailureKind.SURFACE_NOT_MEASURED, FailureKind.GLUE_PATH_INCONSISTENT}
+)
 
 
 @dataclass
@@ -64,6 +76,8 @@ def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
             row.half_area_difference_true < MIN_HALF_AREA_DIFFERENCE + ENDS_CALL_MARGIN
         ):
             fair_kinds.add(FailureKind.ENDS_TOO_CLOSE_TO_CALL)
+        if row.glue_line_steep_true is not None and row.glue_line_steep_true > STEEP_GLUE_LINE_SHARE:
+            fair_kinds |= STEEP_GLUE_LINE_REFUSALS
         fair = row.failure is not None and row.failure in {kind.value for kind in fair_kinds}
         return MatrixRow(sole, row, "fair refusal" if fair else "missed")
     bad = tuple(name for name, limit in TOLERANCES.items() if abs(getattr(row, name)) > limit)

@@ -5,6 +5,11 @@ camera's gain of the moment. A pixel is changed where the current image departs 
 more than the sensor noise allows. This replaces a colour discriminant between "sole colour" and "table
 colour": a sole with a black rim on a dark table, a patterned table, or two-tone soles all differ from the
 table's own recorded texture, and the decision is per pixel, so no window moves the edge.
+
+A cast shadow departs from the taught picture without being the sole: it darkens the table's brightness and
+its texture by one factor. Windows whose texture the reference explains at such a factor are still table,
+and that factor is carried to the pixels beside them, so the sole's edge in a shadow is placed against the
+shadowed table, not the taught one.
 """
 
 from __future__ import annotations
@@ -32,6 +37,25 @@ MIN_TEXTURED_SHARE = 0.3  # of the windows covering a pixel: fewer with texture 
 FAINT_CONTRAST_SIGMAS = 8.0  # a change fainter than this (local contrast) may be found by texture alone
 TEXTURE_SIGMAS = 2.0  # the reference has texture where its local spread exceeds this many residual sigmas
 NOISE_FLOOR_DN = 0.5  # a quantised 8-bit image never has less residual noise than this
+# A window is also still table where a local gain and offset explain the current window from the reference
+# down to the noise (the fit's residual variance below FIT_SIGMAS^2 sigma^2), with the reference's texture
+# present at a shadow's or a lamp's scale (local gain above MIN_TEXTURE_GAIN). It needs less texture than
+# the correlation (a reference spread above STILL_TEXTURE_SIGMAS sigmas): a dark table in a shadow has about
+# 1.5 sigma of texture in 7 px, where the correlation's threshold votes in one window of ten. A sole's window
+# leaves 4-40 sigma^2 unexplained; a sole without texture has no gain on the table's.
+FIT_SIGMAS = 1.5
+MIN_TEXTURE_GAIN = 0.3
+SCALE_AGREEMENT = 0.4  # texture gain within this share of the brightness ratio (both are the shadow's factor)
+# The fit's vote and the carried factor are for shadows only (darker than taught): a black sole on a dark
+# table is 1.2-1.5 times its brightness with faint texture, and a lamp's factor would let it pass as table.
+MAX_SHADOW_FACTOR = 0.95
+MAX_CARRIED_FACTOR = 1.1  # the unshadowed table: 1 within its noise
+GONE_WINDOW_PX = 9  # ~3.5 mm
+GONE_INSIDE = 0.6
+STILL_TEXTURE_SIGMAS = 1.0
+# Shadow-corrected residual: the illumination factor of the still table is carried over ILLUMINATION_WINDOW_PX
+# (~12 mm; half that where the still table is near) to the pixels next to it, so the edge of a sole in a shadow is placed against the shadowed table.
+ILLUMINATION_WINDOW_PX = 31
 
 
 @dataclass(frozen=True)
@@ -69,8 +93,10 @@ class ChangeTest:
         predicted += self.offset
         return np.subtract(np.asarray(current, np.float32), predicted, out=predicted)
 
-    def changed(self, current: np.ndarray, reference: np.ndarray) -> np.ndarray:
-        """Bool image: pixels that no longer show the taught table.
+    def changed(self, current: np.ndarray, reference: np.ndarray, box: tuple[slice, slice] | None = None) -> np.ndarray:
+        """Bool image: pixels that no longer show the taught table (only within `box`, rows and columns, if
+        given: False elsewhere; the windows reach a few pixels, so a box a few mm larger than what is read
+        gives the same pixels as the whole image).
 
         A pixel is changed when its residual exceeds half the local contrast of the change around it (the
         mean residual of the clearly changed pixels within CONTRAST_WINDOW_PX), and at least PIXEL_SIGMAS
@@ -79,39 +105,63 @@ class ChangeTest:
         it a pixel out on strong contrast and cut a weakly contrasting rim off. A 3 x 3 majority (median)
         then removes isolated flags and misses; a straight edge stays where it is.
         """
-        # The texture votes on a worker thread beside the contrast (numpy and OpenCV release the GIL): the
-        # same arrays either way, in about half the time where a core is free.
+        if box is not None:
+            changed = np.zeros(np.shape(current), bool)
+            changed[box] = self.changed(np.asarray(current)[box], np.asarray(reference)[box])
+            return changed
+        # The texture votes on a worker thread beside the residual (numpy and OpenCV release the GIL).
         texture = worker("change-texture").submit(self._texture, current, reference)
         try:
-            magnitude = np.abs(self.residual(current, reference))
-            floor = PIXEL_SIGMAS * self.sigma
-            clear = (magnitude > floor).astype(np.float32)
-            window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
-            contrast = cv2.blur(magnitude * clear, window)
-            contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
-            half_contrast = np.multiply(contrast, 0.5, out=clear)
-            raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
-            faint = contrast < FAINT_CONTRAST_SIGMAS * self.sigma
+            residual = self.residual(current, reference)
         finally:
             futures.wait([texture])
-        still_table, texture_gone = texture.result()
+        still_table, texture_gone, illumination = texture.result()
+        # Against the table as lit now: where the still table is darker or lighter than taught (a shadow), its
+        # factor is carried to the pixels beside it, so a shadowed table pixel next to the sole is not changed.
+        predicted = np.multiply(np.asarray(reference, np.float32), self.gain)
+        predicted += self.offset
+        predicted *= illumination - 1.0
+        residual -= predicted
+        magnitude = np.abs(residual)
+        floor = PIXEL_SIGMAS * self.sigma
+        clear = (magnitude > floor).astype(np.float32)
+        window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
+        contrast = cv2.blur(magnitude * clear, window)
+        contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
+        half_contrast = np.multiply(contrast, 0.5, out=clear)
+        raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
+        faint = contrast < FAINT_CONTRAST_SIGMAS * self.sigma
         # Next to a strong step every window covering a table pixel also covers the step and correlates
         # poorly: the texture vote would move the edge out. It only speaks where the change is faint.
+        # Inside a changed region, though, a pixel whose texture is gone is changed whatever the contrast: a
+        # sole of about the table's brightness matches the prediction at scattered pixels. Inside: most of
+        # its GONE_WINDOW_PX neighbourhood passed the pixel test, which a table pixel beside the edge (half
+        # its neighbourhood at most) never has, even where the windows along a step of the table's texture
+        # lost its correlation.
+        inside = cv2.blur(raw.astype(np.float32), (GONE_WINDOW_PX, GONE_WINDOW_PX)) > GONE_INSIDE
+        inside &= texture_gone
         texture_gone &= faint
         raw |= texture_gone
+        raw |= inside
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         return cv2.medianBlur(mask, 3) > 0
 
-    def _texture(self, current: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(still table, texture gone): the table's own texture is still there, only darker or lighter (a
-        shadow), or it is gone (covered by something of whatever brightness).
+    def _texture(self, current: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(still table, texture gone, illumination): the table's own texture is still there, only darker or
+        lighter (a shadow), or it is gone (covered by something of whatever brightness).
 
         Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
         brightness; a window only counts as table if its texture is also scaled by a shadow's or a lamp's
         factor (below MAX_TEXTURE_GAIN), not by the tenfold of a sole's edge lying along a step of the table's. Still table: nearly all the textured windows covering the pixel correlate, so a sole
         pixel next to the table, about half of whose windows lie further inside, is not vetoed. Texture
         gone: nearly none correlates, which finds a sole of the table's own brightness but does not reach
-        past its edge. Only windows where the reference has texture to compare vote.
+        past its edge. Only windows where the reference has texture to compare vote. A window is also still
+        table where a local gain and offset explain it from the reference down to the noise (FIT_SIGMAS), at
+        a gain that agrees with its brightness ratio: a dark table in shadow has too little texture for the
+        correlation's threshold but not for this fit.
+
+        Also the illumination factor (current over the taught prediction, float32, 1 where unknown) averaged
+        over the still table within ILLUMINATION_WINDOW_PX.
         """
         # The same float32 operations in the same order as the plain formulas in the comments, in place on
         # few buffers and without copies of float32 inputs (a quarter of the time went to allocation).
@@ -123,25 +173,59 @@ class ChangeTest:
         var_c -= np.multiply(mean_c, mean_c, out=scratch)
         var_r = cv2.blur(np.multiply(ref, ref, out=scratch), window)  # blur(ref * ref) - mean_r * mean_r
         var_r -= np.multiply(mean_r, mean_r, out=scratch)
+        # The window's brightness against the taught prediction: a shadow or a lamp scales it as it scales
+        # the texture (the fit's vote below needs both), a sole's brightness has nothing to do with it.
+        brightness = np.multiply(mean_r, self.gain)
+        brightness += self.offset
+        np.divide(mean_c, np.maximum(brightness, 1.0, out=brightness), out=brightness)
         covariance = cv2.blur(np.multiply(cur, ref, out=scratch), window)  # blur(cur * ref) - mean_c * mean_r
         covariance -= np.multiply(mean_c, mean_r, out=mean_c)
+        # Residual variance of the local fit cur = a ref + b: var_c - covariance^2 / var_r (before var_c is reused).
+        unexplained = np.divide(np.multiply(covariance, covariance), np.maximum(var_r, 1e-6))
+        np.subtract(var_c, unexplained, out=unexplained)
         # ncc = covariance / sqrt(max(var_c * var_r, 1e-6))
         ncc = np.multiply(var_c, var_r, out=var_c)
         np.sqrt(np.maximum(ncc, 1e-6, out=ncc), out=ncc)
         np.divide(covariance, ncc, out=ncc)
         # texture_gain = covariance / max(var_r, 1e-6) / max(gain, 1e-6)
-        texture_gain = np.divide(covariance, np.maximum(var_r, 1e-6, out=mean_r), out=mean_r)
+        texture_gain = np.divide(covariance, np.maximum(var_r, 1e-6), out=mean_r)
         texture_gain /= max(self.gain, 1e-6)
         textured = var_r > (TEXTURE_SIGMAS * self.sigma) ** 2
         # Votes of the textured windows covering each pixel: nearly all correlate, or nearly none does.
         share = cv2.blur(textured.astype(np.float32), window)
+        in_scale = texture_gain < MAX_TEXTURE_GAIN
         table_like = np.greater(ncc, TABLE_NCC)
-        table_like &= texture_gain < MAX_TEXTURE_GAIN
+        table_like &= in_scale
         table_like &= textured
         agree = cv2.blur(table_like.astype(np.float32), window)
         enough = share > MIN_TEXTURED_SHARE
-        still = agree > np.multiply(share, UNANIMOUS, out=scratch)
-        still &= enough
         gone = agree < np.multiply(share, 1.0 - UNANIMOUS, out=scratch)
         gone &= enough
-        return still, gone
+        # Still table: the correlation's vote, or the local fit's (less texture needed, see FIT_SIGMAS).
+        still = agree > np.multiply(share, UNANIMOUS, out=scratch)
+        still &= enough
+        fitted = var_r > (STILL_TEXTURE_SIGMAS * self.sigma) ** 2
+        fitted &= unexplained < (FIT_SIGMAS * self.sigma) ** 2
+        fitted &= texture_gain > MIN_TEXTURE_GAIN
+        fitted &= in_scale
+        fitted &= np.abs(texture_gain - brightness) < SCALE_AGREEMENT * brightness
+        fitted &= brightness < MAX_SHADOW_FACTOR
+        fit_share = cv2.blur(fitted.astype(np.float32), window)
+        still |= fit_share > UNANIMOUS
+        # The illumination factor over the still table, carried to its neighbours.
+        predicted = np.multiply(ref, self.gain)
+        predicted += self.offset
+        ratio = np.divide(cur, np.maximum(predicted, 1.0), out=predicted)
+        # Near still table from a window of half the size (a shadow's own edge stays sharp), farther out
+        # from the whole window (the band beside the sole, whose windows do not vote).
+        # A shadow's factor or the unshadowed table's (~1) is carried, so the table beside a shadow keeps its
+        # own; a stray still pixel on a white sole (ratio ~5) or a black one on the dark table (1.2-1.5) is not.
+        plausible = (ratio > MIN_TEXTURE_GAIN) & (ratio < MAX_CARRIED_FACTOR)
+        weight = (still & plausible).astype(np.float32)
+        weighted = ratio * weight
+        illumination = np.ones_like(ratio)
+        for size, least in ((ILLUMINATION_WINDOW_PX, 0.05), (ILLUMINATION_WINDOW_PX // 2, 0.1)):
+            weights = cv2.blur(weight, (size, size))
+            near = weights >= least
+            illumination[near] = cv2.blur(weighted, (size, size))[near] / weights[near]
+        return still, gone, illumination

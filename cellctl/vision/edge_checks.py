@@ -13,6 +13,7 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import MIN_TESTABLE, CheckFailure
+from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.footprint import Footprint
 
 # The surface across the edge: sampled EDGE_OUTER_MM inside the outline and fitted as a line over
@@ -25,6 +26,22 @@ EDGE_INNER_MM = (3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
 # Medians on matrix soles (taught): sharp edges -0.06..+0.15 mm (18 soles, black ones the noisiest); rounded
 # 0.38 (a 3-5 mm fillet on a grey table, whose dark curve the change mask also left out) to 0.9 mm.
 EDGE_MAX_DROP_MM = 0.25
+# A side wall that leans out towards the table (a draft): the surface just inside the outline rises steeply
+# all the way up, so it fits the edge profile's line and passes it. The glue line GLUE_OFFSET_MM inside the
+# wall's foot then lies on the wall: heights there change by 1/tan(slope) per mm of inset (2.8-7 mm per mm
+# for walls 8-20 degrees off vertical), normals 70-80 degrees from vertical, outside the glue contract
+# (checks.MIN_GLUE_NZ), and the part of the wall that faces away from a camera is not seen at all. Per
+# outline point the measured heights at the glue line's offset and 2 mm further in give the slope; along any
+# stretch of WALL_WINDOW_MM of outline, more than WALL_MAX_SHARE of the points with both heights rising steeper
+# than WALL_MAX_SLOPE_DEG from horizontal is a wall, not noise. A wall whose top corner lies inside the glue
+# line's offset (a thin sole) leaves the line on the top: flat there, it passes. Sharp and rounded top edges
+# pass (a 3-5 mm fillet is at most ~30 degrees steep 2-4 mm in); nearer the outline, the 1 mm cells of the
+# height map take in the points of a vertical wall that a camera sees, from the table up (up to 1.5 mm in on
+# a black sole with a rounded edge), which is why the slope is not read there.
+WALL_INNER_MM = (GLUE_OFFSET_MM, GLUE_OFFSET_MM + 2.0)
+WALL_MAX_SLOPE_DEG = 60.0
+WALL_WINDOW_MM = 12
+WALL_MAX_SHARE = 0.6
 # The outline against where each camera's change mask ends along the outline's normal. The depth-step and
 # right-image tests (cellctl.vision.checks) look 1.5-7 mm either side of the outline: a local error of 1-2 mm (an edge whose
 # depth dropped out, a dent, a bulge) passes them and puts the glue line 1-2 mm off its offset. Here the
@@ -72,6 +89,33 @@ def check_edge_profile(
             f"the sole's top falls {drop:.1f} mm (median round the outline) over the last few mm before its "
             "outline: its top edge is rounded or bevelled, so the edge lies beyond where its depth was measured "
             "and the glue path near it is on a curve, not a flat top",
+        )
+    return None
+
+
+def check_steep_wall(
+    outline: np.ndarray, outward: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+) -> CheckFailure | None:
+    """A stretch of the outline (points 1 mm apart, closed) where the measured surface just inside rises like
+    a wall (steeper than WALL_MAX_SLOPE_DEG): the glue line there would lie on the wall, whose heights and
+    normals the cameras above cannot give within tolerance."""
+    near, far = (surface_height(outline - d * outward) for d in WALL_INNER_MM)
+    known = np.isfinite(near) & np.isfinite(far)
+    slope = np.where(known, far - near, 0.0) / (WALL_INNER_MM[1] - WALL_INNER_MM[0])
+    steep = known & (slope > np.tan(np.radians(WALL_MAX_SLOPE_DEG)))
+    window = np.ones(WALL_WINDOW_MM)
+    wrap = WALL_WINDOW_MM - 1
+    count = np.convolve(np.concatenate([known, known[:wrap]]).astype(float), window, "valid")
+    hits = np.convolve(np.concatenate([steep, steep[:wrap]]).astype(float), window, "valid")
+    share = np.where(count >= WALL_WINDOW_MM / 2, hits / np.maximum(count, 1.0), 0.0)
+    worst = int(np.argmax(share))
+    if share[worst] > WALL_MAX_SHARE:
+        return CheckFailure(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"the sole's surface rises like a wall just inside its outline (more than {WALL_MAX_SLOPE_DEG:g} degrees "
+            f"steep between {WALL_INNER_MM[0]:g} and {WALL_INNER_MM[1]:g} mm in, {100 * share[worst]:.0f} % of a "
+            f"{WALL_WINDOW_MM} mm stretch from outline point {worst}): a side wall leaning out to its foot, on which "
+            "the glue line would lie; its heights and normals cannot be measured within tolerance from above",
         )
     return None
 

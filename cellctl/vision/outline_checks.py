@@ -19,7 +19,7 @@ from cellctl.vision.checks import (
     hidden_from,
 )
 from cellctl.vision.closed_path import outward_normals, resample_closed
-from cellctl.vision.edge_checks import check_edge_offsets, check_edge_profile
+from cellctl.vision.edge_checks import check_edge_offsets, check_edge_profile, check_steep_wall
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import edge_heights, projections, silhouette_offsets, table_level
 from cellctl.vision.reconstruction import Reconstruction
@@ -44,6 +44,22 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
     problem = check_edge_profile(ring, outward, heights)
     if problem is not None:
         return problem
+    problem = _check_outline_images(reconstruction, ring, outward, surface, heights)
+    if problem is not None:
+        return problem
+    # Last: a wall the checks above let through (measured all the way down to its foot) still puts the glue
+    # line on its steep face.
+    return check_steep_wall(ring, outward, heights)
+
+
+def _check_outline_images(
+    reconstruction: Reconstruction,
+    ring: np.ndarray,
+    outward: np.ndarray,
+    surface: SoleSurface,
+    heights: Callable[[np.ndarray], np.ndarray],
+) -> CheckFailure | None:
+    """The outline against both cameras' change masks (taught table only): the right image, then the edge."""
     changed_right = reconstruction.changed_right
     if changed_right is None or reconstruction.calibration is None:
         return None

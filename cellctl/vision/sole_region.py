@@ -25,6 +25,9 @@ SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels
 WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
 EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare
+# The change masks are computed this far round the sole's high points (~40 mm: past fattening, a leaning
+# wall's foot, the outline checks' 7 mm and the unmeasured-pixel closing's 24 mm).
+CHANGE_MARGIN_PX = 100
 MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 # Noise of the rectified left grey image (DN of 8 bits, `image_noise_dn`) above which the surface is not
@@ -106,17 +109,35 @@ def change_split(
     test = ChangeTest.fit(current, reference, np.round(cloud.pixels[outside]).astype(np.int64))
     if test is None:
         return None
-    changed = test.changed(current, reference)
+    # The masks are read near the sole only (its points, the outline's checks, the image edge): computed in
+    # the box of the high points and CHANGE_MARGIN_PX round it, the rest of the image is left unchanged.
+    left_box, right_box = _change_boxes(cloud, high, current.shape)
+    changed = test.changed(current, reference, left_box)
     # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
     right_table = cloud.pixels[outside] - np.column_stack([cloud.disparity[outside], np.zeros(len(outside))])
     right_test = ChangeTest.fit(cloud.rectified[1], taught.right, np.round(right_table).astype(np.int64))
-    changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right)
+    changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right, right_box)
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
     near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
     candidates = np.concatenate([high, near])
     x, y = np.round(cloud.pixels[candidates]).astype(np.int64).T
     return ChangeSplit(np.sort(candidates[changed[y, x]]), changed, changed_right)
+
+
+def _change_boxes(
+    cloud: StereoCloud, high: np.ndarray, shape: tuple[int, ...]
+) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+    """(rows, columns) of the left and right images round the high points, CHANGE_MARGIN_PX out (the right
+    one shifted by their disparities)."""
+    height, width = shape[:2]
+    x, y = cloud.pixels[high].T
+    d = cloud.disparity[high]
+    m = CHANGE_MARGIN_PX
+    rows = slice(max(int(y.min()) - m, 0), min(int(y.max()) + m + 1, height))
+    left = slice(max(int(x.min()) - m, 0), min(int(x.max()) + m + 1, width))
+    right = slice(max(int((x - d).min()) - m, 0), min(int((x - d).max()) + m + 1, width))
+    return (rows, left), (rows, right)
 
 
 def image_noise_dn(grey: np.ndarray) -> float:
@@ -215,23 +236,43 @@ def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:
 def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, index: np.ndarray) -> float:
     """Share of the sole's changed pixels (taught table only) without a measured point: glare, no texture.
 
-    The sole's image region is its measured pixels closed over UNMEASURED_CLOSE_PX; where that holds
-    many changed pixels without depth, an outline that disagrees with the depth step has lost part of
-    the sole to unmeasured pixels, and that is the reason to give (cellctl.vision.measurement).
+    The sole's image region is its measured pixels closed over UNMEASURED_CLOSE_PX, and every changed region
+    those pixels touch: a glossy toe whose whole tip lost its depth is changed but lies beyond any closing
+    of the measured pixels. Where that region holds many changed pixels without depth, an outline that
+    disagrees with the depth step has lost part of the sole to unmeasured pixels, and that is the reason to
+    give (cellctl.vision.measurement).
     """
     if changed_left is None or index.size == 0:
         return 0.0
     width, height = cloud.image_size
     x, y = np.round(cloud.pixels[index]).astype(int).T
-    # Only the sole's box and a margin of twice the disc's reach: outside it the whole image's closing is
-    # empty, and inside it the same (a cell within the disc's reach of the box's edge is farther than the
-    # reach from the sole, so unmarked after the dilation, and the erosion keeps it unmarked).
+    # The changed regions the sole's measured pixels lie in (8-connected), as a mask and their box; labelled
+    # within the box of the changed pixels only (the change masks are computed round the sole).
+    changed_rows = np.flatnonzero(np.any(changed_left, axis=1))
+    changed_columns = np.flatnonzero(np.any(changed_left, axis=0))
+    changed_sole = np.zeros(changed_left.shape, bool)
+    if changed_rows.size:
+        box = (slice(changed_rows[0], changed_rows[-1] + 1), slice(changed_columns[0], changed_columns[-1] + 1))
+        count, labels = cv2.connectedComponents(changed_left[box].view(np.uint8), connectivity=8)
+        touched = np.zeros(count, bool)
+        within = (y >= box[0].start) & (y < box[0].stop) & (x >= box[1].start) & (x < box[1].stop)
+        touched[labels[y[within] - box[0].start, x[within] - box[1].start]] = True
+        touched[0] = False  # the unchanged background
+        changed_sole[box] = touched[labels]
+    rows, columns = np.flatnonzero(np.any(changed_sole, axis=1)), np.flatnonzero(np.any(changed_sole, axis=0))
+    # Only the box of the sole and its changed regions and a margin of twice the disc's reach: outside it the
+    # whole image's closing is empty, and inside it the same (a cell within the disc's reach of the box's
+    # edge is farther than the reach from the sole, so unmarked after the dilation, and the erosion keeps it
+    # unmarked).
     margin = UNMEASURED_CLOSE_PX + 1
-    top, left = max(int(y.min()) - margin, 0), max(int(x.min()) - margin, 0)
-    bottom, right = min(int(y.max()) + margin + 1, height), min(int(x.max()) + margin + 1, width)
+    top = max(min(int(y.min()), int(rows[0]) if rows.size else height) - margin, 0)
+    left = max(min(int(x.min()), int(columns[0]) if columns.size else width) - margin, 0)
+    bottom = min(max(int(y.max()), int(rows[-1]) if rows.size else 0) + margin + 1, height)
+    right = min(max(int(x.max()), int(columns[-1]) if columns.size else 0) + margin + 1, width)
     sole = np.zeros((bottom - top, right - left), np.uint8)
     sole[y - top, x - left] = 1
     region = disc_closing(sole, UNMEASURED_CLOSE_PX) > 0
+    region |= changed_sole[top:bottom, left:right]
     measured = np.zeros(region.shape, bool)
     mx, my = np.round(cloud.pixels).astype(int).T
     inside = (mx >= left) & (mx < right) & (my >= top) & (my < bottom)

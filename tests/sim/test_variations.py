@@ -14,7 +14,7 @@ import pytest
 
 from cellctl.cli import main
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import SoleBenchRow, measure_scene
+from cellctl.eval.sole_bench import SoleBenchRow, glue_line_steep, measure_scene
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
 from cellctl.sim.matrix import END_VARIATIONS, MATRIX_COLOURS, MATRIX_ENTRIES, MatrixSole, matrix_soles
@@ -260,8 +260,30 @@ def test_judging_valid_and_refused_results() -> None:
     too_close = replace(refused, failure=FailureKind.ENDS_TOO_CLOSE_TO_CALL.value, half_area_difference_true=0.05)
     assert judge(sole, too_close).verdict == "fair refusal"
     assert judge(sole, replace(too_close, half_area_difference_true=0.09)).verdict == "missed"
+    # A glue line on a wall steeper than the glue contract: the self-checks' refusals are right, others not.
+    sloped = MatrixSole(1, "white", ("sloped-wall",))
+    on_wall = replace(refused, failure=FailureKind.OUTLINE_INCONSISTENT.value, glue_line_steep_true=0.5)
+    assert judge(sloped, on_wall).verdict == "fair refusal"
+    assert judge(sloped, replace(on_wall, failure=FailureKind.SURFACE_NOT_MEASURED.value)).verdict == "fair refusal"
+    assert judge(sloped, replace(on_wall, glue_line_steep_true=0.02)).verdict == "missed"
+    assert judge(sloped, replace(on_wall, failure=FailureKind.NO_SOLE.value)).verdict == "missed"
+    assert judge(sloped, replace(_row(), glue_line_steep_true=0.5)).verdict == "right"  # measured right stays right
     results = [judge(sole, _row()), judge(sole, refused)]
     assert acceptance(results).measured_fraction == 0.5 and not acceptance(results).passed
+
+
+@pytest.mark.parametrize(
+    ("look", "low", "high"),
+    [
+        (SceneLook(), 0.0, 0.0),  # vertical walls: the glue line is on the top
+        (SceneLook(wall_slope_deg=12.0), 0.3, 1.0),  # a 12 degree wall rising 4 mm per mm: the line runs up it
+        (SceneLook(wall_slope_deg=12.0, height="flat"), 0.0, 0.0),  # 2 mm of wall: the line stays on the top
+        (SceneLook(top_edge_radius_mm=5.0), 0.0, 0.0),  # a 5 mm fillet is 37 degrees steep 2 mm in
+    ],
+)
+def test_true_glue_line_on_a_wall_steeper_than_the_contract(look: SceneLook, low: float, high: float) -> None:
+    scene = SoleScene.random(7, "white", half_size_rig(), look)
+    assert low <= glue_line_steep(scene) <= high
 
 
 def test_matrix_bench_runs_on_a_tiny_set() -> None:

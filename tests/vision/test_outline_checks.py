@@ -9,7 +9,7 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import check_outline_right
-from cellctl.vision.edge_checks import check_edge_profile
+from cellctl.vision.edge_checks import check_edge_profile, check_steep_wall
 from cellctl.vision.footprint import Footprint
 
 RADIUS = 50.0
@@ -105,3 +105,36 @@ def test_a_sharp_top_edge_passes_the_edge_profile_and_a_rounded_one_is_refused()
     problem = check_edge_profile(inner, inward_outward, noisy(measured(top(4.0), 1.0)))
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert "rounded" in problem.reason
+
+
+def sloped(slope_deg: float, foot_mm: float = 4.0) -> Callable[[np.ndarray], np.ndarray]:
+    """Height of a sole whose wall rises from a vertical foot at the outline, leaning out by `slope_deg`."""
+
+    def height(xy: np.ndarray) -> np.ndarray:
+        d = RADIUS - np.linalg.norm(xy, axis=1)
+        z = np.minimum(foot_mm + np.maximum(d, 0.0) / np.tan(np.radians(slope_deg)), HEIGHT)
+        return np.where(d >= 0, z, np.nan)
+
+    return height
+
+
+def test_a_wall_leaning_out_to_its_foot_is_refused_where_it_is_measured() -> None:
+    outline, outward = ring()
+    noise = np.random.default_rng(3)
+
+    def noisy(height: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+        return lambda xy: height(xy) + noise.normal(0.0, 0.3, len(xy))
+
+    # Sharp and rounded top edges are no wall (a 5 mm fillet is ~45 degrees steep 1-3 mm in).
+    assert check_steep_wall(outline, outward, noisy(top())) is None
+    assert check_steep_wall(outline, outward, noisy(top(5.0))) is None
+    # A 12 degree wall measured down to its foot on a quarter of the sole (the side facing the camera): the
+    # edge profile's line fits it (it passes), the glue line 2 mm in would be on it.
+    wall = sloped(12.0)
+    seen = lambda xy: np.where(xy[:, 0] > 35.0, wall(xy), np.nan)  # noqa: E731
+    assert check_edge_profile(outline, outward, noisy(seen)) is None
+    problem = check_steep_wall(outline, outward, noisy(seen))
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert "wall" in problem.reason
+    # A 40 degree slope (a chamfer the contract's glue normals still allow) is not a wall.
+    assert check_steep_wall(outline, outward, noisy(sloped(50.0))) is None

@@ -1,11 +1,44 @@
-"""The sole region's helpers against what they replace."""
+"""The share of the sole's pixels without depth counts a whole end that lost its depth (glare on a toe); its
+disc closing is OpenCV's."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from cellctl.vision.sole_region import disc_closing
+from cellctl.vision.cloud import StereoCloud
+from cellctl.vision.sole_region import disc_closing, unmeasured_fraction
+
+
+def _cloud(measured: np.ndarray) -> StereoCloud:
+    """A cloud with one point per True pixel of `measured` (H x W); only the pixels matter here."""
+    y, x = np.nonzero(measured)
+    pixels = np.column_stack([x, y]).astype(np.float64)
+    n = len(pixels)
+    height, width = measured.shape
+    return StereoCloud(np.zeros((n, 3)), np.zeros((n, 3), np.float32), pixels, np.full(n, 50.0), (width, height))
+
+
+def test_a_changed_end_without_depth_beyond_the_measured_pixels_counts_as_unmeasured() -> None:
+    shape = (300, 600)
+    changed = np.zeros(shape, bool)
+    changed[100:200, 100:420] = True  # the sole as the change test sees it
+    measured = np.zeros(shape, bool)
+    measured[100:200, 100:300] = True  # depth on all but its last 120 px (~47 mm, past the 61 px closing)
+    cloud = _cloud(measured)
+    index = np.arange(len(cloud.pixels))
+    assert abs(unmeasured_fraction(cloud, changed, index) - 120 / 320) < 0.02
+
+
+def test_a_changed_region_the_sole_does_not_touch_is_not_the_soles() -> None:
+    shape = (300, 600)
+    changed = np.zeros(shape, bool)
+    changed[100:200, 100:300] = True
+    changed[20:60, 450:580] = True  # something else changed, apart from the sole, with no depth
+    measured = changed.copy()
+    measured[20:60, 450:580] = False
+    cloud = _cloud(measured)
+    assert unmeasured_fraction(cloud, changed, np.arange(len(cloud.pixels))) == 0.0
 
 
 def test_disc_closing_is_opencvs_closing_with_its_disc() -> None:
