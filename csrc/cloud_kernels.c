@@ -624,3 +624,56 @@ int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params
     }
     return CK_OK;
 }
+
+/* ---- points on the footprint's raster (cellctl.vision.footprint) ---- */
+
+static int check_raster(const double *xy, int64_t n, int64_t stride, double cell, int64_t rows, int64_t cols) {
+    if (!xy)
+        return CK_ERR_NULL;
+    if (n < 0 || stride < 2 || !(cell > 0.0) || rows < 0 || cols < 0 || (cols > 0 && rows > INT64_MAX / cols))
+        return CK_ERR_SIZE;
+    return CK_OK;
+}
+
+/* The flat cell of a point, or -1 outside the raster: the comparisons in double, so NaN and infinities
+ * fall outside as numpy's clip-and-test finds them. */
+static inline int64_t raster_cell(double x, double y, double x0, double y0, double cell, int64_t rows,
+                                  int64_t cols) {
+    const double col = floor((x - x0) / cell), row = floor((y - y0) / cell);
+    if (!(col >= 0.0 && col < (double)cols && row >= 0.0 && row < (double)rows))
+        return -1;
+    return (int64_t)row * cols + (int64_t)col;
+}
+
+int ck_cell_counts(const double *xy, int64_t n, int64_t stride, double x0, double y0, double cell, int64_t rows,
+                   int64_t cols, float *out) {
+    int rc = check_raster(xy, n, stride, cell, rows, cols);
+    if (rc != CK_OK)
+        return rc;
+    if (!out)
+        return CK_ERR_NULL;
+    if (n >= (int64_t)1 << 24)
+        return CK_ERR_SIZE; /* a count must stay exact in float32 */
+    for (int64_t k = 0; k < rows * cols; ++k)
+        out[k] = 0.0f;
+    for (int64_t i = 0; i < n; ++i) {
+        const int64_t c = raster_cell(xy[i * stride], xy[i * stride + 1], x0, y0, cell, rows, cols);
+        if (c >= 0)
+            out[c] += 1.0f;
+    }
+    return CK_OK;
+}
+
+int ck_cells_marked(const double *xy, int64_t n, int64_t stride, double x0, double y0, double cell,
+                    const uint8_t *mask, int64_t rows, int64_t cols, uint8_t *out) {
+    int rc = check_raster(xy, n, stride, cell, rows, cols);
+    if (rc != CK_OK)
+        return rc;
+    if (!mask || !out)
+        return CK_ERR_NULL;
+    for (int64_t i = 0; i < n; ++i) {
+        const int64_t c = raster_cell(xy[i * stride], xy[i * stride + 1], x0, y0, cell, rows, cols);
+        out[i] = (uint8_t)(c >= 0 && mask[c] != 0);
+    }
+    return CK_OK;
+}

@@ -130,4 +130,17 @@ int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params
                     const double *dy, const int32_t *rows, const float *image, int height, int width, float *out,
                     int threads);
 
+/*
+ * Points on a raster of the table plane (cellctl.vision.footprint.Footprint): point i at (xy[i * stride],
+ * xy[i * stride + 1]) lies in cell (floor((y - y0) / cell), floor((x - x0) / cell)) of a rows x cols raster,
+ * computed in double as numpy computes it; points outside the raster (or NaN) are in none.
+ * ck_cell_counts: out (rows x cols float32, overwritten) counts the points of each cell.
+ * ck_cells_marked: out[i] = 1 where point i's cell is non-zero in mask (rows x cols uint8), else 0.
+ * stride: doubles from one point to the next (2 for N x 2 rows, 3 for x y z rows), at least 2.
+ */
+int ck_cell_counts(const double *xy, int64_t n, int64_t stride, double x0, double y0, double cell, int64_t rows,
+                   int64_t cols, float *out);
+int ck_cells_marked(const double *xy, int64_t n, int64_t stride, double x0, double y0, double cell,
+                    const uint8_t *mask, int64_t rows, int64_t cols, uint8_t *out);
+
 #endif

@@ -26,7 +26,7 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.measurement import MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
-from cellctl.vision.runtime import one_blas_thread, settle_garbage_collector
+from cellctl.vision.runtime import keep_freed_memory, one_blas_thread, settle_garbage_collector
 
 DEFAULT_SOLES: tuple[tuple[int, str], ...] = ((1, "white"), (2, "black"), (3, "white"), (4, "black"))
 
@@ -130,6 +130,7 @@ def bench_cycles(
     if cycles < 1:
         raise ValueError(f"cycles must be at least 1, got {cycles}")
     one_blas_thread()  # as the service does (cellctl.service.measuring)
+    keep_freed_memory()  # as the service does
     scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
     pairs = [scene.render() for scene in scenes]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]

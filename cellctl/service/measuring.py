@@ -24,7 +24,7 @@ from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_fr
 from cellctl.service.recipes import Recipe
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.reconstruction import SoleReconstructor
-from cellctl.vision.runtime import one_blas_thread, settle_garbage_collector
+from cellctl.vision.runtime import keep_freed_memory, one_blas_thread, settle_garbage_collector
 from cellctl.vision.teach import TaughtTable, TeachError, load_taught
 from firmware_io.handshake import Trigger
 from firmware_io.registers import ErrorCode
@@ -40,6 +40,7 @@ class CellMeasurer:
         # numpy's BLAS on one thread: its thread team made single products of a cycle take up to 30 x their
         # time when a core was busy (cellctl.vision.runtime); the same numbers on one thread.
         one_blas_thread()
+        keep_freed_memory()  # the memory a cycle frees stays for the next: no page faults (same module)
         self.calib, self.calibration_problem = load_calibration(config)
         self.reconstructor = (
             None

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cellctl.stereo.kernels import points_in_polygon
+from cellctl.stereo.kernels import cell_counts, cells_marked, points_in_polygon
 
 DEFAULT_CELL_MM = 0.5  # ~ the stereo pixel footprint at 550 mm (0.39 mm): most cells receive a point
 
@@ -45,14 +45,13 @@ class Footprint:
         return np.clip(row, 0, rows - 1), np.clip(col, 0, cols - 1), inside
 
     def counts(self, xy: np.ndarray) -> np.ndarray:
-        """Number of points per cell (float32, the raster's shape)."""
-        row, col, inside = self.cells(xy)
-        flat = np.bincount(row[inside] * self.mask.shape[1] + col[inside], minlength=self.mask.size)
-        return flat.reshape(self.mask.shape).astype(np.float32)
+        """Number of points per cell (float32, the raster's shape); the cells as `cells` finds them, in C
+        (one pass instead of numpy's ten over the ~5 10^5 points of a cycle)."""
+        return cell_counts(xy, self.origin, self.cell_mm, self.mask.shape)
 
     def contains(self, xy: np.ndarray) -> np.ndarray:
-        row, col, inside = self.cells(xy)
-        return inside & (self.mask[row, col] > 0)
+        """Whether each point (N x 2) lies in a marked cell (the cells as `cells` finds them, in C)."""
+        return cells_marked(xy, self.origin, self.cell_mm, self.mask)
 
     def centres(self) -> np.ndarray:
         """Table (x, y) of the centres of the marked cells (N x 2)."""

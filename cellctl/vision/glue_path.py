@@ -8,13 +8,12 @@ from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.local_fit import local_planes
 from cellctl.vision.sole_result import GluePath
-from cellctl.vision.surface import SoleSurface
+from cellctl.vision.surface import PATH_SMOOTHING_MM, SoleSurface, path_heights
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
 GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
-GLUE_SMOOTHING_MM = 6.0  # heights along the path: width of the local plane fit, averages the patches' noise
 
 
 def glue_path(
@@ -51,10 +50,10 @@ def glue_path(
         )
     # Neighbouring patches overlap but their noise does not all average out; the surface is smooth, so a
     # plane fitted to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
-    # for a sloping surface also where the path turns round a pointed end).
-    sigma = GLUE_SMOOTHING_MM / spacing_mm
+    # for a sloping surface also where the path turns round a pointed end), as wide as the noise needs.
+    sigma = PATH_SMOOTHING_MM / spacing_mm
     raw = without_single_outliers(samples.z[: len(path_xy)])
-    z, _ = local_planes(path_xy, path_xy, raw, GLUE_SMOOTHING_MM)
+    z = path_heights(path_xy, raw)  # a local plane fit as wide as the local noise needs (cellctl.vision.surface)
     inner = without_single_outliers(samples.z[len(path_xy) :])
     # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
     # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).

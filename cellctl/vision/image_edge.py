@@ -1,7 +1,19 @@
 """The sole's edge placed from the images: the depth-based outline moved onto the edge both cameras'
 silhouettes (change masks against the taught table) show, each projected at the height where that camera's
-silhouette lies (docs/measurements.md, Footprint). Off by default (PLACE_EDGE_FROM_IMAGES): see
-docs/sole-benchmark.md for what it measured and why it is not on.
+silhouette lies (docs/measurements.md, Footprint), only where depth is silent between the outline and that
+edge (`depth_silent`). docs/sole-benchmark.md has what it measured, with and without that guard.
+
+Why the guard: after a move the edge-offset check compares the outline with the masks it was moved onto, so
+it can no longer refuse an outward error both masks share (a contact shadow). Such an error lies on the
+table, whose texture the matcher measures at table height; the error the move is for (a black top edge's
+last mm without depth: where the census window straddles the step along an edge near the epipolar lines, the
+sole's and the table's disparities cost alike and the uniqueness test drops both) has no depth at all there.
+
+Off by default (PLACE_EDGE_FROM_IMAGES): the guard holds where the shadowed table keeps its texture (the test's
+case), but the matrix's dark cast shadows (2016, 2039: a low side light) leave the table beside the sole
+without depth too, and there the guarded placement moved 55 outline points 1.6-3.2 mm past the true edge
+(both soles refused by the depth-step check all the same; /work/notes/edge-diag/guard_truth.py). On, it
+measures 3 more of the 84 matrix soles and bench --cycle's black sole 2 (docs/sole-benchmark.md, fifth round).
 
 A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
 the edge lies where the silhouette's ray meets the top edge's measured height. Where a camera sees the wall,
@@ -27,10 +39,15 @@ from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import SoleSurface
 
-PLACE_EDGE_FROM_IMAGES = False
+PLACE_EDGE_FROM_IMAGES = False  # the module docstring says why
 EDGE_MOVE_MIN_MM = 0.5  # a sharp edge's offsets scatter by ~0.2 mm in the images: smaller is no evidence
 EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a texture line fools one mask)
 EDGE_MOVE_SMOOTHING_MM = 1.5
+# The guard (`depth_silent`): a move must cross ground where depth measured nothing at the table's height, in a
+# strip this wide along the outline, up to this far short of the proposed edge (the table is measured from there).
+SILENT_STRIP_MM = 1.0
+SILENT_SHORT_OF_EDGE_MM = 0.25
+SILENT_STEP_MM = 0.125  # half a raster cell
 
 
 def projections(
@@ -108,16 +125,60 @@ def _local(offsets: np.ndarray) -> np.ndarray:
         return np.where(enough, np.nanmedian(window, axis=0), np.nan)
 
 
-def edge_shift(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+def edge_shift(
+    left: np.ndarray, right: np.ndarray, silent: Callable[[np.ndarray], np.ndarray] | None = None
+) -> np.ndarray:
     """How far to move each outline point out along its normal: both cameras' local edge where they agree
     within EDGE_MOVE_AGREE_MM and their mean is more than EDGE_MOVE_MIN_MM beyond the outline, else 0;
     smoothed along the outline. Never inward: the change masks' own errors (a wall lit like the table, the
     change test's blur at a top edge) put the edge inside the sole in both cameras alike, so their agreement
-    on an inward edge is no evidence (the self-check refuses there instead)."""
+    on an inward edge is no evidence (the self-check refuses there instead).
+
+    silent (proposed moves -> bool per point): whether depth is silent over each move (`depth_silent`); where
+    it is not, the point stays, also after the smoothing, so the edge-offset check still judges it there."""
     local_left, local_right = _local(left), _local(right)
     mean = 0.5 * (local_left + local_right)
     move = (np.abs(local_left - local_right) <= EDGE_MOVE_AGREE_MM) & (mean > EDGE_MOVE_MIN_MM)
-    return smooth_along(np.where(move, mean, 0.0), EDGE_MOVE_SMOOTHING_MM)
+    proposed = np.where(move, mean, 0.0)
+    if silent is None:
+        return smooth_along(proposed, EDGE_MOVE_SMOOTHING_MM)
+    allowed = move & silent(proposed)
+    return np.where(allowed, smooth_along(np.where(allowed, mean, 0.0), EDGE_MOVE_SMOOTHING_MM), 0.0)
+
+
+def depth_silent(ring: np.ndarray, outward: np.ndarray, table_points: Footprint) -> Callable[[np.ndarray], np.ndarray]:
+    """Per outline point and proposed move: True where depth measured no point at the table's height between
+    the outline and the proposed edge (a strip SILENT_STRIP_MM wide, up to SILENT_SHORT_OF_EDGE_MM short of it).
+
+    That is the case the move is for: a weakly textured top edge whose last mm has no depth (the matcher
+    cannot tell the top's disparity from the table's where its window straddles the step), so the depth step
+    ends short of the edge both masks show. An outward error both masks share lies on the table instead (a
+    contact shadow, a dark stain at the foot): the matcher measures the table's texture there at table
+    height, and the point is not moved (the edge-offset check then refuses it). `table_points` are the raw
+    cells with such points, not the dilated `measured_cells`, which would hide a 1 mm gap."""
+    tangent = np.column_stack([-outward[:, 1], outward[:, 0]])
+    across = np.arange(-0.5 * SILENT_STRIP_MM, 0.5 * SILENT_STRIP_MM + 1e-9, SILENT_STEP_MM)
+
+    def silent(proposed: np.ndarray) -> np.ndarray:
+        result = np.zeros(len(ring), bool)
+        moving = np.flatnonzero(proposed > 0)
+        if moving.size == 0:
+            return result
+        reach = np.maximum(proposed[moving] - SILENT_SHORT_OF_EDGE_MM, SILENT_STEP_MM)
+        along = np.arange(0.0, float(reach.max()) + 1e-9, SILENT_STEP_MM)
+        xy = (
+            ring[moving, None, None]
+            + along[None, :, None, None] * outward[moving, None, None]
+            + across[None, None, :, None] * tangent[moving, None, None]
+        )  # moving x along x across x 2
+        row, col, inside = table_points.cells(xy.reshape(-1, 2))
+        shape = xy.shape[:3]
+        within = np.broadcast_to((along[None, :] <= reach[:, None] + 1e-9)[:, :, None], shape)
+        table = table_points.mask[row, col].reshape(shape).astype(bool) | ~inside.reshape(shape)
+        result[moving] = ~np.any(table & within, axis=(1, 2))
+        return result
+
+    return silent
 
 
 def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:
@@ -125,8 +186,8 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
     changed_left, changed_right = reconstruction.changed_left, reconstruction.changed_right
     if not PLACE_EDGE_FROM_IMAGES or changed_left is None or changed_right is None:
         return outline
-    if reconstruction.calibration is None:
-        return outline
+    if reconstruction.calibration is None or reconstruction.table_points is None:
+        return outline  # no guard without the raw depth cells: the check judges the outline as it is
     ring = resample_closed(outline, 1.0)
     outward = outward_normals(ring)
     if not np.any(np.isfinite(surface.coarse_heights(ring - 3.0 * outward, 3.0))):
@@ -137,7 +198,7 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
         silhouette_offsets(ring, outward, edge_height, changed, to_pixel, centre, level)
         for changed, (to_pixel, centre) in zip((changed_left, changed_right), projections(reconstruction), strict=True)
     )
-    shift = edge_shift(left, right)
+    shift = edge_shift(left, right, depth_silent(ring, outward, reconstruction.table_points))
     if not np.any(shift):
         return outline
     return ring + shift[:, None] * outward

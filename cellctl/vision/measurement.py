@@ -100,38 +100,41 @@ def measure_sole(
     smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
     surface = SoleSurface(reconstruction)  # one per reconstruction: its neighbour grid serves every query below
     outline = onto_image_edge(reconstruction, smooth_closed(footprint.outline(), smoothing), surface)
-    centroid, axis = _principal_axis(outline)
-    proj = (outline - centroid) @ axis
-    lo, hi = float(proj.min()), float(proj.max())
-    difference = _half_area_difference(footprint, centroid, axis, 0.5 * (lo + hi))
-    if difference < 0:  # the toe is the end with the larger half: orient the axis heel -> toe
-        axis, lo, hi, difference = -axis, -hi, -lo, -difference
-    length = hi - lo
-    base.update(axis=axis, outline=outline, half_area_difference=difference)
-    if difference < MIN_HALF_AREA_DIFFERENCE:
-        return _invalid(
-            FailureKind.ENDS_TOO_CLOSE_TO_CALL,
-            f"toe and heel too close to call: the footprint halves differ by {100 * difference:.1f} % of the area "
-            f"(need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
-            **base,
-        )
-    # The glue path needs only the footprint, the outline and the surface: it is built on a second thread while
-    # this one checks the outline and takes the heights (numpy, OpenCV and the C kernels release the GIL).
-    # The refusals keep their order: the glue path's come after the outline's and the heights'.
-    glue = worker("glue-path").submit(
-        _glue, footprint, outline, surface, centroid, axis, glue_offset_mm, glue_spacing_mm
-    )
+    # The glue line needs only the footprint and the outline: its rasters are drawn on a second thread from
+    # here, beside the axis, the half areas, the outline checks and the heights (numpy, OpenCV and the C kernels
+    # release the GIL); the glue path on it follows on the same thread once the axis is known. The refusals keep
+    # their order: the glue path's come after the axis', the outline's and the heights'.
+    line = worker("glue-path").submit(_glue_line, footprint, outline, glue_offset_mm)
     try:
-        checked = _outline_and_heights(reconstruction, outline, surface, centroid, axis, lo, hi, base)
-        timings["measure"] = time.perf_counter() - start
-        if isinstance(checked, MeasurementRefused):
-            return checked  # as before: whatever the glue path came to does not matter
-        heel_z, toe_z = checked
-        start = time.perf_counter()
-        path, failure, missing = glue.result()
-        timings["glue_path"] = time.perf_counter() - start  # what is left of it after the outline and heights
+        centroid, axis = _principal_axis(outline)
+        proj = (outline - centroid) @ axis
+        lo, hi = float(proj.min()), float(proj.max())
+        difference = _half_area_difference(footprint, centroid, axis, 0.5 * (lo + hi))
+        if difference < 0:  # the toe is the end with the larger half: orient the axis heel -> toe
+            axis, lo, hi, difference = -axis, -hi, -lo, -difference
+        length = hi - lo
+        base.update(axis=axis, outline=outline, half_area_difference=difference)
+        if difference < MIN_HALF_AREA_DIFFERENCE:
+            return _invalid(
+                FailureKind.ENDS_TOO_CLOSE_TO_CALL,
+                f"toe and heel too close to call: the footprint halves differ by {100 * difference:.1f} % of the "
+                f"area (need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
+                **base,
+            )
+        glue = worker("glue-path").submit(_glue, line, surface, centroid, axis, glue_spacing_mm)
+        try:
+            checked = _outline_and_heights(reconstruction, outline, surface, centroid, axis, lo, hi, base)
+            timings["measure"] = time.perf_counter() - start
+            if isinstance(checked, MeasurementRefused):
+                return checked  # as before: whatever the glue path came to does not matter
+            heel_z, toe_z = checked
+            start = time.perf_counter()
+            path, failure, missing = glue.result()
+            timings["glue_path"] = time.perf_counter() - start  # what is left of it after the outline and heights
+        finally:
+            futures.wait([glue])  # never left running into the next cycle
     finally:
-        futures.wait([glue])  # never left running into the next cycle
+        futures.wait([line])
     if failure is not None:
         return _invalid(failure, missing or "no glue path", **base)
     assert path is not None
@@ -193,16 +196,10 @@ def _outline_and_heights(
     return heel_z, toe_z
 
 
-def _glue(
-    footprint: Footprint,
-    outline: np.ndarray,
-    surface: SoleSurface,
-    centroid: np.ndarray,
-    axis: np.ndarray,
-    glue_offset_mm: float,
-    glue_spacing_mm: float,
-) -> tuple[GluePath | None, FailureKind | None, str | None]:
-    """The glue path, or the failure kind and reason why there is none."""
+def _glue_line(
+    footprint: Footprint, outline: np.ndarray, glue_offset_mm: float
+) -> tuple[np.ndarray | None, str | None]:
+    """The closed line `glue_offset_mm` inside the outline (table mm), or why there is none."""
     # The line glue_offset_mm inside the edge, from the footprint's distance transform: exact at pointed
     # and cusped ends too, where moving the outline along its normals would cross itself. Cell centres lie
     # half a cell inside the edge (Footprint.outline moves the contour back out by that half cell).
@@ -213,9 +210,23 @@ def _glue(
     edge = footprint.filled(outline).closed(GLUE_EDGE_CLOSE_MM)
     inset = edge.eroded(glue_offset_mm + 0.5 * footprint.cell_mm).outline()
     if len(inset) < 3:
-        return None, FailureKind.MEASUREMENT_INVALID, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide"
+        return None, f"no glue path: the sole is nowhere {glue_offset_mm:g} mm wide"
     # Smoothing takes the raster's staircase out but pulls sharp corners in: back onto the offset line.
-    glue_line = snap_to_inset(edge, smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm)
+    return snap_to_inset(edge, smooth_closed(inset, GLUE_OUTLINE_SMOOTHING_MM), glue_offset_mm), None
+
+
+def _glue(
+    line: futures.Future[tuple[np.ndarray | None, str | None]],
+    surface: SoleSurface,
+    centroid: np.ndarray,
+    axis: np.ndarray,
+    glue_spacing_mm: float,
+) -> tuple[GluePath | None, FailureKind | None, str | None]:
+    """The glue path on the glue line (`line`, drawn before on the same thread), or the failure kind and reason
+    why there is none."""
+    glue_line, no_line = line.result()
+    if glue_line is None:
+        return None, FailureKind.MEASUREMENT_INVALID, no_line
     path, missing = glue_path(surface, glue_line, centroid, axis, 0.0, glue_spacing_mm)
     return path, None if path is not None else FailureKind.SURFACE_NOT_MEASURED, missing
 

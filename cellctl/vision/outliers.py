@@ -58,6 +58,8 @@ def _point_grid(pixels: np.ndarray, points: np.ndarray, margin: int) -> tuple[np
     and each point's (row, col) in it."""
     x, y = pixels.T.astype(np.int64)
     cols, rows = x - int(x.min()) + margin, y - int(y.min()) + margin
-    grid = np.full((3, int(rows.max()) + margin + 1, int(cols.max()) + margin + 1), np.nan, np.float32)
-    grid[:, rows, cols] = points.T
-    return grid, rows, cols
+    # Filled as H x W x 3 (each pixel's x y z side by side, as the kernels read them) and handed on as its
+    # 3 x H x W view: the kernels' arguments are then this array itself, not a transposed copy per kernel.
+    grid = np.full((int(rows.max()) + margin + 1, int(cols.max()) + margin + 1, 3), np.nan, np.float32)
+    grid[rows, cols] = points
+    return np.moveaxis(grid, -1, 0), rows, cols

@@ -90,6 +90,8 @@ class Reconstruction(_SolePoints):
     # The depth step on the footprint's raster, for the outline's self-check (cellctl.vision.checks):
     raised: Footprint | None = None  # cells where most measured points rise above the table
     measured_cells: Footprint | None = None  # cells with any measured point
+    # Cells with a measured point at the table's height, not dilated: where depth saw the table (image_edge).
+    table_points: Footprint | None = None
     taught: TaughtTable | None = None  # the taught table the sole was found against, if any
     changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
     changed_left: np.ndarray | None = None  # the same for the left image
@@ -149,6 +151,7 @@ class _RunState:
         self.separation = 0.0
         self.raised: Footprint | None = None  # cells where most measured points rise above the table
         self.measured_cells: Footprint | None = None  # cells with any measured point
+        self.table_points: Footprint | None = None  # cells with a measured point at the table's height
         self.changed_right: np.ndarray | None = None
         self._changed_left: np.ndarray | None = None
 
@@ -186,6 +189,7 @@ class _RunState:
             calibration=self.cloud.calibration,
             raised=self.raised,
             measured_cells=self.measured_cells,
+            table_points=self.table_points,
             taught=self.taught,
             changed_right=self.changed_right,
             changed_left=self._changed_left,
@@ -248,6 +252,9 @@ class Segmentation(_RunState):
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._no_sole(points, no_sole)
         self.raised, self.measured_cells = depth_step(raster, every, high_counts)
+        self.table_points = Footprint(
+            ((every > high_counts) & (every > 0)).astype(np.uint8), raster.origin, raster.cell_mm
+        )
         if self.taught is not None:
             change = change_split(self.cloud, self.taught, points, footprint, high, self.min_height)
             if change is None:

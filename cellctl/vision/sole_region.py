@@ -271,8 +271,7 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
     right = min(max(int(x.max()), int(columns[-1]) if columns.size else 0) + margin + 1, width)
     sole = np.zeros((bottom - top, right - left), np.uint8)
     sole[y - top, x - left] = 1
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (UNMEASURED_CLOSE_PX, UNMEASURED_CLOSE_PX))
-    region = cv2.morphologyEx(sole, cv2.MORPH_CLOSE, kernel) > 0
+    region = disc_closing(sole, UNMEASURED_CLOSE_PX) > 0
     region |= changed_sole[top:bottom, left:right]
     measured = np.zeros(region.shape, bool)
     mx, my = np.round(cloud.pixels).astype(int).T
@@ -280,6 +279,42 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
     measured[my[inside] - top, mx[inside] - left] = True
     lost = region & changed_left[top:bottom, left:right] & ~measured
     return float(np.count_nonzero(lost)) / max(float(np.count_nonzero(region)), 1.0)
+
+
+def disc_closing(mask: np.ndarray, size: int) -> np.ndarray:
+    """cv2.morphologyEx(mask, MORPH_CLOSE, the size x size MORPH_ELLIPSE element), the same cells, ~4 x faster.
+
+    OpenCV's disc is a stack of centred runs, widest in the middle row: the union of the centred rectangles
+    at its steps. A dilation by a union is the maximum of the dilations by its parts, an erosion the minimum
+    of the erosions, and OpenCV filters a rectangle separably (each as cv2 does it, borders included)."""
+    rectangles = _disc_rectangles(size)
+    dilated = np.zeros_like(mask)
+    for rectangle in rectangles:
+        np.maximum(dilated, cv2.dilate(mask, rectangle), out=dilated)
+    closed = np.ones_like(mask)
+    for rectangle in rectangles:
+        np.minimum(closed, cv2.erode(dilated, rectangle), out=closed)
+    return closed
+
+
+def _disc_rectangles(size: int) -> list[np.ndarray]:
+    """The centred rectangles whose union is OpenCV's size x size elliptic element (odd size)."""
+    if size < 1 or size % 2 == 0:
+        raise ValueError(f"the disc must have an odd size, got {size}")
+    disc, middle = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)), size // 2
+    half_widths = []
+    for row in disc:
+        columns = np.flatnonzero(row)
+        half = middle - int(columns[0])
+        assert int(columns[-1]) == middle + half and len(columns) == 2 * half + 1  # a centred run
+        half_widths.append(half)
+    # For each run width, the rows whose run is at least that wide (contiguous about the middle row).
+    rectangles = []
+    for half in sorted(set(half_widths)):
+        rows = [abs(k - middle) for k, h in enumerate(half_widths) if h >= half]
+        assert len(rows) == 2 * max(rows) + 1
+        rectangles.append(np.ones((2 * max(rows) + 1, 2 * half + 1), np.uint8))
+    return rectangles
 
 
 def cut_by_border(cloud: StereoCloud, index: np.ndarray) -> tuple[FailureKind | None, str | None]:

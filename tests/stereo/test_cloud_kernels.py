@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from cellctl.stereo.kernels import (
+    cell_counts,
+    cells_marked,
     neighbour_means,
     patch_sample,
     patch_shift,
@@ -366,3 +368,56 @@ def test_patch_fits_in_row_groups_are_the_fits_of_one_call() -> None:
     np.testing.assert_array_equal(grouped.xy, whole.xy)
     for a, b in zip(grouped.pixels, whole.pixels, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def _numpy_cells(xy: np.ndarray, origin: tuple[float, float], cell: float, shape: tuple[int, int]):  # noqa: ANN202
+    """Footprint.cells' numpy rule: (row, col, inside), clipped."""
+    # Not-a-number and infinite coordinates cast to an integer out of every range: `inside` says False for
+    # them, which is the rule; numpy warns about the cast itself.
+    with np.errstate(invalid="ignore", over="ignore"):
+        col = np.floor((xy[:, 0] - origin[0]) / cell).astype(np.int64)
+        row = np.floor((xy[:, 1] - origin[1]) / cell).astype(np.int64)
+    inside = (row >= 0) & (row < shape[0]) & (col >= 0) & (col < shape[1])
+    return np.clip(row, 0, shape[0] - 1), np.clip(col, 0, shape[1] - 1), inside
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_cell_counts_and_marks_follow_the_numpy_rule(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    points = np.column_stack(
+        [rng.uniform(-40.0, 90.0, 20000), rng.uniform(-30.0, 60.0, 20000), rng.normal(0, 5, 20000)]
+    )
+    # Points on cell corners and edges (where floor decides), off the raster, and not numbers.
+    points[:500, :2] = np.round(points[:500, :2] * 4.0) / 4.0
+    points[500:510, 0] = [np.nan, np.inf, -np.inf, 1e300, -1e300, np.nan, 0.0, 1.0, 2.0, 3.0]
+    points[510:515, 1] = [np.nan, np.inf, -np.inf, 1e300, -1e300]
+    origin, cell, shape = (-12.25, -7.5), 0.25, (200, 330)
+    mask = (rng.random(shape) < 0.4).astype(np.uint8)
+    row, col, inside = _numpy_cells(points[:, :2], origin, cell, shape)
+    expected = np.bincount(row[inside] * shape[1] + col[inside], minlength=shape[0] * shape[1])
+    assert 1000 < inside.sum() < len(points) - 1000  # both kinds
+    with np.errstate(over="ignore"):  # 1e300 becomes infinity in float32, another point off the raster
+        single = points[:, :2].astype(np.float32)
+    for xy in (points[:, :2], np.ascontiguousarray(points[:, :2]), points[::3, :2], single):
+        row, col, inside = _numpy_cells(np.asarray(xy, np.float64), origin, cell, shape)
+        expected = np.bincount(row[inside] * shape[1] + col[inside], minlength=mask.size).reshape(shape)
+        counts = cell_counts(xy, origin, cell, shape)
+        assert counts.dtype == np.float32
+        np.testing.assert_array_equal(counts, expected.astype(np.float32))
+        np.testing.assert_array_equal(cells_marked(xy, origin, cell, mask), inside & (mask[row, col] > 0))
+    assert cell_counts(np.zeros((0, 2)), origin, cell, shape).sum() == 0
+    assert cells_marked(np.zeros((0, 2)), origin, cell, mask).shape == (0,)
+
+
+def test_cell_counts_and_marks_refuse_bad_input() -> None:
+    xy = np.zeros((3, 2))
+    with pytest.raises(ValueError, match="N x 2"):
+        cell_counts(np.zeros(4), (0.0, 0.0), 0.25, (4, 4))
+    with pytest.raises(ValueError, match="cells"):
+        cell_counts(xy, (0.0, 0.0), 0.25, (0, 4))
+    with pytest.raises(ValueError, match="out of range"):
+        cell_counts(xy, (0.0, 0.0), 0.0, (4, 4))
+    with pytest.raises(ValueError, match="out of range"):
+        cells_marked(xy, (0.0, 0.0), -1.0, np.ones((4, 4), np.uint8))
+    with pytest.raises(ValueError, match="raster"):
+        cells_marked(xy, (0.0, 0.0), 0.25, np.ones(4, np.uint8))

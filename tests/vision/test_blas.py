@@ -1,4 +1,4 @@
-"""numpy's OpenBLAS set to one thread (cellctl.vision.runtime): found, set, and the products unchanged."""
+"""Process settings (cellctl.vision.runtime): numpy's OpenBLAS on one thread with the same products; freed memory kept."""
 
 from __future__ import annotations
 
@@ -17,3 +17,21 @@ def test_one_blas_thread_sets_numpys_openblas_to_one_thread_with_the_same_produc
     assert one_blas_thread()
     assert blas_threads() == 1
     assert np.array_equal(points @ matrix.T, before)
+
+
+def test_keep_freed_memory_lets_the_next_cycle_reuse_what_the_last_one_freed() -> None:
+    import resource
+
+    from cellctl.vision.runtime import keep_freed_memory
+
+    def faults_of_a_40_mb_array() -> int:
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        block = np.ones(5 << 20)  # 40 MB, above the largest block glibc would otherwise take from its heap
+        after = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        del block
+        return after - before
+
+    if not keep_freed_memory():
+        pytest.skip("not glibc: its malloc settings are not available here")
+    faults_of_a_40_mb_array()  # the heap grows once
+    assert faults_of_a_40_mb_array() < 50  # then the freed block is used again (0 here; mapped anew: 532)

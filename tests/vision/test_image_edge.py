@@ -7,7 +7,9 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from cellctl.vision.image_edge import edge_shift, silhouette_offsets
+from cellctl.vision.edge_checks import check_edge_offsets
+from cellctl.vision.footprint import Footprint
+from cellctl.vision.image_edge import depth_silent, edge_shift, silhouette_offsets
 
 RADIUS = 50.0
 HEIGHT = 20.0
@@ -71,3 +73,53 @@ def test_the_outline_moves_only_where_both_cameras_agree() -> None:
     assert np.all(np.abs(shift[25:35] - 1.2) < 0.05)
     assert np.all(shift[100:120] == 0.0) and np.all(shift[150:170] == 0.0) and np.all(shift[60:80] == 0.0)
     assert np.all(shift[180:195] == 0.0)
+
+
+def table_depth(radius: float, shadow: tuple[float, float] | None = None) -> Footprint:
+    """Raw cells (0.25 mm) where depth measured the table around a disc: beyond `radius` from the centre; with
+    `shadow` (from, to in radians) the sole's edge there lies 1.2 mm inside RADIUS and a contact shadow covers
+    the table from it to RADIUS: depth measures the (textured) table in the shadow from 0.3 mm past the edge."""
+    cell = 0.25
+    n = int(2 * (RADIUS + 10) / cell)
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) * cell - (RADIUS + 10)
+    r, angle = np.hypot(x, y), np.mod(np.arctan2(y, x), 2 * np.pi)
+    table = r > radius
+    if shadow is not None:
+        table |= (angle >= shadow[0]) & (angle < shadow[1]) & (r > RADIUS - 1.2 + 0.3)
+    return Footprint(table.astype(np.uint8), (-(RADIUS + 10), -(RADIUS + 10)), cell)
+
+
+def test_the_outline_moves_where_depth_is_silent_but_not_over_a_measured_shadow() -> None:
+    """Both masks put the edge 1.2 mm beyond the outline all round. On one side that is a black top edge whose
+    last mm has no depth (depth measures the table only from 0.6 mm past the edge): the outline moves there and
+    the check passes. On the other side the outline is right and both masks end on a contact shadow on the
+    table, which depth measures at table height: no move, and the edge-offset check still refuses it."""
+    ring, outward = circle(RADIUS - 1.2)
+    offsets = np.full(len(ring), 1.2)
+    shadow = (np.pi, 2 * np.pi)  # the lower half: outline on the true edge, a 1.2 mm shadow beyond it
+    silent = depth_silent(ring, outward, table_depth(RADIUS + 0.6, shadow))
+    in_shadow = np.mod(np.arctan2(outward[:, 1], outward[:, 0]), 2 * np.pi) >= np.pi
+    shift = edge_shift(offsets, offsets, silent)
+    assert np.all(shift[in_shadow] == 0.0)  # not even the smoothing's tail reaches a guarded point
+    assert np.all(np.abs(shift[~in_shadow][10:-10] - 1.2) < 0.05)
+    moved = offsets - shift  # where the masks' edge lies from the moved outline
+    failure = check_edge_offsets([moved, moved])
+    assert failure is not None and "beyond" in failure.reason
+    assert np.all(np.abs(moved[~in_shadow][10:-10]) < 0.05)
+    # Unguarded, the same shadow would be moved onto and then pass the check: what the guard is for.
+    unguarded = edge_shift(offsets, offsets)
+    assert check_edge_offsets([offsets - unguarded, offsets - unguarded]) is None
+
+
+def test_a_single_table_point_in_the_gap_stops_the_move() -> None:
+    ring, outward = circle(RADIUS - 1.2)
+    table = table_depth(RADIUS + 0.6)
+    k = 40
+    row, col, _ = table.cells((ring[k] + 0.5 * outward[k])[None])
+    table.mask[row, col] = 1  # one measured table-level point 0.5 mm out from outline point k
+    proposed = np.full(len(ring), 1.2)
+    silent = depth_silent(ring, outward, table)(proposed)
+    assert not silent[k] and silent[k + 3] and silent[k - 3]
+    # A move that would end short of the measured table is allowed; none is proposed where there is no move.
+    assert np.all(depth_silent(ring, outward, table_depth(RADIUS + 0.6))(proposed))
+    assert not np.any(depth_silent(ring, outward, table_depth(RADIUS + 0.6))(np.zeros(len(ring))))

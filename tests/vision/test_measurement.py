@@ -126,6 +126,20 @@ def test_glue_path_follows_the_edge_on_the_surface(stereo_results) -> None:  # n
 # ---- bad input -----------------------------------------------------------------------------------------
 
 
+def test_surface_samples_on_two_threads_are_those_on_one(stereo_results) -> None:  # noqa: ANN001
+    from cellctl.vision.surface import SoleSurface
+
+    for _, _, reconstruction, result in stereo_results[:2]:
+        surface = SoleSurface(reconstruction)
+        # The glue path's queries (its path, then its inner ring), an odd count, and one the images cannot fit.
+        path = result.glue_path.points[:, :2]
+        for xy in (np.vstack([path, path + 9.0]), path[:-1], np.vstack([path[:5], [[1e4, 1e4]]])):
+            one, two = surface.sample(xy, 4.0), surface.sample(xy, 4.0, parallel=True)
+            assert one.refined.any()
+            for a, b in ((one.z, two.z), (one.normals, two.normals), (one.refined, two.refined)):
+                np.testing.assert_array_equal(a, b)
+
+
 def test_no_sole_in_view(rig, reconstructor) -> None:  # noqa: ANN001
     empty = dataclasses.replace(SoleScene.random(0, "white", rig), sole=None)
     pair = empty.render()
