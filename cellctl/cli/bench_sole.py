@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from cellctl.errors import UserError
 
 if TYPE_CHECKING:
+    from cellctl.sim.matrix import MatrixSole
     from cellctl.sim.render_cache import RenderCache
     from cellctl.sim.scene import SoleScene
 
@@ -35,6 +36,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--variations",
         metavar="NAME,...",
         help="with --matrix: only these matrix entries (default all; `--variations list` prints them)",
+    )
+    parser.add_argument(
+        "--only",
+        metavar="SEED,...",
+        help="with --matrix: measure only these seeds of the --soles/--first-seed matrix (a matrix sole's "
+        "variations and colour depend on its place in the matrix, so `--soles 1 --first-seed S` is another sole)",
     )
     parser.add_argument("--first-seed", type=int, default=0, help="seed of the first sole (default 0)")
     parser.add_argument("--calib", metavar="calib.yaml", help="rig to simulate (default: the built-in simulated rig)")
@@ -63,6 +70,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.soles < 1:
         raise UserError(f"--soles must be at least 1, got {args.soles}")
+    if args.only and not args.matrix:
+        raise UserError("--only needs --matrix")
     if args.variations and not args.matrix:
         raise UserError("--variations needs --matrix")
     if args.render_only and not args.cache:
@@ -104,6 +113,8 @@ def _run_matrix(args: argparse.Namespace) -> int:
         soles = matrix_soles(args.soles, args.first_seed, entries)
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    if args.only:
+        soles = _only(soles, args.only)
     calib = Calibration.load(args.calib) if args.calib else None
     cache = _cache(args)
     if args.render_only:
@@ -120,10 +131,27 @@ def _run_matrix(args: argparse.Namespace) -> int:
     else:
         command = f"cellctl bench-sole --matrix --soles {args.soles} --first-seed {args.first_seed}"
         command += f" --variations {args.variations}" if args.variations else ""
+        command += f" --only {args.only}" if args.only else ""
         command += f" --calib {args.calib}" if args.calib else ""
         command += " --taught" if args.taught else ""
         print(sole_matrix.matrix_markdown(results, command))
     return 0 if sole_matrix.acceptance(results).passed else 1
+
+
+def _only(soles: list[MatrixSole], only: str) -> list[MatrixSole]:
+    """The matrix soles whose seeds are listed (comma-separated); UserError for a seed not in the matrix."""
+    try:
+        seeds = [int(text) for text in only.split(",")]
+    except ValueError:
+        raise UserError(f"--only takes comma-separated seeds, got {only!r}") from None
+    by_seed = {sole.seed: sole for sole in soles}
+    missing = [seed for seed in seeds if seed not in by_seed]
+    if missing:
+        first, last = soles[0].seed, soles[-1].seed
+        raise UserError(
+            f"--only: seed {missing[0]} is not in the matrix ({first}..{last}): check --soles and --first-seed"
+        )
+    return [by_seed[seed] for seed in seeds]
 
 
 def _cache(args: argparse.Namespace) -> RenderCache | None:

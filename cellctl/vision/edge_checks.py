@@ -127,14 +127,18 @@ def edge_offsets(
     changed: np.ndarray,
     table_to_pixel: Callable[[np.ndarray], np.ndarray],
     table_level: Footprint | None = None,
+    outermost: bool = False,
 ) -> np.ndarray:
     """Per outline point: where the camera's changed region ends along the outward normal, in mm from the
     outline (+: beyond it), NaN where the profile shows no clear single edge.
 
-    The profile runs EDGE_SEARCH_MM either side at height `level` (per point); `table_to_pixel(points N x 3)
-    -> N x 2` projects into the camera's rectified image whose change mask is `changed`. Samples outside the
-    image, and changed outside samples on `table_level` cells (a shadow on the measured table), are unknown. The
-    edge is the step (changed, then unchanged) with the fewest samples on the wrong side.
+    outermost: where several steps fit equally well (samples between them unknown: out of the image, or
+    changed on `table_level` cells), the one farthest out instead of the innermost; unknown samples to the end of
+    the search give no edge. The check reads both (check_edge_offsets on each): missing evidence must not be
+    read in the outline's favour. Stereo drags a textured table's depth 1-2 mm onto the edge of a weakly
+    textured (black) sole, so the sole's own edge band is on `table_level` cells, and the innermost step put
+    the edge on an outline that stopped short with the depth (1.4 mm inside the true edge over 65 mm, glue
+    line 1.4 mm off, on a held-out matrix sole).
     """
     steps = np.arange(-EDGE_SEARCH_MM, EDGE_SEARCH_MM + 1e-9, EDGE_SEARCH_STEP_MM)
     n, k = len(outline), len(steps)
@@ -158,6 +162,9 @@ def edge_offsets(
     best = np.argmin(misfit, axis=1)
     count = known.sum(axis=1)
     offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
+    if outermost:
+        best = k - np.argmin(misfit[:, ::-1], axis=1)  # the outermost step of the same (least) misfit
+        offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
     clear = (count >= EDGE_PROFILE_MIN_KNOWN * k) & (
         misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1)
     )

@@ -97,6 +97,7 @@ def silhouette_offsets(
     to_pixel: Callable[[np.ndarray], np.ndarray],
     centre: np.ndarray,
     table_level: Footprint | None = None,
+    outermost: bool = False,
 ) -> np.ndarray:
     """Where one camera's silhouette puts the edge, in mm along the outward normal from each outline point.
 
@@ -105,11 +106,11 @@ def silhouette_offsets(
     measured height. Where the camera sees the wall it is the wall's foot on the table, or the top edge again if
     the wall is lit like the table (no change); one camera cannot tell the two apart (the same ray at two
     heights), so there the reading nearer the outline is taken (the edge-offset check's rule): with outward
-    moves only, the smaller claim.
+    moves only, the smaller claim. outermost: as in edge_checks.edge_offsets (for the check, not for placing).
     """
     sees_wall = np.sum(outward * (centre[:2] - ring), axis=1) > 0
-    foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
-    top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
+    foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level, outermost)
+    top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level, outermost)
     nearer = np.where(np.abs(np.nan_to_num(foot, nan=np.inf)) < np.abs(np.nan_to_num(top, nan=np.inf)), foot, top)
     return np.where(sees_wall, nearer, top)
 

@@ -72,14 +72,24 @@ def _check_outline_images(
     # Per camera, its silhouette's edge at the height where it lies (cellctl.vision.image_edge): the top edge
     # from the inward side of a wall; from the outward side the foot on the table or the top edge where the
     # wall is lit so that it hardly differs from the table, the nearer.
-    offsets = [
-        silhouette_offsets(ring, outward, edge_height, changed, to_pixel, centre, level)
-        for changed, to_pixel, centre in (
-            (reconstruction.changed_left, left_pixel, left_centre),
-            (changed_right, right_pixel, right_centre),
-        )
+    # Read twice: the innermost of equally good steps, then the outermost (edge_checks.edge_offsets): where
+    # evidence is missing (changed pixels excused on table-level cells) neither reading may clear the outline.
+    # Where the outermost finds no edge (unknown to the end of the search: a wide shadow) the innermost stands.
+    cameras = (
+        (reconstruction.changed_left, left_pixel, left_centre),
+        (changed_right, right_pixel, right_centre),
+    )
+    inner = [
+        silhouette_offsets(ring, outward, edge_height, c, to_pixel, centre, level) for c, to_pixel, centre in cameras
     ]
-    return check_edge_offsets(offsets)
+    problem = check_edge_offsets(inner)
+    if problem is not None:
+        return problem
+    outer = [
+        silhouette_offsets(ring, outward, edge_height, c, to_pixel, centre, level, outermost=True)
+        for c, to_pixel, centre in cameras
+    ]
+    return check_edge_offsets([np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True)])
 
 
 HEIGHT_MAP_CELL_MM = 1.0

@@ -168,6 +168,11 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
     "bench-sole: missing calibration": lambda d, _: Case(
         ["bench-sole", "--calib", str(d / "absent.yaml"), "--soles", "1"], "does not exist"
     ),
+    "bench-sole: --only seed not in the matrix": lambda d, _: Case(
+        ["bench-sole", "--matrix", "--soles", "84", "--first-seed", "3000", "--only", "3002,3090"],
+        "seed 3090 is not in the matrix (3000..3083)",
+    ),
+    "bench-sole: --only without --matrix": lambda d, _: Case(["bench-sole", "--only", "3"], "--only needs --matrix"),
     "results: missing config": lambda d, _: Case(["results", "--config", str(d / "absent.toml")], "does not exist"),
     "rectify: matrix rows/cols do not match": lambda d, _: Case(
         [

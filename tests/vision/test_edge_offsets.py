@@ -66,6 +66,9 @@ def test_a_local_dent_or_bulge_of_the_outline_is_refused(changed: np.ndarray, de
     radius[100:110] -= dent  # 10 mm of outline 1.5 mm inside (or outside) the edge: the glue line follows it
     found = offsets(radius, changed)
     assert np.nanmedian(found[102:108]) == pytest.approx(dent, abs=0.4)
+    # a clear single edge reads the same outermost (the readings differ only where evidence is missing)
+    worst = offsets_on(table_level(), radius, changed, worst=True)
+    assert np.array_equal(worst[95:115], found[95:115], equal_nan=True)
     problem = check_edge_offsets([found])
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert ("beyond" if dent > 0 else "inside") in problem.reason
@@ -75,3 +78,47 @@ def test_an_outline_with_no_edge_near_it_is_refused(changed: np.ndarray) -> None
     found = offsets(np.full(314, RADIUS - 10.0), changed)  # the edge is beyond the search everywhere
     problem = check_edge_offsets([found])
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
+
+
+def dragged_table_level(depth_drag_mm: float) -> Footprint:
+    """Depth at the table's height off the sole and `depth_drag_mm` onto it (a textured table's disparity dragged
+    over the weakly textured edge of a black sole)."""
+    cells = np.mgrid[0:800, 0:800]
+    xy = (np.stack([cells[1], cells[0]], -1) + 0.5) * 0.25 - 100.0
+    return Footprint((np.linalg.norm(xy, axis=-1) > RADIUS - depth_drag_mm).astype(np.uint8), (-100.0, -100.0), 0.25)
+
+
+def offsets_on(level_cells: Footprint, outline_radius: np.ndarray, changed: np.ndarray, worst: bool) -> np.ndarray:
+    angle = np.linspace(0.0, 2 * np.pi, int(2 * np.pi * RADIUS), endpoint=False)
+    outward = np.column_stack([np.cos(angle), np.sin(angle)])
+    outline = outline_radius[:, None] * outward
+    sees_wall = np.sum(outward * (CAMERA[:2] - outline), axis=1) > 0
+    level = np.where(sees_wall, 0.0, HEIGHT)
+    return edge_offsets(outline, outward, level, changed, project, level_cells, outermost=worst)
+
+
+def test_an_outline_short_with_the_depth_is_refused_when_the_missing_evidence_counts_against_it(
+    changed: np.ndarray,
+) -> None:
+    # The outline stops 1.5 mm short along 30 mm, where the depth stops (table-level cells 1.6 mm onto the
+    # sole all round): the changed pixels between it and the true edge are excused as a shadow on the table.
+    radius = np.full(314, RADIUS)
+    radius[100:130] -= 1.5
+    cells = dragged_table_level(1.6)
+    innermost = offsets_on(cells, radius, changed, worst=False)
+    assert np.nanmedian(innermost[105:125]) < 0.5  # the innermost equally good step sits on the short outline
+    assert check_edge_offsets([innermost]) is None  # ...and the check was blind to it
+    worst = offsets_on(cells, radius, changed, worst=True)
+    assert np.nanmedian(worst[105:125]) == pytest.approx(1.5, abs=0.4)
+    problem = check_edge_offsets([worst])
+    assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT and "beyond" in problem.reason
+
+
+def test_the_outermost_reading_still_passes_the_true_outline_past_a_shadow_and_a_dragged_depth(
+    changed: np.ndarray,
+) -> None:
+    cells = dragged_table_level(1.6)
+    found = offsets_on(cells, np.full(314, RADIUS), changed, worst=True)
+    assert np.mean(np.isfinite(found)) > 0.8  # the 8 mm shadow runs past the search: unknown there, not an edge
+    assert np.nanmax(np.abs(found)) <= 0.5
+    assert check_edge_offsets([found]) is None
