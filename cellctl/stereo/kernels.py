@@ -6,6 +6,8 @@ They sit behind the stereo package because it is the one door to the compiled co
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from cellctl.stereo._core import ffi, lib
@@ -273,10 +275,14 @@ def _raster_points(xy: np.ndarray) -> tuple[np.ndarray, int]:
     return xy, xy.strides[0] // 8
 
 
-def _raster_pointer(xy: np.ndarray):  # noqa: ANN202 - a cffi pointer
+def _raster_args(xy: np.ndarray, origin: tuple[float, float], cell_mm: float) -> tuple[np.ndarray, tuple[Any, ...]]:
+    """The points as C reads them (keep the array alive across the call) and the raster kernels' leading
+    arguments: points, count, row stride, origin x and y, cell size."""
+    xy, stride = _raster_points(xy)
     # The rows may be a view into a wider array (x y z): the pointer to its first element, kept alive by xy
     # (no points: any valid pointer, nothing is read).
-    return ffi.cast("const double *", (xy if len(xy) else _NO_POINTS).ctypes.data)
+    pointer = ffi.cast("const double *", (xy if len(xy) else _NO_POINTS).ctypes.data)
+    return xy, (pointer, len(xy), stride, float(origin[0]), float(origin[1]), float(cell_mm))
 
 
 _NO_POINTS = np.zeros(2)
@@ -285,44 +291,25 @@ _NO_POINTS = np.zeros(2)
 def cell_counts(xy: np.ndarray, origin: tuple[float, float], cell_mm: float, shape: tuple[int, int]) -> np.ndarray:
     """Points (N x 2, table mm) per cell of a raster of `shape` whose cell (0, 0) has its corner at `origin`
     (float32 counts; cell = floor((x - x0) / cell_mm) in double as numpy takes it; points off it count nowhere)."""
-    xy, stride = _raster_points(xy)
+    xy, leading = _raster_args(xy, origin, cell_mm)
     rows, cols = shape
     if rows < 1 or cols < 1:
         raise ValueError(f"the raster must have cells, got shape {shape}")
     out = np.empty((rows, cols), np.float32)
-    rc = lib.ck_cell_counts(
-        _raster_pointer(xy),
-        len(xy),
-        stride,
-        float(origin[0]),
-        float(origin[1]),
-        float(cell_mm),
-        rows,
-        cols,
-        _ptr("float *", out),
-    )
+    rc = lib.ck_cell_counts(*leading, rows, cols, _ptr("float *", out))
     _check(rc, "cell counts")
     return out
 
 
 def cells_marked(xy: np.ndarray, origin: tuple[float, float], cell_mm: float, mask: np.ndarray) -> np.ndarray:
     """Whether each point's cell (as `cell_counts` finds it) is non-zero in `mask` (uint8 raster): bool, N."""
-    xy, stride = _raster_points(xy)
+    xy, leading = _raster_args(xy, origin, cell_mm)
     mask = np.ascontiguousarray(mask, np.uint8)
     if mask.ndim != 2 or mask.size == 0:
         raise ValueError(f"mask must be a non-empty 2-D raster, got shape {mask.shape}")
     out = np.empty(max(len(xy), 1), np.uint8)
     rc = lib.ck_cells_marked(
-        _raster_pointer(xy),
-        len(xy),
-        stride,
-        float(origin[0]),
-        float(origin[1]),
-        float(cell_mm),
-        _ptr("const uint8_t *", mask),
-        mask.shape[0],
-        mask.shape[1],
-        _ptr("uint8_t *", out),
+        *leading, _ptr("const uint8_t *", mask), mask.shape[0], mask.shape[1], _ptr("uint8_t *", out)
     )
     _check(rc, "cells marked")
     return out[: len(xy)].view(bool)
