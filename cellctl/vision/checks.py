@@ -57,16 +57,6 @@ MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a
 # gets its heights from elsewhere: 1-8 mm off on simulated soles.
 GLUE_COVER_RADIUS_MM = 1.0
 MAX_GLUE_UNCOVERED = 0.05
-# The glue heights' own noise against the height tolerance. The matcher's error is correlated over ~20 mm along
-# the path, so no path fit averages it away, and the path's noise measure (second differences of its raw patch
-# heights, cellctl.vision.surface.path_noise) sees only its fast part: over 34 measured matrix soles of three sets
-# (the black ones and the wide-angle rig's) the worst glue height error was 1.4-4.1 times the path's median noise
-# (median 2.4; /work/notes/rig-diag/ratio.txt). Where that
-# typical ratio puts the worst point beyond the tolerance, the heights are not known well enough to publish. On
-# the wide-angle rig (rectified focal 1053 px, 4.8 mm of height per px of disparity) black rubber's median
-# noise is 0.47-0.52 mm against 0.15-0.34 mm on the default rig (docs/sole-benchmark.md, held-out 4022).
-GLUE_HEIGHT_TOLERANCE_MM = 1.0
-GLUE_WORST_PER_NOISE = 2.5
 
 
 @dataclass(frozen=True)
@@ -271,20 +261,6 @@ def check_glue_path(
         return _glue(
             f"glue normal {k} is {angle[k]:.0f} degrees from the surface fitted around it "
             f"(limit {GLUE_MAX_NORMAL_DEG:g})"
-        )
-    return None
-
-
-def check_glue_noise(noise: np.ndarray) -> CheckFailure | None:
-    """The glue path's local height noise (mm per raw sample, NaN: unknown) against the height tolerance."""
-    if not np.isfinite(noise).any():
-        return None
-    median = float(np.nanmedian(noise))
-    if GLUE_WORST_PER_NOISE * median > GLUE_HEIGHT_TOLERANCE_MM:
-        return _glue(
-            f"the glue path's heights are too noisy: {median:.2f} mm median noise along the path puts its worst "
-            f"point about {GLUE_WORST_PER_NOISE * median:.1f} mm off (limit {GLUE_HEIGHT_TOLERANCE_MM:g} mm): "
-            "the stereo cannot resolve this sole's top finely enough (weak texture, or a rig with coarse pixels)"
         )
     return None
 

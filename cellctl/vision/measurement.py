@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.vision.checks import GLUE_COVER_RADIUS_MM, check_glue_coverage, check_glue_noise, check_glue_path
+from cellctl.vision.checks import GLUE_COVER_RADIUS_MM, check_glue_coverage, check_glue_path
 from cellctl.vision.closed_path import smooth_closed
 from cellctl.vision.defaults import (
     GLUE_OFFSET_MM,
@@ -42,7 +42,7 @@ from cellctl.vision.image_edge import onto_image_edge
 from cellctl.vision.outline_checks import outline_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
-from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface, path_noise
+from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 from cellctl.vision.workers import worker
 
 __all__ = [
@@ -149,8 +149,6 @@ def measure_sole(
     problem = check_glue_path(
         path.points, path.normals, raw_z, patch_normals, (float(sole_z[0]), float(sole_z[1])), glue_spacing_mm
     )
-    if problem is None and path.raw_z is not None:
-        problem = check_glue_noise(path_noise(path.raw_z))
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     implausible = _implausible(length, heel_z, toe_z)

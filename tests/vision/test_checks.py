@@ -128,17 +128,3 @@ def test_a_notch_cut_into_the_outline_is_refused_though_most_of_the_outline_agre
     problem = check_outline_depth(notched, outward, raised, measured)
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert "stretch" in problem.reason
-
-
-def test_glue_heights_too_noisy_for_the_tolerance_are_refused_with_a_named_reason() -> None:
-    from cellctl.vision.checks import GLUE_HEIGHT_TOLERANCE_MM, GLUE_WORST_PER_NOISE, check_glue_noise
-    from cellctl.vision.surface import path_noise
-
-    rng = np.random.default_rng(4022)
-    top = 10.0 + 3.0 * np.sin(np.linspace(0.0, 2.0 * np.pi, 300, endpoint=False))  # a smooth top: no noise
-    limit = GLUE_HEIGHT_TOLERANCE_MM / GLUE_WORST_PER_NOISE
-    assert check_glue_noise(path_noise(top + rng.normal(0.0, 0.6 * limit, top.size))) is None
-    problem = check_glue_noise(path_noise(top + rng.normal(0.0, 1.4 * limit, top.size)))
-    assert problem is not None and problem.kind == FailureKind.GLUE_PATH_INCONSISTENT
-    assert "too noisy" in problem.reason
-    assert check_glue_noise(np.full(10, np.nan)) is None
