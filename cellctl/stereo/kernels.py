@@ -49,19 +49,14 @@ def neighbour_means(
     2.3 px first (cellctl.vision.outliers defines the rule); threads: OpenMP threads (0: all), the same
     result on any number.
     """
-    points, at, spacing = _grid_arguments(grid, at, spacing_mm)
+    count, _kept, leading = _grid_arguments(grid, at, spacing_mm)
     offsets = np.ascontiguousarray(offsets, np.int32)
     if offsets.shape != (36, 2):
         raise ValueError(f"offsets must be 36 x 2, got shape {offsets.shape}")
-    mean = np.empty(len(at), np.float32)
-    exact = np.empty(len(at), np.uint8)
+    mean = np.empty(count, np.float32)
+    exact = np.empty(count, np.uint8)
     rc = lib.ck_neighbour_means(
-        _ptr("const float *", points),
-        grid.shape[1],
-        grid.shape[2],
-        _ptr("const int64_t *", at),
-        len(at),
-        _ptr("const double *", spacing),
+        *leading,
         _ptr("const int32_t *", offsets),
         _ptr("float *", mean),
         _ptr("uint8_t *", exact),
@@ -85,19 +80,14 @@ def window_means(
     widest half inside the grid; spacing_mm: mm between pixels at each point; halves: increasing window halves
     (cellctl.vision.outliers defines the rule); threads: OpenMP threads (0: all), the same result on any number.
     """
-    points, at, spacing = _grid_arguments(grid, at, spacing_mm)
+    count, _kept, leading = _grid_arguments(grid, at, spacing_mm)
     half = np.ascontiguousarray(halves, np.int32)
     if half.ndim != 1:
         raise ValueError(f"halves must be a sequence of window halves, got shape {half.shape}")
-    mean = np.empty(len(at), np.float32)
-    settled = np.empty(len(at), np.uint8)
+    mean = np.empty(count, np.float32)
+    settled = np.empty(count, np.uint8)
     rc = lib.ck_window_means(
-        _ptr("const float *", points),
-        grid.shape[1],
-        grid.shape[2],
-        _ptr("const int64_t *", at),
-        len(at),
-        _ptr("const double *", spacing),
+        *leading,
         _ptr("const int32_t *", half),
         len(half),
         _ptr("float *", mean),
@@ -253,14 +243,26 @@ def patch_sample(
 
 def _grid_arguments(
     grid: np.ndarray, at: np.ndarray, spacing_mm: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[int, tuple[np.ndarray, ...], tuple[Any, ...]]:
     """The pixel-grid kernels' common arguments as C wants them: each pixel's x y z side by side (one cache
-    line per neighbour instead of three), the points' flat indices, and a spacing per point."""
+    line per neighbour instead of three), the points' flat indices, and a spacing per point.
+
+    Returns the number of points, the arrays C reads (keep them alive across the call) and the kernels'
+    leading arguments: points, grid height and width, indices, count, spacings."""
     if grid.ndim != 3 or grid.shape[0] != 3:
         raise ValueError(f"grid must be 3 x H x W, got shape {grid.shape}")
     points = np.ascontiguousarray(np.moveaxis(grid, 0, -1), np.float32)
     at = np.ascontiguousarray(at, np.int64)
-    return points, at, np.ascontiguousarray(np.broadcast_to(spacing_mm, at.shape), np.float64)
+    spacing = np.ascontiguousarray(np.broadcast_to(spacing_mm, at.shape), np.float64)
+    leading = (
+        _ptr("const float *", points),
+        grid.shape[1],
+        grid.shape[2],
+        _ptr("const int64_t *", at),
+        len(at),
+        _ptr("const double *", spacing),
+    )
+    return len(at), (points, at, spacing), leading
 
 
 def _raster_points(xy: np.ndarray) -> tuple[np.ndarray, int]:
