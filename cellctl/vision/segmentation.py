@@ -157,9 +157,11 @@ class _RunState:
 
     def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
         """A refusal with what this run found about the table and the cloud, plus the sole's points if any."""
-        return ReconstructionRefused(
-            failure=failure,
-            reason=reason,
+        return ReconstructionRefused(failure=failure, reason=reason, **self._found(), **sole)
+
+    def _found(self) -> dict[str, Any]:
+        """What this run found about the table and the cloud: every result carries it, refused or not."""
+        return dict(
             measured_points=self.measured,
             measured_fraction=self.fraction,
             table_plane=self.plane,
@@ -167,7 +169,6 @@ class _RunState:
             colour_filter=self.colour_filter,
             colour_separation=self.separation,
             timings=self.timings,
-            **sole,
         )
 
     def _result(self, failure: FailureKind | None, reason: str | None, **sole: Any) -> ReconstructionResult:
@@ -179,13 +180,7 @@ class _RunState:
             )
         assert self.plane is not None and self.transform is not None  # a sole is only found on a table
         return Reconstruction(
-            camera_to_table=self.transform,
-            table_plane=self.plane,
-            colour_filter=self.colour_filter,
-            colour_separation=self.separation,
-            measured_points=self.measured,
-            measured_fraction=self.fraction,
-            timings=self.timings,
+            **self._found(),
             calibration=self.cloud.calibration,
             raised=self.raised,
             measured_cells=self.measured_cells,
