@@ -159,12 +159,12 @@ def edge_offsets(
     before = np.concatenate([np.zeros((n, 1)), np.cumsum(off, axis=1)], axis=1)
     after = np.concatenate([np.cumsum(on[:, ::-1], axis=1)[:, ::-1], np.zeros((n, 1))], axis=1)
     misfit = before + after
-    best = np.argmin(misfit, axis=1)
+    if outermost:  # the outermost step of the same (least) misfit: misfit has k + 1 columns
+        best = k - np.argmin(misfit[:, ::-1], axis=1)
+    else:
+        best = np.argmin(misfit, axis=1)
     count = known.sum(axis=1)
     offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
-    if outermost:
-        best = k - np.argmin(misfit[:, ::-1], axis=1)  # the outermost step of the same (least) misfit
-        offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
     clear = (count >= EDGE_PROFILE_MIN_KNOWN * k) & (
         misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1)
     )
