@@ -87,11 +87,12 @@ class ChangeTest:
             keep = np.abs(residual) < CHANGE_SIGMAS * sigma
         return cls(float(gain), float(offset), sigma)
 
-    def residual(self, current: np.ndarray, reference: np.ndarray) -> np.ndarray:
-        # In place on one buffer, no copies of float32 inputs: the same float32 operations in the same order.
+    def predicted(self, reference: np.ndarray) -> np.ndarray:
+        """The taught table as the current exposure shows it: gain x reference + offset (a new float32 array;
+        no copy of a float32 input)."""
         predicted = np.multiply(np.asarray(reference, np.float32), self.gain)
         predicted += self.offset
-        return np.subtract(np.asarray(current, np.float32), predicted, out=predicted)
+        return predicted
 
     def changed(self, current: np.ndarray, reference: np.ndarray, box: tuple[slice, slice] | None = None) -> np.ndarray:
         """Bool image: pixels that no longer show the taught table (only within `box`, rows and columns, if
@@ -112,14 +113,13 @@ class ChangeTest:
         # The texture votes on a worker thread beside the residual (numpy and OpenCV release the GIL).
         texture = worker("change-texture").submit(self._texture, current, reference)
         try:
-            residual = self.residual(current, reference)
+            predicted = self.predicted(reference)
+            residual = np.subtract(np.asarray(current, np.float32), predicted)
         finally:
             futures.wait([texture])
         still_table, texture_gone, illumination = texture.result()
         # Against the table as lit now: where the still table is darker or lighter than taught (a shadow), its
         # factor is carried to the pixels beside it, so a shadowed table pixel next to the sole is not changed.
-        predicted = np.multiply(np.asarray(reference, np.float32), self.gain)
-        predicted += self.offset
         predicted *= illumination - 1.0
         residual -= predicted
         magnitude = np.abs(residual)
@@ -175,8 +175,7 @@ class ChangeTest:
         var_r -= np.multiply(mean_r, mean_r, out=scratch)
         # The window's brightness against the taught prediction: a shadow or a lamp scales it as it scales
         # the texture (the fit's vote below needs both), a sole's brightness has nothing to do with it.
-        brightness = np.multiply(mean_r, self.gain)
-        brightness += self.offset
+        brightness = self.predicted(mean_r)
         np.divide(mean_c, np.maximum(brightness, 1.0, out=brightness), out=brightness)
         covariance = cv2.blur(np.multiply(cur, ref, out=scratch), window)  # blur(cur * ref) - mean_c * mean_r
         covariance -= np.multiply(mean_c, mean_r, out=mean_c)
@@ -213,8 +212,7 @@ class ChangeTest:
         fit_share = cv2.blur(fitted.astype(np.float32), window)
         still |= fit_share > UNANIMOUS
         # The illumination factor over the still table, carried to its neighbours.
-        predicted = np.multiply(ref, self.gain)
-        predicted += self.offset
+        predicted = self.predicted(ref)
         ratio = np.divide(cur, np.maximum(predicted, 1.0), out=predicted)
         # Near still table from a window of half the size (a shadow's own edge stays sharp), farther out
         # from the whole window (the band beside the sole, whose windows do not vote).
