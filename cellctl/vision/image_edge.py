@@ -1,29 +1,28 @@
-"""The sole's edge placed from the images: the depth-based outline moved onto the edge both cameras'
+"""The sole's edge placed from the images: the depth-based outline moved out onto the edge both cameras'
 silhouettes (change masks against the taught table) show, each projected at the height where that camera's
-silhouette lies (docs/measurements.md, Footprint), only where depth is silent between the outline and that
-edge (`depth_silent`). docs/sole-benchmark.md has what it measured, with and without that guard.
+silhouette lies (docs/measurements.md, Footprint), read as the edge-offset check of
+cellctl.vision.outline_checks reads them (`stereo_offsets`, innermost and outermost of equally good steps).
 
-Why the guard: after a move the edge-offset check compares the outline with the masks it was moved onto, so
-it can no longer refuse an outward error both masks share (a contact shadow). Such an error lies on the
-table, whose texture the matcher measures at table height; the error the move is for (a black top edge's
-last mm without depth: where the census window straddles the step along an edge near the epipolar lines, the
-sole's and the table's disparities cost alike and the uniqueness test drops both) has no depth at all there.
+What it corrects: the depth outline stops short of a weakly textured (black) top edge, by 0.6-1.4 mm on the
+matrix soles. Where the census window straddles the step along an edge near the epipolar lines, the sole's
+and the table's disparities cost alike and the uniqueness test drops the last mm; next to a textured table
+the matcher drags the table's disparity onto the edge, so that band of the sole lies on table-level cells,
+which the innermost reading excuses (it stops on the outline) and the outermost reads as the sole.
 
-Off by default (PLACE_EDGE_FROM_IMAGES): the guard holds where the shadowed table keeps its texture (the test's
-case), but the matrix's dark cast shadows (2016, 2039: a low side light) leave the table beside the sole
-without depth too, and there the guarded placement moved 55 outline points 1.6-3.2 mm past the true edge
-(both soles refused by the depth-step check all the same; /work/notes/edge-diag/guard_truth.py). On, it
-measures 3 more of the 84 matrix soles and bench --cycle's black sole 2 (docs/sole-benchmark.md, fifth round).
+Guards: both cameras agree (each at its own silhouette height), the move is 0.5-1.5 mm (a dark cast shadow's
+edge lies 2-3 mm out: such a point is not moved and the check refuses it), the innermost readings do not
+put the edge inside, and depth is silent on the way (`depth_silent`: no raw table-level depth in the
+crossed band; a contact shadow on textured table is measured there). After a move the edge-offset check
+compares the outline with the masks it was moved onto, so there it refuses only errors beyond the cap or
+where the cameras disagree; the depth-step and right-image tests stay independent of the move.
+
+Inward moves (the depth step fattened past both masks) are built and tested (`edge_shift(inward_too=True)`)
+but off (PLACE_EDGE_INWARD): the constant's comment and docs/sole-benchmark.md say why.
 
 A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
 the edge lies where the silhouette's ray meets the top edge's measured height. Where a camera sees the wall,
 its silhouette is the foot or, for a wall lit like the table, the top edge, which one camera cannot tell
-apart: the reading nearer the outline is taken. The outline is moved only outward, where both cameras give
-an edge, agree, and the move is larger than the edge's own scatter in the images; elsewhere it stays where
-the depth put it, and the self-checks judge the result.
-
-The camera projections, the table-level cells and the per-camera reading (`silhouette_offsets`) are also what
-the edge-offset check of cellctl.vision.outline_checks reads the images with.
+apart: `stereo_offsets` takes the one the other camera's unambiguous reading confirms.
 """
 
 from __future__ import annotations
@@ -34,12 +33,12 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
-from cellctl.vision.edge_checks import EDGE_OFFSET_WINDOW_MM, edge_offsets
+from cellctl.vision.edge_checks import EDGE_OFFSET_WINDOW_MM, edge_offset_pair
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import SoleSurface
 
-PLACE_EDGE_FROM_IMAGES = True  # the module docstring says what guards it
+PLACE_EDGE_FROM_IMAGES = True  # outward moves; the module docstring says what guards them
 # Inward moves (the depth step fattened past both masks) are built and tested but off: on the matrices they
 # measure four more soles right, and they make two soles valid that then fail on something no check sees (a
 # black toe's cloud 1.1-1.4 mm high, glue height 1.23 mm off with the outline within 0.7 mm of the truth; a
@@ -108,14 +107,13 @@ def _readings(
     edge_height: np.ndarray,
     camera: Camera,
     table_level: Footprint | None,
-    outermost: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One camera's mask edge read at the table (foot) and at the top edge's height (top), and where it sees
-    the wall (its centre lies outward of the outline point)."""
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """One camera's mask edge read at the table (foot) and at the top edge's height (top), each (innermost,
+    outermost), and where it sees the wall (its centre lies outward of the outline point)."""
     changed, to_pixel, centre = camera
     sees_wall = np.sum(outward * (centre[:2] - ring), axis=1) > 0
-    foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level, outermost)
-    top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level, outermost)
+    foot = edge_offset_pair(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
+    top = edge_offset_pair(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
     return foot, top, sees_wall
 
 
@@ -144,8 +142,9 @@ def silhouette_offsets(
     heights), so there the reading nearer the outline is taken. `stereo_offsets` decides with the other camera
     instead. outermost: as in edge_checks.edge_offsets.
     """
-    foot, top, sees_wall = _readings(ring, outward, edge_height, (changed, to_pixel, centre), table_level, outermost)
-    return np.where(sees_wall, _nearer(foot, top, 0.0), top)
+    foot, top, sees_wall = _readings(ring, outward, edge_height, (changed, to_pixel, centre), table_level)
+    which = 1 if outermost else 0
+    return np.where(sees_wall, _nearer(foot[which], top[which], 0.0), top[which])
 
 
 def stereo_offsets(
@@ -154,19 +153,18 @@ def stereo_offsets(
     edge_height: np.ndarray,
     cameras: tuple[Camera, Camera],
     table_level: Footprint | None = None,
-    outermost: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Both cameras' silhouette offsets (`silhouette_offsets`), where a camera sees the wall read at the height
-    the other camera confirms: of its foot and top readings the one nearer the other camera's unambiguous
-    reading (its top edge, where the wall is hidden from it); where the other sees the wall too, the one nearer
-    the outline.
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Both cameras' silhouette offsets (`silhouette_offsets`), ((left, right) innermost, (left, right)
+    outermost: edge_checks.edge_offset_pair), where a camera sees the wall read at the height the other camera
+    confirms: of its foot and top readings the one nearer the other camera's unambiguous reading (its top
+    edge, where the wall is hidden from it); where the other sees the wall too, the one nearer the outline.
 
     The nearer-the-outline rule alone reads in the outline's favour: with the outline 1 mm beyond a dark wall's
     foot, the top reading of the camera that sees that wall lies on the outline (the ray to the foot crosses
     the top's height ~1 mm further out) and was taken, so an outline 0.5-1 mm beyond a black pointed toe passed
     the edge-offset check with the other camera's correct -0.9 mm halved by the mean."""
     (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = (
-        _readings(ring, outward, edge_height, camera, table_level, outermost) for camera in cameras
+        _readings(ring, outward, edge_height, camera, table_level) for camera in cameras
     )
 
     def read(
@@ -176,7 +174,9 @@ def stereo_offsets(
         by_other = np.where(np.isfinite(witness), _nearer(foot, top, witness), _nearer(foot, top, 0.0))
         return np.where(wall, by_other, top)
 
-    return read(foot_l, top_l, wall_l, top_r, wall_r), read(foot_r, top_r, wall_r, top_l, wall_l)
+    inner = read(foot_l[0], top_l[0], wall_l, top_r[0], wall_r), read(foot_r[0], top_r[0], wall_r, top_l[0], wall_l)
+    outer = read(foot_l[1], top_l[1], wall_l, top_r[1], wall_r), read(foot_r[1], top_r[1], wall_r, top_l[1], wall_l)
+    return inner, outer
 
 
 def _local(offsets: np.ndarray) -> np.ndarray:
@@ -283,8 +283,7 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
     level = table_level(reconstruction)
     (left_pixel, left_centre), (right_pixel, right_centre) = projections(reconstruction)
     cameras = ((changed_left, left_pixel, left_centre), (changed_right, right_pixel, right_centre))
-    inner = stereo_offsets(ring, outward, edge_height, cameras, level)
-    outer = stereo_offsets(ring, outward, edge_height, cameras, level, outermost=True)
+    inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)
     outer_left, outer_right = (np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True))
     silent = depth_silent(ring, outward, reconstruction.table_points)
     shift = edge_shift(inner[0], inner[1], silent, (outer_left, outer_right), PLACE_EDGE_INWARD)

@@ -79,11 +79,10 @@ def _check_outline_images(
         (reconstruction.changed_left, left_pixel, left_centre),
         (changed_right, right_pixel, right_centre),
     )
-    inner = stereo_offsets(ring, outward, edge_height, cameras, level)
+    inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
     problem = check_edge_offsets(list(inner))
     if problem is not None:
         return problem
-    outer = stereo_offsets(ring, outward, edge_height, cameras, level, outermost=True)
     return check_edge_offsets([np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True)])
 
 

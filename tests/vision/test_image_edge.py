@@ -108,7 +108,7 @@ def test_a_camera_that_sees_the_wall_is_read_at_the_height_the_other_confirms() 
     (changed_l, project_l), (changed_r, project_r) = camera_image(left_camera), camera_image(right_camera)
     ring, outward = circle(RADIUS + 1.0)
     heights = np.full(len(ring), HEIGHT)
-    left, right = stereo_offsets(
+    (left, right), _ = stereo_offsets(
         ring, outward, heights, ((changed_l, project_l, left_camera), (changed_r, project_r, right_camera))
     )
     wall_side = (ring[:, 0] > RADIUS * np.cos(np.radians(20))) & (np.abs(ring[:, 1]) < 15.0)
