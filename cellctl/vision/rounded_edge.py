@@ -14,11 +14,11 @@ words, and is the outline part of measuring it one day. What is known, and why i
   true height of the wall's top the silhouettes lie 0.1-0.4 mm (median) inside the true edge, where the depth
   outline lies 0.4-1.0 mm inside, but that height is not measured: it is the curve's unmeasured part.
 - The surface. The glue line 2 mm inside the true edge lies on the curve, 20-37 degrees steep for 3-5 mm of
-  radius. The stereo cloud there is 0.4-0.6 mm low and its slope 5-15 degrees too flat (the matcher's
-  window averages across the curve); local fits on it, quadratic or oriented across the edge, pooled along
-  the outline or not, and the image patch fits miss the true normal by more than the 5 degree tolerance at
-  80-95 % of the glue line's points (the same fits on the true heights are within it). So no valid glue
-  path can be given, and the check refuses.
+  radius. The stereo cloud there is 0.4-0.6 mm low; local fits on it across the edge (quadratic or linear,
+  pooled along the outline or not) and the image patch fits miss the true normal by more than the 5 degree
+  tolerance at 80-95 % of the glue line's points (12-15 degrees too flat in the median on two of three soles),
+  where a quadratic over +-1.5 mm across the edge fitted to the true heights is within it at 95 %: the data,
+  not the fit, falls short. So no valid glue path can be given, and the check refuses.
 """
 
 from __future__ import annotations
@@ -149,8 +149,8 @@ def describe(profile: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, 
         fall = float(np.interp(at, np.array(FALL_AT_MM)[known], profile[known]))
         words.append(
             f"{glue_offset_mm:g} mm inside the edge the measured top has fallen {max(fall, 0.0):.1f} mm and slopes "
-            f"{max(tilt, 0.0):.0f} degrees outward, a curve on which depth gives the glue path's heights and normals "
-            "too flat"
+            f"{max(tilt, 0.0):.0f} degrees outward, a curve whose slope depth does not give within the glue normals' "
+            "tolerance"
         )
     return "; ".join(words)
 
