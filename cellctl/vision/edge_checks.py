@@ -59,14 +59,18 @@ MAX_EDGE_OFFSET_MM = 0.8
 
 
 def check_edge_profile(
-    outline: np.ndarray, outward: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+    outline: np.ndarray,
+    outward: np.ndarray,
+    surface_height: Callable[[np.ndarray], np.ndarray],
+    detail: Callable[[], str] | None = None,
 ) -> CheckFailure | None:
     """The surface across the edge: does the top run on flat to the outline, or fall away before it?
 
     `surface_height(xy N x 2) -> N` is the measured height (NaN where none). Per outline point the height
     EDGE_OUTER_MM inside is compared with the line through the heights further in; the median over the
     outline (a rounded edge runs round the sole, a single bad patch does not move the median) must not fall
-    more than EDGE_MAX_DROP_MM below it.
+    more than EDGE_MAX_DROP_MM below it. detail: words added to a refusal (cellctl.vision.rounded_edge.detail:
+    the edge and the curve in numbers), asked for only then.
     """
     inner = np.array(EDGE_INNER_MM)
     heights = np.column_stack([surface_height(outline - d * outward) for d in inner])
@@ -84,11 +88,12 @@ def check_edge_profile(
     a = (t0[usable] - b * s1[usable]) / s0[usable]
     drop = float(np.median(a + b * EDGE_OUTER_MM - outer[usable]))
     if drop > EDGE_MAX_DROP_MM:
+        more = detail() if detail is not None else ""
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"the sole's top falls {drop:.1f} mm (median round the outline) over the last few mm before its "
             "outline: its top edge is rounded or bevelled, so the edge lies beyond where its depth was measured "
-            "and the glue path near it is on a curve, not a flat top",
+            "and the glue path near it is on a curve, not a flat top" + (f" ({more})" if more else ""),
         )
     return None
 

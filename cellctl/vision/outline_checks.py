@@ -11,6 +11,7 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.stereo.pointgrid import PointGrid
+from cellctl.vision import rounded_edge
 from cellctl.vision.checks import (
     OUTLINE_OUTSIDE_MM,
     CheckFailure,
@@ -41,7 +42,9 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
         )
         if problem is not None:
             return problem
-    problem = check_edge_profile(ring, outward, heights)
+    problem = check_edge_profile(
+        ring, outward, heights, lambda: rounded_edge.detail(reconstruction, ring, outward, heights)
+    )
     if problem is not None:
         return problem
     problem = _check_outline_images(reconstruction, ring, outward, surface, heights)
