@@ -134,12 +134,24 @@ def edge_offsets(
     table_level: Footprint | None = None,
     outermost: bool = False,
 ) -> np.ndarray:
+    """`edge_offset_pair`'s innermost reading, or with `outermost` its outermost."""
+    return edge_offset_pair(outline, outward, level, changed, table_to_pixel, table_level)[1 if outermost else 0]
+
+
+def edge_offset_pair(
+    outline: np.ndarray,
+    outward: np.ndarray,
+    level: np.ndarray,
+    changed: np.ndarray,
+    table_to_pixel: Callable[[np.ndarray], np.ndarray],
+    table_level: Footprint | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Per outline point: where the camera's changed region ends along the outward normal, in mm from the
     outline (+: beyond it), NaN where the profile shows no clear single edge.
 
-    outermost: where several steps fit equally well (samples between them unknown: out of the image, or
-    changed on `table_level` cells), the one farthest out instead of the innermost; unknown samples to the end of
-    the search give no edge. The check reads both (check_edge_offsets on each): missing evidence must not be
+    Two readings from one sampling, (innermost, outermost): where several steps fit equally well (samples
+    between them unknown: out of the image, or changed on `table_level` cells), the innermost of them, and the
+    one farthest out; unknown samples to the end of the search give no edge. The check reads both (check_edge_offsets on each): missing evidence must not be
     read in the outline's favour. Stereo drags a textured table's depth 1-2 mm onto the edge of a weakly
     textured (black) sole, so the sole's own edge band is on `table_level` cells, and the innermost step put
     the edge on an outline that stopped short with the depth (1.4 mm inside the true edge over 65 mm, glue
@@ -164,18 +176,17 @@ def edge_offsets(
     before = np.concatenate([np.zeros((n, 1)), np.cumsum(off, axis=1)], axis=1)
     after = np.concatenate([np.cumsum(on[:, ::-1], axis=1)[:, ::-1], np.zeros((n, 1))], axis=1)
     misfit = before + after
-    if outermost:  # the outermost step of the same (least) misfit: misfit has k + 1 columns
-        best = k - np.argmin(misfit[:, ::-1], axis=1)
-    else:
-        best = np.argmin(misfit, axis=1)
     count = known.sum(axis=1)
-    offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
-    clear = (count >= EDGE_PROFILE_MIN_KNOWN * k) & (
-        misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1)
-    )
-    # A step at either end of the search is no edge found within it.
-    clear &= (best > 0) & (best < k)
-    return np.where(clear, offset, np.nan)
+    enough = count >= EDGE_PROFILE_MIN_KNOWN * k
+    # The innermost and the outermost step of the same (least) misfit: misfit has k + 1 columns.
+    readings = []
+    for best in (np.argmin(misfit, axis=1), k - np.argmin(misfit[:, ::-1], axis=1)):
+        offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
+        clear = enough & (misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1))
+        # A step at either end of the search is no edge found within it.
+        clear &= (best > 0) & (best < k)
+        readings.append(np.where(clear, offset, np.nan))
+    return readings[0], readings[1]
 
 
 def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:

@@ -1,29 +1,28 @@
-"""The sole's edge placed from the images: the depth-based outline moved onto the edge both cameras'
+"""The sole's edge placed from the images: the depth-based outline moved out onto the edge both cameras'
 silhouettes (change masks against the taught table) show, each projected at the height where that camera's
-silhouette lies (docs/measurements.md, Footprint), only where depth is silent between the outline and that
-edge (`depth_silent`). docs/sole-benchmark.md has what it measured, with and without that guard.
+silhouette lies (docs/measurements.md, Footprint), read as the edge-offset check of
+cellctl.vision.outline_checks reads them (`stereo_offsets`, innermost and outermost of equally good steps).
 
-Why the guard: after a move the edge-offset check compares the outline with the masks it was moved onto, so
-it can no longer refuse an outward error both masks share (a contact shadow). Such an error lies on the
-table, whose texture the matcher measures at table height; the error the move is for (a black top edge's
-last mm without depth: where the census window straddles the step along an edge near the epipolar lines, the
-sole's and the table's disparities cost alike and the uniqueness test drops both) has no depth at all there.
+What it corrects: the depth outline stops short of a weakly textured (black) top edge, by 0.6-1.4 mm on the
+matrix soles. Where the census window straddles the step along an edge near the epipolar lines, the sole's
+and the table's disparities cost alike and the uniqueness test drops the last mm; next to a textured table
+the matcher drags the table's disparity onto the edge, so that band of the sole lies on table-level cells,
+which the innermost reading excuses (it stops on the outline) and the outermost reads as the sole.
 
-Off by default (PLACE_EDGE_FROM_IMAGES): the guard holds where the shadowed table keeps its texture (the test's
-case), but the matrix's dark cast shadows (2016, 2039: a low side light) leave the table beside the sole
-without depth too, and there the guarded placement moved 55 outline points 1.6-3.2 mm past the true edge
-(both soles refused by the depth-step check all the same; /work/notes/edge-diag/guard_truth.py). On, it
-measures 3 more of the 84 matrix soles and bench --cycle's black sole 2 (docs/sole-benchmark.md, fifth round).
+Guards: both cameras agree (each at its own silhouette height), the move is 0.5-1.5 mm (a dark cast shadow's
+edge lies 2-3 mm out: such a point is not moved and the check refuses it), the innermost readings do not
+put the edge inside, and depth is silent on the way (`depth_silent`: no raw table-level depth in the
+crossed band; a contact shadow on textured table is measured there). After a move the edge-offset check
+compares the outline with the masks it was moved onto, so there it refuses only errors beyond the cap or
+where the cameras disagree; the depth-step and right-image tests stay independent of the move.
+
+Inward moves (the depth step fattened past both masks) are built and tested (`edge_shift(inward_too=True)`)
+but off (PLACE_EDGE_INWARD): the constant's comment and docs/sole-benchmark.md say why.
 
 A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
 the edge lies where the silhouette's ray meets the top edge's measured height. Where a camera sees the wall,
 its silhouette is the foot or, for a wall lit like the table, the top edge, which one camera cannot tell
-apart: the reading nearer the outline is taken. The outline is moved only outward, where both cameras give
-an edge, agree, and the move is larger than the edge's own scatter in the images; elsewhere it stays where
-the depth put it, and the self-checks judge the result.
-
-The camera projections, the table-level cells and the per-camera reading (`silhouette_offsets`) are also what
-the edge-offset check of cellctl.vision.outline_checks reads the images with.
+apart: `stereo_offsets` takes the one the other camera's unambiguous reading confirms.
 """
 
 from __future__ import annotations
@@ -34,15 +33,25 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
-from cellctl.vision.edge_checks import EDGE_OFFSET_WINDOW_MM, edge_offsets
+from cellctl.vision.edge_checks import EDGE_OFFSET_WINDOW_MM, edge_offset_pair
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import SoleSurface
 
-PLACE_EDGE_FROM_IMAGES = False  # the module docstring says why
+PLACE_EDGE_FROM_IMAGES = True  # outward moves; the module docstring says what guards them
+# Inward moves (the depth step fattened past both masks) are built and tested but off: on the matrices they
+# measure four more soles right, and they make two soles valid that then fail on something no check sees (a
+# black toe's cloud 1.1-1.4 mm high, glue height 1.23 mm off with the outline within 0.7 mm of the truth; a
+# 3 mm spike of the depth outline 1.5 mm out, narrower than the check's median): the edge-offset refusal there
+# is all that kept them out (docs/sole-benchmark.md, sixth round "offset6").
+PLACE_EDGE_INWARD = False
 EDGE_MOVE_MIN_MM = 0.5  # a sharp edge's offsets scatter by ~0.2 mm in the images: smaller is no evidence
 EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a texture line fools one mask)
 EDGE_MOVE_SMOOTHING_MM = 1.5
+# The depth outline's own errors the move corrects: ~1 mm (a dark top edge's last mm without depth; a textured
+# table's disparity dragged onto a black edge; a depth step fattened past the masks). The masks' errors that
+# both cameras share are larger (a cast shadow's edge 2-3 mm beyond the sole): such a point is not moved.
+EDGE_MOVE_MAX_MM = 1.5
 # The guard (`depth_silent`): a move must cross ground where depth measured nothing at the table's height, in a
 # strip this wide along the outline, up to this far short of the proposed edge (the table is measured from there).
 SILENT_STRIP_MM = 1.0
@@ -89,6 +98,31 @@ def edge_heights(surface: SoleSurface, ring: np.ndarray, outward: np.ndarray) ->
     return np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
 
 
+Camera = tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], np.ndarray]  # change mask, projection, centre
+
+
+def _readings(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    edge_height: np.ndarray,
+    camera: Camera,
+    table_level: Footprint | None,
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """One camera's mask edge read at the table (foot) and at the top edge's height (top), each (innermost,
+    outermost), and where it sees the wall (its centre lies outward of the outline point)."""
+    changed, to_pixel, centre = camera
+    sees_wall = np.sum(outward * (centre[:2] - ring), axis=1) > 0
+    foot = edge_offset_pair(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level)
+    top = edge_offset_pair(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level)
+    return foot, top, sees_wall
+
+
+def _nearer(foot: np.ndarray, top: np.ndarray, to: np.ndarray | float) -> np.ndarray:
+    """Per point the reading nearer `to` (NaN readings never nearer)."""
+    foot_off = np.nan_to_num(np.abs(foot - to), nan=np.inf)
+    return np.where(foot_off < np.nan_to_num(np.abs(top - to), nan=np.inf), foot, top)
+
+
 def silhouette_offsets(
     ring: np.ndarray,
     outward: np.ndarray,
@@ -105,14 +139,44 @@ def silhouette_offsets(
     sole makes the silhouette. Where the sole hides the wall from the camera, that is the top edge, at its
     measured height. Where the camera sees the wall it is the wall's foot on the table, or the top edge again if
     the wall is lit like the table (no change); one camera cannot tell the two apart (the same ray at two
-    heights), so there the reading nearer the outline is taken (the edge-offset check's rule): with outward
-    moves only, the smaller claim. outermost: as in edge_checks.edge_offsets (for the check, not for placing).
+    heights), so there the reading nearer the outline is taken. `stereo_offsets` decides with the other camera
+    instead. outermost: as in edge_checks.edge_offsets.
     """
-    sees_wall = np.sum(outward * (centre[:2] - ring), axis=1) > 0
-    foot = edge_offsets(ring, outward, np.zeros(len(ring)), changed, to_pixel, table_level, outermost)
-    top = edge_offsets(ring, outward, np.maximum(edge_height, 0.0), changed, to_pixel, table_level, outermost)
-    nearer = np.where(np.abs(np.nan_to_num(foot, nan=np.inf)) < np.abs(np.nan_to_num(top, nan=np.inf)), foot, top)
-    return np.where(sees_wall, nearer, top)
+    foot, top, sees_wall = _readings(ring, outward, edge_height, (changed, to_pixel, centre), table_level)
+    which = 1 if outermost else 0
+    return np.where(sees_wall, _nearer(foot[which], top[which], 0.0), top[which])
+
+
+def stereo_offsets(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    edge_height: np.ndarray,
+    cameras: tuple[Camera, Camera],
+    table_level: Footprint | None = None,
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Both cameras' silhouette offsets (`silhouette_offsets`), ((left, right) innermost, (left, right)
+    outermost: edge_checks.edge_offset_pair), where a camera sees the wall read at the height the other camera
+    confirms: of its foot and top readings the one nearer the other camera's unambiguous reading (its top
+    edge, where the wall is hidden from it); where the other sees the wall too, the one nearer the outline.
+
+    The nearer-the-outline rule alone reads in the outline's favour: with the outline 1 mm beyond a dark wall's
+    foot, the top reading of the camera that sees that wall lies on the outline (the ray to the foot crosses
+    the top's height ~1 mm further out) and was taken, so an outline 0.5-1 mm beyond a black pointed toe passed
+    the edge-offset check with the other camera's correct -0.9 mm halved by the mean."""
+    (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = (
+        _readings(ring, outward, edge_height, camera, table_level) for camera in cameras
+    )
+
+    def read(
+        foot: np.ndarray, top: np.ndarray, wall: np.ndarray, other_top: np.ndarray, other_wall: np.ndarray
+    ) -> np.ndarray:
+        witness = np.where(other_wall, np.nan, other_top)
+        by_other = np.where(np.isfinite(witness), _nearer(foot, top, witness), _nearer(foot, top, 0.0))
+        return np.where(wall, by_other, top)
+
+    inner = read(foot_l[0], top_l[0], wall_l, top_r[0], wall_r), read(foot_r[0], top_r[0], wall_r, top_l[0], wall_l)
+    outer = read(foot_l[1], top_l[1], wall_l, top_r[1], wall_r), read(foot_r[1], top_r[1], wall_r, top_l[1], wall_l)
+    return inner, outer
 
 
 def _local(offsets: np.ndarray) -> np.ndarray:
@@ -126,24 +190,47 @@ def _local(offsets: np.ndarray) -> np.ndarray:
 
 
 def edge_shift(
-    left: np.ndarray, right: np.ndarray, silent: Callable[[np.ndarray], np.ndarray] | None = None
+    left: np.ndarray,
+    right: np.ndarray,
+    silent: Callable[[np.ndarray], np.ndarray] | None = None,
+    outer: tuple[np.ndarray, np.ndarray] | None = None,
+    inward_too: bool = True,
 ) -> np.ndarray:
-    """How far to move each outline point out along its normal: both cameras' local edge where they agree
-    within EDGE_MOVE_AGREE_MM and their mean is more than EDGE_MOVE_MIN_MM beyond the outline, else 0;
-    smoothed along the outline. Never inward: the change masks' own errors (a wall lit like the table, the
-    change test's blur at a top edge) put the edge inside the sole in both cameras alike, so their agreement
-    on an inward edge is no evidence (the self-check refuses there instead).
+    """How far to move each outline point along its outward normal (+: out, -: in), smoothed along the
+    outline; 0 where the evidence does not hold.
 
-    silent (proposed moves -> bool per point): whether depth is silent over each move (`depth_silent`); where
-    it is not, the point stays, also after the smoothing, so the edge-offset check still judges it there."""
+    left, right: each camera's silhouette offsets (`silhouette_offsets`, the innermost of equally good steps);
+    outer: the same read outermost (edge_checks.edge_offsets), as the edge-offset check reads them; without it
+    the innermost readings stand for both. A move is the mean of both cameras' local edges (running medians
+    over EDGE_OFFSET_WINDOW_MM) where they agree within EDGE_MOVE_AGREE_MM and lie more than EDGE_MOVE_MIN_MM
+    and at most EDGE_MOVE_MAX_MM from the outline:
+
+    - outward by the outermost readings (the depth stopped short: excused table-level samples beyond it are the
+      sole's edge band the matcher dragged to the table's height), where the innermost do not put the edge
+      inside and `silent` allows it;
+    - inward by the innermost readings, where the outermost agree that the edge is inside (no changed band
+      beyond the outline that could be the sole's).
+
+    Where the two readings contradict each other (an edge inside and another beyond), the point stays.
+    inward_too=False: outward moves only (the placement's default, PLACE_EDGE_INWARD).
+
+    Beyond EDGE_MOVE_MAX_MM the point stays: no depth error of the kind the move corrects is that large, and the
+    masks' own errors are (a cast shadow's edge 2-3 mm out); the edge-offset check then refuses it.
+    silent (proposed moves -> bool per point): whether depth is silent over each outward move (`depth_silent`);
+    where it is not, the point stays, also after the smoothing, so the edge-offset check still judges it there."""
+    outer_left, outer_right = (left, right) if outer is None else outer
     local_left, local_right = _local(left), _local(right)
-    mean = 0.5 * (local_left + local_right)
-    move = (np.abs(local_left - local_right) <= EDGE_MOVE_AGREE_MM) & (mean > EDGE_MOVE_MIN_MM)
-    proposed = np.where(move, mean, 0.0)
-    if silent is None:
-        return smooth_along(proposed, EDGE_MOVE_SMOOTHING_MM)
-    allowed = move & silent(proposed)
-    return np.where(allowed, smooth_along(np.where(allowed, mean, 0.0), EDGE_MOVE_SMOOTHING_MM), 0.0)
+    far_left, far_right = _local(outer_left), _local(outer_right)
+    near, far = 0.5 * (local_left + local_right), 0.5 * (far_left + far_right)
+    out = (np.abs(far_left - far_right) <= EDGE_MOVE_AGREE_MM) & (far > EDGE_MOVE_MIN_MM) & (far <= EDGE_MOVE_MAX_MM)
+    out &= (local_left > -EDGE_MOVE_MIN_MM) & (local_right > -EDGE_MOVE_MIN_MM)
+    inward = (np.abs(local_left - local_right) <= EDGE_MOVE_AGREE_MM) & (near < -EDGE_MOVE_MIN_MM) & inward_too
+    inward &= (near >= -EDGE_MOVE_MAX_MM) & (far_left < -EDGE_MOVE_MIN_MM) & (far_right < -EDGE_MOVE_MIN_MM)
+    if silent is not None:
+        out &= silent(np.where(out, far, 0.0))
+    allowed = out | inward
+    proposed = np.where(out, far, np.where(inward, near, 0.0))
+    return np.where(allowed, smooth_along(proposed, EDGE_MOVE_SMOOTHING_MM), 0.0)
 
 
 def depth_silent(ring: np.ndarray, outward: np.ndarray, table_points: Footprint) -> Callable[[np.ndarray], np.ndarray]:
@@ -194,11 +281,12 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
         return outline
     edge_height = edge_heights(surface, ring, outward)
     level = table_level(reconstruction)
-    left, right = (
-        silhouette_offsets(ring, outward, edge_height, changed, to_pixel, centre, level)
-        for changed, (to_pixel, centre) in zip((changed_left, changed_right), projections(reconstruction), strict=True)
-    )
-    shift = edge_shift(left, right, depth_silent(ring, outward, reconstruction.table_points))
+    (left_pixel, left_centre), (right_pixel, right_centre) = projections(reconstruction)
+    cameras = ((changed_left, left_pixel, left_centre), (changed_right, right_pixel, right_centre))
+    inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)
+    outer_left, outer_right = (np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True))
+    silent = depth_silent(ring, outward, reconstruction.table_points)
+    shift = edge_shift(inner[0], inner[1], silent, (outer_left, outer_right), PLACE_EDGE_INWARD)
     if not np.any(shift):
         return outline
     return ring + shift[:, None] * outward

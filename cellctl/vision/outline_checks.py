@@ -22,7 +22,7 @@ from cellctl.vision.checks import (
 from cellctl.vision.closed_path import outward_normals, resample_closed
 from cellctl.vision.edge_checks import check_edge_offsets, check_edge_profile, check_steep_wall
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.image_edge import edge_heights, projections, silhouette_offsets, table_level
+from cellctl.vision.image_edge import edge_heights, projections, stereo_offsets, table_level
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.surface import SoleSurface
 
@@ -72,9 +72,9 @@ def _check_outline_images(
     problem = check_outline_right(ring, outward, edge_height, changed_right, right_pixel, right_centre, heights, level)
     if problem is not None or reconstruction.changed_left is None:
         return problem
-    # Per camera, its silhouette's edge at the height where it lies (cellctl.vision.image_edge): the top edge
-    # from the inward side of a wall; from the outward side the foot on the table or the top edge where the
-    # wall is lit so that it hardly differs from the table, the nearer.
+    # Per camera, its silhouette's edge at the height where it lies (cellctl.vision.image_edge.stereo_offsets):
+    # the top edge from the inward side of a wall; from the outward side the foot on the table or the top edge
+    # where the wall is lit so that it hardly differs from the table, whichever the other camera confirms.
     # Read twice: the innermost of equally good steps, then the outermost (edge_checks.edge_offsets): where
     # evidence is missing (changed pixels excused on table-level cells) neither reading may clear the outline.
     # Where the outermost finds no edge (unknown to the end of the search: a wide shadow) the innermost stands.
@@ -82,16 +82,10 @@ def _check_outline_images(
         (reconstruction.changed_left, left_pixel, left_centre),
         (changed_right, right_pixel, right_centre),
     )
-    inner = [
-        silhouette_offsets(ring, outward, edge_height, c, to_pixel, centre, level) for c, to_pixel, centre in cameras
-    ]
-    problem = check_edge_offsets(inner)
+    inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
+    problem = check_edge_offsets(list(inner))
     if problem is not None:
         return problem
-    outer = [
-        silhouette_offsets(ring, outward, edge_height, c, to_pixel, centre, level, outermost=True)
-        for c, to_pixel, centre in cameras
-    ]
     return check_edge_offsets([np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True)])
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from cellctl.vision.edge_checks import check_edge_offsets
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.image_edge import depth_silent, edge_shift, silhouette_offsets
+from cellctl.vision.image_edge import EDGE_MOVE_MAX_MM, depth_silent, edge_shift, silhouette_offsets, stereo_offsets
 
 RADIUS = 50.0
 HEIGHT = 20.0
@@ -61,18 +61,62 @@ def test_each_camera_places_the_edge_at_the_height_of_its_silhouette(wall: bool)
 
 
 def test_the_outline_moves_only_where_both_cameras_agree() -> None:
-    n = 200
+    n = 240
     left, right = np.zeros(n), np.zeros(n)
     left[20:40] = right[20:40] = 1.2  # both see the edge 1.2 mm beyond: a dent of the outline
     left[100:120] = 1.5  # one camera fooled (a shadow past the edge): no move
     right[150:170] = np.nan  # the other has no edge there: no move
     left[150:170] = 1.5
     left[60:80] = right[60:80] = 0.3  # within the edge's scatter: no move
-    left[180:195] = right[180:195] = -1.2  # both masks end inside the outline: no evidence, no move
+    left[180:195] = right[180:195] = -1.2  # both masks end inside the outline: it lies beyond the edge, move in
+    left[205:220] = -1.2  # only one camera says inside: no move
     shift = edge_shift(left, right)
     assert np.all(np.abs(shift[25:35] - 1.2) < 0.05)
+    assert np.all(np.abs(shift[185:190] + 1.2) < 0.05)
     assert np.all(shift[100:120] == 0.0) and np.all(shift[150:170] == 0.0) and np.all(shift[60:80] == 0.0)
-    assert np.all(shift[180:195] == 0.0)
+    assert np.all(shift[200:225] == 0.0)
+
+
+def test_no_move_where_the_outermost_reading_contradicts_or_the_edge_is_too_far() -> None:
+    """Inward only where the outermost readings also put the edge inside (no changed band beyond the outline
+    that could be the sole's); outward by the outermost readings; nothing beyond EDGE_MOVE_MAX_MM (a cast
+    shadow's edge 2-3 mm out): those points stay for the edge-offset check to refuse."""
+    n = 200
+    inner = np.zeros(n)
+    inner[20:40] = -1.0
+    inner[60:80] = 0.1  # innermost on the outline, outermost 1.0 beyond: the excused band is the sole's edge
+    inner[100:120] = 2.5  # both cameras agree on an edge 2.5 mm out: too far for a depth error
+    inner[140:160] = -(EDGE_MOVE_MAX_MM + 0.5)
+    outer = inner.copy()
+    outer[20:40] = 1.0  # the outermost reading finds a changed band beyond the outline: no move either way
+    outer[60:80] = 1.0
+    shift = edge_shift(inner, inner, outer=(outer, outer))
+    assert np.all(shift[15:45] == 0.0)
+    assert np.all(np.abs(shift[65:75] - 1.0) < 0.05)
+    assert np.all(shift[100:120] == 0.0) and np.all(shift[140:160] == 0.0)
+    moved = inner - shift
+    failure = check_edge_offsets([moved, moved])  # the points left alone are still refused
+    assert failure is not None
+
+
+def test_a_camera_that_sees_the_wall_is_read_at_the_height_the_other_confirms() -> None:
+    """An outline 1 mm beyond a dark cylinder's foot. The left camera, outside the +x wall, sees that wall: its
+    mask ends at the foot, and the same ray meets the top's height ~1 mm further out, on the outline. Taking
+    the reading nearer the outline (one camera alone) takes the top and clears the outline there; the right
+    camera, on the far side, sees only the top edge and puts it 1 mm inside: its reading picks the foot."""
+    left_camera, right_camera = np.array([80.0, 0.0, 550.0]), np.array([-80.0, 0.0, 550.0])
+    (changed_l, project_l), (changed_r, project_r) = camera_image(left_camera), camera_image(right_camera)
+    ring, outward = circle(RADIUS + 1.0)
+    heights = np.full(len(ring), HEIGHT)
+    (left, right), _ = stereo_offsets(
+        ring, outward, heights, ((changed_l, project_l, left_camera), (changed_r, project_r, right_camera))
+    )
+    wall_side = (ring[:, 0] > RADIUS * np.cos(np.radians(20))) & (np.abs(ring[:, 1]) < 15.0)
+    assert np.count_nonzero(wall_side) > 20
+    assert np.nanmax(np.abs(left[wall_side] + 1.0)) <= 0.4
+    assert np.nanmax(np.abs(right[wall_side] + 1.0)) <= 0.4
+    alone = silhouette_offsets(ring, outward, heights, changed_l, project_l, left_camera)
+    assert np.nanmedian(alone[wall_side]) > -0.5  # the bias the other camera removes
 
 
 def table_depth(radius: float, shadow: tuple[float, float] | None = None) -> Footprint:
