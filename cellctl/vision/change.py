@@ -244,5 +244,5 @@ class ChangeTest:
             weight_fit = cv2.blur(confident.astype(np.float32), window)
             local = weight_fit >= MIN_LOCAL_FIT_SHARE
             factor = cv2.blur(np.multiply(brightness, confident, dtype=np.float32), window)
-            illumination[local] = factor[local] / weight_fit[local]
+            np.divide(factor, weight_fit, out=illumination, where=local)
         return still, gone, illumination
