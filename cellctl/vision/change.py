@@ -56,6 +56,12 @@ STILL_TEXTURE_SIGMAS = 1.0
 # Shadow-corrected residual: the illumination factor of the still table is carried over ILLUMINATION_WINDOW_PX
 # (~12 mm; half that where the still table is near) to the pixels next to it, so the edge of a sole in a shadow is placed against the shadowed table.
 ILLUMINATION_WINDOW_PX = 31
+# Where some of the windows covering a pixel (MIN_LOCAL_FIT_SHARE) fit the reference at a shadow's factor with
+# a clear correlation, their factor replaces the carried one: two lamps' shadows overlap in a darker band
+# beside the sole (3-5 mm), whose weak texture gives no still vote, and the broad shadow's factor carried
+# into it left it changed (the right-image and edge checks then refused soles whose outline was right).
+LOCAL_SHADOW_FIT = True
+MIN_LOCAL_FIT_SHARE = 0.1  # of the NCC windows covering a pixel (5 of 49)
 
 
 @dataclass(frozen=True)
@@ -226,4 +232,17 @@ class ChangeTest:
             weights = cv2.blur(weight, (size, size))
             near = weights >= least
             illumination[near] = cv2.blur(weighted, (size, size))[near] / weights[near]
+        if LOCAL_SHADOW_FIT:
+            # Where windows covering the pixel fit the reference at a shadow's factor, that factor (their mean)
+            # rather than the one carried from the still table farther away: two lamps' shadows overlap in a
+            # darker band beside the sole, too narrow and too weakly textured for the still vote.
+            # Only windows whose fit is also a clear correlation (TABLE_NCC) speak here: on a uniform black sole
+            # one window in ten fits a shadow's factor by chance, the correlation of a fit that explains the
+            # table's texture does not come by chance.
+            confident = np.greater(ncc, TABLE_NCC)
+            confident &= fitted
+            weight_fit = cv2.blur(confident.astype(np.float32), window)
+            local = weight_fit >= MIN_LOCAL_FIT_SHARE
+            factor = cv2.blur(np.multiply(brightness, confident, dtype=np.float32), window)
+            np.divide(factor, weight_fit, out=illumination, where=local)
         return still, gone, illumination

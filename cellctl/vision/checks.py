@@ -39,6 +39,7 @@ RIGHT_OUTSIDE_MM = 3.0
 # Past the top edge of a wall facing away from the camera, at the edge's height: unchanged if the outline is
 # on the edge. The projection's error from the edge height (~2 mm at a ~10 degree view) is ~0.4 mm.
 RIGHT_EDGE_OUT_MM = 0.75
+CLAIMED_CELL_MM = 0.5  # raster of the outline's interior for the right camera's view past the edge
 HIDDEN_STEP_MM = 1.0  # the ray to the camera is followed in these steps of height...
 HIDDEN_MAX_MM = 60.0  # ...up to the tallest sole
 GLUE_HEIGHT_MARGIN_MM = 1.5  # glue heights beyond the sole's own height range by more than this: not on it
@@ -146,7 +147,9 @@ def check_outline_right(
     measured sole height there (NaN off the sole). Outside each outline point:
 
     - where the right camera sees the table there (its ray passes over no part of the sole higher than
-      the ray), the table RIGHT_OUTSIDE_MM out must be unchanged. `table_level`: cells whose measured points
+      the ray: the measured heights, and where the top has no depth, the outline's interior up to the edge
+      height; the height map often stops a few mm short of a dark or rounded top edge, and a tall sole's
+      edge then hid the table it was thought to show), the table RIGHT_OUTSIDE_MM out must be unchanged. `table_level`: cells whose measured points
       lie at the table's height; a changed pixel there is a shadow or a stain on the table, not sole (a sole
       reaching there would have been measured at its own height), so it does not count against the outline;
     - where the sole hides that table (the wall facing away from the camera), the point RIGHT_EDGE_OUT_MM
@@ -161,7 +164,10 @@ def check_outline_right(
     inside = np.column_stack([outline - RIGHT_INSIDE_MM * outward, edge])
     outside = np.column_stack([outline + RIGHT_OUTSIDE_MM * outward, np.zeros(len(outline))])
     beyond_edge = np.column_stack([outline + RIGHT_EDGE_OUT_MM * outward, edge])
-    visible = ~_hidden(outside, right_centre, surface_height)
+    # The sole as the outline claims it: where the last mm of the top has no depth (the height map stops short
+    # of the edge), the ray from the table just outside to the camera still passes below the top edge.
+    claimed = Footprint.empty_like(outline, CLAIMED_CELL_MM, 2.0).filled(outline)
+    visible = ~_hidden(outside, right_centre, surface_height, (claimed, edge))
 
     def sample(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         px = np.round(project(points)).astype(np.int64)
@@ -199,14 +205,25 @@ def hidden_from(
 
 
 def _hidden(
-    table_points: np.ndarray, camera: np.ndarray, surface_height: Callable[[np.ndarray], np.ndarray]
+    table_points: np.ndarray,
+    camera: np.ndarray,
+    surface_height: Callable[[np.ndarray], np.ndarray],
+    claimed: tuple[Footprint, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Whether the ray from each table point (N x 3, z = 0) to the camera passes below the sole's surface."""
+    """Whether the ray from each table point (N x 3, z = 0) to the camera passes below the sole's surface.
+
+    claimed: a region and a height per table point: where the surface has no measured height, the ray of
+    point i is also below it inside the region up to height i.
+    """
     hidden = np.zeros(len(table_points), bool)
     for z in np.arange(HIDDEN_STEP_MM, HIDDEN_MAX_MM, HIDDEN_STEP_MM):
         fraction = z / camera[2]
         xy = table_points[:, :2] + fraction * (camera[:2] - table_points[:, :2])
-        hidden |= surface_height(xy) >= z  # NaN (no sole there) compares False
+        height = surface_height(xy)
+        hidden |= height >= z  # NaN (no sole there) compares False
+        if claimed is not None:
+            region, top = claimed
+            hidden |= np.isnan(height) & (top >= z) & region.contains(xy)
     return hidden
 
 

@@ -74,10 +74,19 @@ def table_level_outside(radius: float = RADIUS) -> Footprint:
     return Footprint((np.linalg.norm(xy, axis=-1) > radius + 0.5).astype(np.uint8), (-100.0, -100.0), 0.25)
 
 
-def right_check(outline_radius: float, changed: np.ndarray, heights: Callable[[np.ndarray], np.ndarray]) -> object:
+def right_check(
+    outline_radius: float,
+    changed: np.ndarray,
+    heights: Callable[[np.ndarray], np.ndarray],
+    table_level: Footprint | None = None,
+) -> object:
     outline, outward = ring(outline_radius)
     edge = np.full(len(outline), HEIGHT)
-    return check_outline_right(outline, outward, edge, changed, project, CAMERA, heights, table_level_outside())
+    level = table_level_outside() if table_level is None else table_level
+    return check_outline_right(outline, outward, edge, changed, project, CAMERA, heights, level)
+
+
+NO_TABLE_LEVEL = Footprint(np.zeros((1, 1), np.uint8), (-100.0, -100.0), 0.25)  # no cell measured at table height
 
 
 def test_the_right_outline_fits_the_right_image_also_with_a_shadow_on_the_table() -> None:
@@ -90,6 +99,21 @@ def test_an_outline_inside_the_edge_does_not_fit_the_right_image_on_the_side_fac
     # away, hidden from the camera, the ray past the supposed top edge meets the sole.
     problem = right_check(RADIUS - 2.0, silhouette(), measured(top(), 2.0))
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
+
+
+def test_the_sole_the_outline_claims_hides_the_table_where_the_top_edge_has_no_depth() -> None:
+    # The last 2-6 mm of the top without depth (a dark or rounded edge) and no table-level cells to excuse the
+    # table: on the side facing away the table 3 mm out is hidden behind the top edge, which the height map
+    # does not reach. The outline's own sole (its edge height up to the outline) hides it, so the true
+    # outline fits; outlines 1.5 and 2 mm inside still do not.
+    changed = silhouette()
+    for lost in (2.0, 4.0, 6.0):
+        heights = measured(top(), lost)
+        assert right_check(RADIUS, changed, heights, NO_TABLE_LEVEL) is None
+        for short in (1.5, 2.0):
+            for level in (NO_TABLE_LEVEL, None):
+                problem = right_check(RADIUS - short, changed, heights, level)
+                assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
 
 
 def test_a_sharp_top_edge_passes_the_edge_profile_and_a_rounded_one_is_refused() -> None:
