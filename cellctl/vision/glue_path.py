@@ -6,9 +6,9 @@ import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
-from cellctl.vision.local_fit import local_planes
+from cellctl.vision.local_fit import disc_overlap, slope_gradients
 from cellctl.vision.sole_result import GluePath
-from cellctl.vision.surface import PATH_SMOOTHING_MM, SoleSurface, path_heights
+from cellctl.vision.surface import PATH_NOISE_LAG, PATH_SMOOTHING_MM, SoleSurface, path_heights, path_noise
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
@@ -61,14 +61,37 @@ def glue_path(
     # left 5-6 degrees of noise at the worst point; 15 mm brought every one of seven matrix soles' worst
     # normal down (black: 5.1 -> 5.0, 6.1 -> 4.1, 4.6 -> 3.6, 3.7 -> 2.3 degrees), a sole's top being far
     # flatter over 15 mm than the tolerance's 5 degrees.
-    _, gradient = local_planes(
-        path_xy, np.vstack([path_xy, inner_xy]), np.concatenate([raw, inner]), GLUE_NORMAL_SMOOTHING_MM
+    # Where the slope changes along the path within the fit (a tall sole's heel seat running into its waist)
+    # the plane takes up the slope a few mm away; there the fit adds the slope's change along the path, where
+    # that lowers the expected error (cellctl.vision.local_fit.slope_gradients).
+    noise = np.concatenate([sample_noise(raw, spacing_mm), sample_noise(inner, spacing_mm)])
+    gradient, _ = slope_gradients(
+        path_xy,
+        np.column_stack([path_inward[:, 1], -path_inward[:, 0]]),  # the tangent
+        np.vstack([path_xy, inner_xy]),
+        np.concatenate([raw, inner]),
+        noise,
+        GLUE_NORMAL_SMOOTHING_MM,
+        GLUE_FIT_RADIUS_MM,
+        spacing_mm,
     )
     normals = np.column_stack([-gradient, np.ones(len(path_xy))])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+
+
+def sample_noise(z: np.ndarray, spacing_mm: float) -> np.ndarray:
+    """Each patch height's own noise (mm RMS) along a closed path of samples `spacing_mm` apart.
+
+    surface.path_noise takes second differences at PATH_NOISE_LAG samples as if the samples were independent;
+    patches of GLUE_FIT_RADIUS_MM closer than two radii share pixels, and the shared part of the noise cancels in
+    the differences: the sample's noise is path_noise / sqrt(1 - 4/3 rho(lag) + 1/3 rho(2 lag)), rho the
+    patches' overlap (cellctl.vision.local_fit.disc_overlap)."""
+    lag = PATH_NOISE_LAG * spacing_mm
+    seen = 1.0 - (4.0 * disc_overlap(lag, GLUE_FIT_RADIUS_MM) - disc_overlap(2.0 * lag, GLUE_FIT_RADIUS_MM)) / 3.0
+    return path_noise(z) / np.sqrt(float(seen))
 
 
 def without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -> np.ndarray:
