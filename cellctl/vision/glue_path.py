@@ -14,6 +14,11 @@ GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
 GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
+# The patch-overlap noise model (sample_variance) against the slopes' true errors: over the 113 measured soles of
+# the three matrix sets (72k gradient components), the cubic fits' errors are 1.45 x their propagated sd
+# (median-based; RMS 1.25 on black soles, where the noise dominates; /work/notes/wrong6-diag/calib.py): the
+# matcher's error is correlated beyond the patches' overlap. The variances are scaled by this ratio squared.
+GLUE_SLOPE_NOISE_RATIO = 1.5
 
 
 def glue_path(
@@ -64,15 +69,16 @@ def glue_path(
     # Where the slope changes along the path within the fit (a tall sole's heel seat running into its waist)
     # the plane takes up the slope a few mm away; there the fit adds the slope's change along the path, where
     # that lowers the expected error (cellctl.vision.local_fit.slope_gradients).
-    noise = np.concatenate([sample_noise(raw, spacing_mm), sample_noise(inner, spacing_mm)])
+    variance = GLUE_SLOPE_NOISE_RATIO**2 * np.concatenate(
+        [sample_variance(path_xy, raw, spacing_mm), sample_variance(inner_xy, inner, spacing_mm)]
+    )
     gradient, _ = slope_gradients(
         path_xy,
         np.column_stack([path_inward[:, 1], -path_inward[:, 0]]),  # the tangent
         np.vstack([path_xy, inner_xy]),
         np.concatenate([raw, inner]),
-        noise,
+        variance,
         GLUE_NORMAL_SMOOTHING_MM,
-        GLUE_FIT_RADIUS_MM,
         spacing_mm,
     )
     normals = np.column_stack([-gradient, np.ones(len(path_xy))])
@@ -82,16 +88,26 @@ def glue_path(
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
 
 
-def sample_noise(z: np.ndarray, spacing_mm: float) -> np.ndarray:
-    """Each patch height's own noise (mm RMS) along a closed path of samples `spacing_mm` apart.
+def sample_variance(xy: np.ndarray, z: np.ndarray, spacing_mm: float) -> np.ndarray:
+    """Each patch height's noise variance (mm^2) along a closed path of samples xy, `spacing_mm` apart (nominal),
+    times its correlation with the samples around it (the sum of the correlations: a wide fit's variance is then
+    sum(row^2 x this), cellctl.vision.local_fit.slope_gradients).
 
-    surface.path_noise takes second differences at PATH_NOISE_LAG samples as if the samples were independent;
-    patches of GLUE_FIT_RADIUS_MM closer than two radii share pixels, and the shared part of the noise cancels in
-    the differences: the sample's noise is path_noise / sqrt(1 - 4/3 rho(lag) + 1/3 rho(2 lag)), rho the
-    patches' overlap (cellctl.vision.local_fit.disc_overlap)."""
+    Patches of GLUE_FIT_RADIUS_MM closer than two radii share pixels; with independent pixel noise their heights
+    correlate as the discs overlap (local_fit.disc_overlap). surface.path_noise takes second differences at
+    PATH_NOISE_LAG samples as if the samples were independent; the shared part cancels there, so the sample's
+    noise is path_noise / sqrt(1 - 4/3 rho(lag) + 1/3 rho(2 lag))."""
     lag = PATH_NOISE_LAG * spacing_mm
     seen = 1.0 - (4.0 * disc_overlap(lag, GLUE_FIT_RADIUS_MM) - disc_overlap(2.0 * lag, GLUE_FIT_RADIUS_MM)) / 3.0
-    return path_noise(z) / np.sqrt(float(seen))
+    variance = path_noise(z) ** 2 / float(seen)
+    correlated = np.ones(len(z))
+    for k in range(1, len(z) // 2):
+        rho = disc_overlap(np.linalg.norm(xy - np.roll(xy, k, axis=0), axis=1), GLUE_FIT_RADIUS_MM)
+        rho_back = disc_overlap(np.linalg.norm(xy - np.roll(xy, -k, axis=0), axis=1), GLUE_FIT_RADIUS_MM)
+        if not (rho.any() or rho_back.any()):
+            break
+        correlated += rho + rho_back
+    return variance * correlated
 
 
 def without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -> np.ndarray:

@@ -76,33 +76,26 @@ def disc_overlap(distance: np.ndarray | float, radius: float) -> np.ndarray:
     return (2.0 / np.pi) * (np.arccos(x) - x * np.sqrt(1.0 - x * x))
 
 
-def _weighted_fits(
-    at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float, tangent: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per query: the gradient (K x 2) and the rows of the linear estimator giving it (K x 2 x M) of a weighted
-    fit z = a + g . d (+ c2 u^2 + c3 u^3 with u = d . tangent, if tangent is given); the same ridge on g as
-    local_planes. Samples must be finite."""
+def _plane_and_cubic(
+    at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float, tangent: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per query: the gradients (K x 2) and the rows of the linear estimators giving them (K x 2 x M) of two
+    weighted fits, z = a + g . d and z = a + g . d + c2 u^2 + c3 u^3 (u = d . tangent); the same weights and ridge
+    on g as local_planes. Samples must be finite."""
     dx = xy[None, :, 0] - at[:, None, 0]
     dy = xy[None, :, 1] - at[:, None, 1]
     w = np.exp(-(dx * dx + dy * dy) / (2.0 * sigma_mm**2))
-    columns = [np.ones_like(dx), dx, dy]
-    if tangent is not None:
-        u = dx * tangent[:, 0:1] + dy * tangent[:, 1:2]
-        columns += [u * u, u * u * u]
-    basis = np.stack(columns, axis=1)  # K x P x M
+    u = dx * tangent[:, 0:1] + dy * tangent[:, 1:2]
+    u2 = u * u
+    basis = np.stack([np.ones_like(dx), dx, dy, u2, u2 * u], axis=1)  # K x 5 x M
     weighted = basis * w[:, None, :]
-    normal = weighted @ basis.transpose(0, 2, 1)  # K x P x P
+    normal = weighted @ basis.transpose(0, 2, 1)  # K x 5 x 5
     ridge = GRADIENT_RIDGE_MM2 * w.sum(axis=1)
     normal[:, 1, 1] += ridge
     normal[:, 2, 2] += ridge
-    rows = np.linalg.solve(normal, weighted)[:, 1:3]  # K x 2 x M
-    return rows @ z, rows
-
-
-def _variances(rows: np.ndarray, pairs: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
-    """Sum over both gradient components of rows' variance (K) for sample covariances given as pairs (i, j, c)."""
-    i, j, c = pairs
-    return np.einsum("kci,kci,i->k", rows[:, :, i], rows[:, :, j], c)
+    plane_rows = np.linalg.inv(normal[:, :3, :3])[:, 1:3] @ weighted[:, :3]  # K x 2 x M
+    cubic_rows = np.linalg.inv(normal)[:, 1:3] @ weighted
+    return plane_rows @ z, plane_rows, cubic_rows @ z, cubic_rows
 
 
 def slope_gradients(
@@ -110,15 +103,16 @@ def slope_gradients(
     tangent: np.ndarray,
     xy: np.ndarray,
     z: np.ndarray,
-    noise: np.ndarray,
+    variance: np.ndarray,
     sigma_mm: float,
-    patch_radius_mm: float,
     spacing_mm: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Surface gradient (K x 2) at points `at` of a closed path (unit tangents K x 2, samples `spacing_mm` apart):
     per point the plane or the plane with the slope's change along the path (see FOLD_TURN_DEG), whichever has
-    the smaller expected error. Samples xy (M x 2), heights z (M, NaN: left out), each with its noise (M, mm
-    RMS) from an image patch of `patch_radius_mm`. Also returns where the cubic was taken (K bool).
+    the smaller expected error. Samples xy (M x 2), heights z (M, NaN: left out) and each sample's noise
+    variance (M, mm^2) counted with its correlation to its neighbours: a fit's variance is then taken as
+    sum(row^2 x variance), which holds for rows that change little between correlated samples (a fit much
+    wider than the correlation). Also returns where the cubic was taken (K bool).
 
     The along-path coordinate u means something only where the path does not fold back within the fit's reach
     (round a pointed end the projection of both sides onto one tangent mixes them and the cubic fits the fold):
@@ -126,16 +120,15 @@ def slope_gradients(
     """
     finite = np.isfinite(z)
     xy, z = xy[finite], z[finite]
-    sd = np.where(np.isfinite(noise[finite]), noise[finite], np.nanmedian(noise[finite]))
-    plane, plane_rows = _weighted_fits(at, xy, z, sigma_mm, None)
-    cubic, cubic_rows = _weighted_fits(at, xy, z, sigma_mm, tangent)
-    # Sample covariances: patches overlap only within two radii.
-    distance = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
-    i, j = np.nonzero(distance < 2.0 * patch_radius_mm)
-    pairs = (i, j, disc_overlap(distance[i, j], patch_radius_mm) * sd[i] * sd[j])
-    plane_var = _variances(plane_rows, pairs)
-    cubic_var = _variances(cubic_rows, pairs)
-    difference_var = _variances(cubic_rows - plane_rows, pairs)
+    known = variance[finite]
+    known = np.where(np.isfinite(known), known, np.nanmedian(known) if np.isfinite(known).any() else 0.0)
+    plane, plane_rows, cubic, cubic_rows = _plane_and_cubic(at, xy, z, sigma_mm, tangent)
+
+    def fit_variance(rows: np.ndarray) -> np.ndarray:
+        return np.sum(rows * rows * known, axis=(1, 2))
+
+    plane_var, cubic_var = fit_variance(plane_rows), fit_variance(cubic_rows)
+    difference_var = fit_variance(cubic_rows - plane_rows)
     bias_and_noise = np.sum((cubic - plane) ** 2, axis=1)
     better = bias_and_noise - difference_var + plane_var > cubic_var
     reach = max(1, int(round(2.0 * sigma_mm / spacing_mm)))
