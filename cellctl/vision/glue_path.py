@@ -37,7 +37,8 @@ def glue_path(
     Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
     offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
     Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
-    from a plane fitted to both around each point (a patch's own tilt is too noisy on a weakly textured
+    from a plane fitted to both around each point, or where the slope changes along the path a plane plus that
+    change, whichever has the smaller expected error (a patch's own tilt is too noisy on a weakly textured
     sole: ~10 degrees).
     """
     resampled = resample_closed(outline, 0.25)
