@@ -6,14 +6,22 @@ import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
-from cellctl.vision.local_fit import local_planes
+from cellctl.vision.local_fit import disc_overlap, slope_gradients
 from cellctl.vision.sole_result import GluePath
-from cellctl.vision.surface import PATH_SMOOTHING_MM, SoleSurface, path_heights
+from cellctl.vision.surface import PATH_NOISE_LAG, PATH_SMOOTHING_MM, SoleSurface, path_heights, path_noise
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
 GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
+# The patch-overlap noise model (sample_variance) against the slopes' true errors: over the 113 measured soles of
+# the three matrix sets (72k gradient components) the cubic fits' errors are 1.45 x their propagated sd
+# (median-based; 1.25 on black soles, where the noise dominates) and 1.68 x at the 95th percentile (the standard
+# 20: 1.42, 1.65; /work/notes/wrong6-diag/calib.py): the matcher's error is correlated beyond the patches'
+# overlap. The choice between the fits is taken at break-even, so the noise is taken at its tail: variances
+# scaled by this ratio squared (1.5 and 2.0 give the same verdicts; 1.5 let noise flip a few worst points to
+# the cubic, up to +1 degree on a plain black sole).
+GLUE_SLOPE_NOISE_RATIO = 1.75
 
 
 def glue_path(
@@ -29,7 +37,8 @@ def glue_path(
     Moving each point along the inward normal is exact for outlines whose curvature radius exceeds the
     offset everywhere, which holds for soles (the tightest curve, the toe, has a radius of several cm).
     Heights are sampled on the path and on a second ring GLUE_NORMAL_BASE_MM further in; the normal comes
-    from a plane fitted to both around each point (a patch's own tilt is too noisy on a weakly textured
+    from a plane fitted to both around each point, or where the slope changes along the path a plane plus that
+    change, whichever has the smaller expected error (a patch's own tilt is too noisy on a weakly textured
     sole: ~10 degrees).
     """
     resampled = resample_closed(outline, 0.25)
@@ -61,14 +70,48 @@ def glue_path(
     # left 5-6 degrees of noise at the worst point; 15 mm brought every one of seven matrix soles' worst
     # normal down (black: 5.1 -> 5.0, 6.1 -> 4.1, 4.6 -> 3.6, 3.7 -> 2.3 degrees), a sole's top being far
     # flatter over 15 mm than the tolerance's 5 degrees.
-    _, gradient = local_planes(
-        path_xy, np.vstack([path_xy, inner_xy]), np.concatenate([raw, inner]), GLUE_NORMAL_SMOOTHING_MM
+    # Where the slope changes along the path within the fit (a tall sole's heel seat running into its waist)
+    # the plane takes up the slope a few mm away; there the fit adds the slope's change along the path, where
+    # that lowers the expected error (cellctl.vision.local_fit.slope_gradients).
+    variance = GLUE_SLOPE_NOISE_RATIO**2 * np.concatenate(
+        [sample_variance(path_xy, raw, spacing_mm), sample_variance(inner_xy, inner, spacing_mm)]
+    )
+    gradient, _ = slope_gradients(
+        path_xy,
+        np.column_stack([path_inward[:, 1], -path_inward[:, 0]]),  # the tangent
+        np.vstack([path_xy, inner_xy]),
+        np.concatenate([raw, inner]),
+        variance,
+        GLUE_NORMAL_SMOOTHING_MM,
+        spacing_mm,
     )
     normals = np.column_stack([-gradient, np.ones(len(path_xy))])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+
+
+def sample_variance(xy: np.ndarray, z: np.ndarray, spacing_mm: float) -> np.ndarray:
+    """Each patch height's noise variance (mm^2) along a closed path of samples xy, `spacing_mm` apart (nominal),
+    times its correlation with the samples around it (the sum of the correlations: a wide fit's variance is then
+    sum(row^2 x this), cellctl.vision.local_fit.slope_gradients).
+
+    Patches of GLUE_FIT_RADIUS_MM closer than two radii share pixels; with independent pixel noise their heights
+    correlate as the discs overlap (local_fit.disc_overlap). surface.path_noise takes second differences at
+    PATH_NOISE_LAG samples as if the samples were independent; the shared part cancels there, so the sample's
+    noise is path_noise / sqrt(1 - 4/3 rho(lag) + 1/3 rho(2 lag))."""
+    lag = PATH_NOISE_LAG * spacing_mm
+    seen = 1.0 - (4.0 * disc_overlap(lag, GLUE_FIT_RADIUS_MM) - disc_overlap(2.0 * lag, GLUE_FIT_RADIUS_MM)) / 3.0
+    variance = path_noise(z) ** 2 / float(seen)
+    correlated = np.ones(len(z))
+    for k in range(1, len(z) // 2):
+        rho = disc_overlap(np.linalg.norm(xy - np.roll(xy, k, axis=0), axis=1), GLUE_FIT_RADIUS_MM)
+        rho_back = disc_overlap(np.linalg.norm(xy - np.roll(xy, -k, axis=0), axis=1), GLUE_FIT_RADIUS_MM)
+        if not (rho.any() or rho_back.any()):
+            break
+        correlated += rho + rho_back
+    return variance * correlated
 
 
 def without_single_outliers(z: np.ndarray, limit_mm: float = GLUE_OUTLIER_MM) -> np.ndarray:

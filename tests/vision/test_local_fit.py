@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from cellctl.vision.closed_path import smooth_along
-from cellctl.vision.local_fit import local_planes
+from cellctl.vision.glue_path import sample_variance
+from cellctl.vision.local_fit import disc_overlap, local_planes, slope_gradients
+from cellctl.vision.surface import path_noise
 
 
 def test_a_rising_pointed_end_keeps_its_tip_height_and_slope() -> None:
@@ -30,3 +32,79 @@ def test_samples_on_one_line_give_the_lines_height_and_missing_samples_are_skipp
     height, gradient = local_planes(np.array([[0.0, 0.0], [500.0, 0.0]]), xy, z, 4.0)
     assert abs(height[0] - 5.0) < 1e-6 and abs(gradient[0, 0] - 0.1) < 0.01 and gradient[0, 1] == 0.0
     assert np.isnan(height[1])
+
+
+def _straight_path_with_ring(n: int = 120, spacing: float = 2.0, base: float = 15.0) -> tuple[np.ndarray, ...]:
+    """A closed path's straight side: n points along x, a ring `base` mm inward (+y), unit tangents along x."""
+    x = (np.arange(n) - n / 2) * spacing
+    path = np.column_stack([x, np.zeros(n)])
+    ring = path + [0.0, base]
+    tangent = np.tile([1.0, 0.0], (n, 1))
+    return path, ring, tangent
+
+
+def _seat_into_ramp(xy: np.ndarray) -> np.ndarray:
+    """A flat seat (x < 0) that turns into a ramp rising 0.3 mm per mm (x > 0), curving over 10 mm: the slope
+    changes along the path within a 12 mm fit."""
+    x = xy[:, 0]
+    return 40.0 + np.where(x < 0.0, 0.0, np.where(x < 10.0, 0.3 * x * x / 20.0, 0.3 * (x - 5.0)))
+
+
+def test_slope_change_along_the_path_is_followed_where_the_plane_would_take_up_the_ramp() -> None:
+    path, ring, tangent = _straight_path_with_ring()
+    xy = np.vstack([path, ring])
+    z = _seat_into_ramp(xy) + np.random.default_rng(1).normal(0.0, 0.03, len(xy))
+    variance = np.full(len(xy), 0.03**2)
+    gradient, cubic = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
+    _, plane = local_planes(path, xy, z, 12.0)
+    seat = np.flatnonzero((path[:, 0] > -8.0) & (path[:, 0] < -2.0))  # flat, 2-8 mm before the ramp starts
+    assert np.all(plane[seat, 0] > 0.02)  # the plane takes up the ramp: > 1.1 degrees off
+    assert np.max(np.abs(gradient[seat, 0])) < 0.7 * np.min(plane[seat, 0])  # measured 0.04 vs 0.055
+    assert cubic[seat].all()
+
+
+def test_noise_alone_keeps_the_plane() -> None:
+    path, ring, tangent = _straight_path_with_ring()
+    xy = np.vstack([path, ring])
+    rng = np.random.default_rng(2)
+    worse = []
+    for _ in range(10):
+        z = 10.0 + 0.05 * xy[:, 0] + rng.normal(0.0, 0.3, len(xy))  # a sloping plane, black rubber's noise
+        gradient, cubic = slope_gradients(path, tangent, xy, z, np.full(len(xy), 0.3**2), 12.0, 2.0)
+        _, plane = local_planes(path, xy, z, 12.0)
+        assert cubic.mean() < 0.4  # the expected-error rule takes the cubic by chance at ~30 % of the points...
+        worse.append(np.max(np.abs(gradient[:, 0] - 0.05)) / np.max(np.abs(plane[:, 0] - 0.05)))
+    assert np.median(worse) < 1.3  # ...where it costs little
+
+
+def test_no_cubic_where_the_path_folds_round_a_pointed_end() -> None:
+    s = np.linspace(-60.0, 60.0, 61)
+    half = np.radians(17.5)
+    path = np.column_stack([-np.abs(s) * np.cos(half), s * np.sin(half)])
+    tangent = np.gradient(path, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    z = 20.0 + 0.3 * path[:, 0] + 0.01 * path[:, 0] ** 2
+    _, cubic = slope_gradients(path, tangent, path, z, np.full(len(z), 0.01), 12.0, 2.0)
+    assert not cubic[20:41].any()  # within 2 widths of the tip
+
+
+def test_disc_overlap() -> None:
+    assert disc_overlap(0.0, 4.0) == 1.0 and disc_overlap(8.0, 4.0) == 0.0 and disc_overlap(20.0, 4.0) == 0.0
+    values = disc_overlap(np.linspace(0.0, 8.0, 9), 4.0)
+    assert np.all(np.diff(values) < 0.0)
+    assert abs(disc_overlap(4.0, 4.0) - 0.391) < 0.001
+
+
+def test_sample_variance_counts_the_patches_overlap() -> None:
+    rng = np.random.default_rng(3)
+    n = 400
+    z = rng.normal(0.0, 0.2, n)
+    # Samples further apart than two patch radii: independent, the path noise itself.
+    far = np.column_stack([np.arange(n) * 10.0, np.zeros(n)])
+    np.testing.assert_allclose(sample_variance(far, z, 10.0), path_noise(z) ** 2)
+    # 2 mm apart with 4 mm patches: the same heights read as more noise per sample (second differences miss
+    # the shared part), counted with the correlated neighbours' sum (1 + 2 (0.69 + 0.39 + 0.14) = 3.44).
+    near = np.column_stack([np.arange(n) * 2.0, np.zeros(n)])
+    ratio = (sample_variance(near, z, 2.0) / path_noise(z) ** 2)[10:-10]  # the open ends have fewer neighbours
+    np.testing.assert_allclose(ratio, ratio[0])
+    assert 6.5 < ratio[0] < 7.5  # 3.44 / (1 - 4/3 x 0.39)
