@@ -122,7 +122,11 @@ def change_split(
     near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
     candidates = np.concatenate([high, near])
     x, y = np.round(cloud.pixels[candidates]).astype(np.int64).T
-    return ChangeSplit(np.sort(candidates[changed[y, x]]), changed, changed_right)
+    # Sorted as np.sort would give them (high and near are disjoint): marked on the points, read back in order
+    # (one pass over the points instead of a sort of the ~2 10^5 chosen).
+    chosen = np.zeros(len(points), bool)
+    chosen[candidates[changed[y, x]]] = True
+    return ChangeSplit(np.flatnonzero(chosen), changed, changed_right)
 
 
 def _change_boxes(
