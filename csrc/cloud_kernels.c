@@ -741,3 +741,56 @@ int ck_cells_marked(const double *xy, int64_t n, int64_t stride, double x0, doub
     }
     return CK_OK;
 }
+
+/* ---- binary morphology with a disc of centred runs (cellctl.vision.sole_region) ---- */
+
+int ck_disc_dilate(const uint8_t *mask, int64_t rows, int64_t cols, int of_zero, const int32_t *half, int32_t reach,
+                   int invert, uint8_t *out, int16_t *scratch) {
+    if (!mask || !half || !out || !scratch)
+        return CK_ERR_NULL;
+    if (rows < 1 || cols < 1 || rows > CK_MAX_RASTER || cols > CK_MAX_RASTER || reach < 0 || reach > CK_MAX_RASTER ||
+        (of_zero != 0 && of_zero != 1) || (invert != 0 && invert != 1))
+        return CK_ERR_SIZE;
+    for (int32_t k = 0; k <= 2 * reach; ++k)
+        if (half[k] < 0 || half[k] > CK_MAX_RASTER)
+            return CK_ERR_RANGE;
+    /* Per row, each cell's distance along the row to the nearest source cell (`far` where the row has none):
+     * a cell is in the dilation where, for some row offset d of the disc, the row r + d has a source cell
+     * within the disc's run half[d + reach] of its column. Cells off the raster are never sources (OpenCV's
+     * border for a dilation; for an erosion, done as the complement's dilation, they count as marked). */
+    const int16_t far = INT16_MAX;
+    const uint8_t source = of_zero ? 0 : 1;
+    for (int64_t r = 0; r < rows; ++r) {
+        const uint8_t *m = mask + r * cols;
+        int16_t *h = scratch + r * cols;
+        int32_t last = -1; /* column of the last source cell seen, -1: none yet */
+        for (int64_t c = 0; c < cols; ++c) {
+            if ((m[c] != 0) == source)
+                last = (int32_t)c;
+            h[c] = last < 0 ? far : (int16_t)(c - last);
+        }
+        last = -1;
+        for (int64_t c = cols - 1; c >= 0; --c) {
+            if ((m[c] != 0) == source)
+                last = (int32_t)c;
+            if (last >= 0 && last - c < h[c])
+                h[c] = (int16_t)(last - c);
+        }
+    }
+    const uint8_t hit = invert ? 0 : 1;
+    for (int64_t r = 0; r < rows; ++r) {
+        uint8_t *o = out + r * cols;
+        for (int64_t c = 0; c < cols; ++c)
+            o[c] = 0;
+        const int64_t lo = r - reach < 0 ? -r : -(int64_t)reach, hi = r + reach >= rows ? rows - 1 - r : reach;
+        for (int64_t d = lo; d <= hi; ++d) {
+            const int16_t *h = scratch + (r + d) * cols;
+            const int16_t run = (int16_t)half[d + reach];
+            for (int64_t c = 0; c < cols; ++c)
+                o[c] |= (uint8_t)(h[c] <= run);
+        }
+        for (int64_t c = 0; c < cols; ++c)
+            o[c] = o[c] ? hit : (uint8_t)(1 - hit);
+    }
+    return CK_OK;
+}

@@ -13,6 +13,7 @@ import numpy as np
 import open3d as o3d
 
 from cellctl.errors import FailureKind
+from cellctl.stereo.kernels import disc_dilate
 from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
@@ -286,23 +287,19 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
 
 
 def disc_closing(mask: np.ndarray, size: int) -> np.ndarray:
-    """cv2.morphologyEx(mask, MORPH_CLOSE, the size x size MORPH_ELLIPSE element), the same cells, ~4 x faster.
+    """cv2.morphologyEx(mask, MORPH_CLOSE, the size x size MORPH_ELLIPSE element) of a 0/1 uint8 mask: the
+    same cells, in C (cellctl.stereo.kernels.disc_dilate), ~3 x faster than as the union of its rectangles.
 
-    OpenCV's disc is a stack of centred runs, widest in the middle row: the union of the centred rectangles
-    at its steps. A dilation by a union is the maximum of the dilations by its parts, an erosion the minimum
-    of the erosions, and OpenCV filters a rectangle separably (each as cv2 does it, borders included)."""
-    rectangles = _disc_rectangles(size)
-    dilated = np.zeros_like(mask)
-    for rectangle in rectangles:
-        np.maximum(dilated, cv2.dilate(mask, rectangle), out=dilated)
-    closed = np.ones_like(mask)
-    for rectangle in rectangles:
-        np.minimum(closed, cv2.erode(dilated, rectangle), out=closed)
-    return closed
+    OpenCV's disc is a stack of centred runs, widest in the middle row. A cell is in the dilation where some
+    row of the disc finds a marked cell within its run along that row; the erosion is the dilation of the
+    unmarked cells, complemented (cells off the raster count as unmarked for the dilation and as marked for the
+    erosion, OpenCV's default border)."""
+    half_widths = _disc_runs(size)
+    return disc_dilate(disc_dilate(mask, half_widths), half_widths, of_zero=True, invert=True)
 
 
-def _disc_rectangles(size: int) -> list[np.ndarray]:
-    """The centred rectangles whose union is OpenCV's size x size elliptic element (odd size)."""
+def _disc_runs(size: int) -> np.ndarray:
+    """Half widths of the centred runs, row by row, of OpenCV's size x size elliptic element (odd size)."""
     if size < 1 or size % 2 == 0:
         raise ValueError(f"the disc must have an odd size, got {size}")
     disc, middle = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)), size // 2
@@ -312,13 +309,7 @@ def _disc_rectangles(size: int) -> list[np.ndarray]:
         half = middle - int(columns[0])
         assert int(columns[-1]) == middle + half and len(columns) == 2 * half + 1  # a centred run
         half_widths.append(half)
-    # For each run width, the rows whose run is at least that wide (contiguous about the middle row).
-    rectangles = []
-    for half in sorted(set(half_widths)):
-        rows = [abs(k - middle) for k, h in enumerate(half_widths) if h >= half]
-        assert len(rows) == 2 * max(rows) + 1
-        rectangles.append(np.ones((2 * max(rows) + 1, 2 * half + 1), np.uint8))
-    return rectangles
+    return np.array(half_widths, np.int32)
 
 
 def cut_by_border(cloud: StereoCloud, index: np.ndarray) -> tuple[FailureKind | None, str | None]:

@@ -9,6 +9,7 @@ import pytest
 from cellctl.stereo.kernels import (
     cell_counts,
     cells_marked,
+    disc_dilate,
     neighbour_means,
     patch_sample,
     patch_shift,
@@ -478,3 +479,46 @@ def test_cell_counts_and_marks_refuse_bad_input() -> None:
         cells_marked(xy, (0.0, 0.0), -1.0, np.ones((4, 4), np.uint8))
     with pytest.raises(ValueError, match="raster"):
         cells_marked(xy, (0.0, 0.0), 0.25, np.ones(4, np.uint8))
+
+
+def _ellipse_runs(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's size x size elliptic element and the half widths of its centred runs, row by row."""
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    return disc, np.array([size // 2 - int(np.flatnonzero(row)[0]) for row in disc], np.int32)
+
+
+@pytest.mark.parametrize("size", [1, 3, 5, 9, 17, 31, 61])
+def test_disc_dilation_and_erosion_are_opencvs(size: int) -> None:
+    """The disc kernel dilates as cv2.dilate and (of the zero cells, complemented) erodes as cv2.erode with
+    OpenCV's elliptic element and default border: blobs at and off the raster's edges, holes, specks, thin
+    rasters, an empty and a full one."""
+    rng = np.random.default_rng(size)
+    disc, half = _ellipse_runs(size)
+    shapes = [(120, 170), (37, 211), (1, 90), (80, 1), (2, 2)]
+    for k, shape in enumerate(shapes * 4):
+        mask = np.zeros(shape, np.uint8)
+        for _ in range(3):
+            centre = (int(rng.integers(0, shape[1])), int(rng.integers(0, shape[0])))
+            axes = (int(rng.integers(1, 70)), int(rng.integers(1, 50)))
+            cv2.ellipse(mask, centre, axes, float(rng.uniform(0, 180)), 0, 360, 1, -1)
+        mask &= (rng.random(shape) < rng.uniform(0.6, 1.0)).astype(np.uint8)
+        mask[rng.random(shape) < 0.01] = 1
+        if k == 5:
+            mask[:] = 0
+        if k == 6:
+            mask[:] = 1
+        np.testing.assert_array_equal(disc_dilate(mask, half), cv2.dilate(mask, disc))
+        np.testing.assert_array_equal(disc_dilate(mask, half, of_zero=True, invert=True), cv2.erode(mask, disc))
+        np.testing.assert_array_equal(disc_dilate(mask, half, invert=True), 1 - cv2.dilate(mask, disc))
+
+
+def test_disc_dilation_refuses_bad_input() -> None:
+    mask = np.ones((10, 10), np.uint8)
+    with pytest.raises(ValueError, match="odd number of runs"):
+        disc_dilate(mask, np.array([1, 2], np.int32))
+    with pytest.raises(ValueError, match="outside its array"):
+        disc_dilate(mask, np.array([0, -1, 0], np.int32))
+    with pytest.raises(ValueError, match="non-empty 2-D"):
+        disc_dilate(np.ones(10, np.uint8), np.array([1], np.int32))
+    with pytest.raises(ValueError, match="out of range"):
+        disc_dilate(np.ones((1, 30000), np.uint8), np.array([1], np.int32))
