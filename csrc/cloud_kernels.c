@@ -22,6 +22,73 @@ static int thread_count(int threads) { return threads > 0 ? threads : omp_get_ma
 /* Below this many points or pixels a call stays on one thread: waking the others costs more. */
 #define CK_PARALLEL_MIN 4096
 
+/* The slow case of ck_neighbour_means, CK_LANES points at a time: branch-free on the data (min / max per
+ * compare-exchange, the same instructions on every lane), where sorting each point's 36 distances alone
+ * mispredicts about half its comparisons.
+ * The comparators are Batcher's merge exchange for 36 keys (Knuth, TAOCP vol. 3, 5.2.2, Algorithm M, 241
+ * comparators in 21 rounds) without those that cannot reach the 19 smallest (220 left): afterwards keys 0-18
+ * of each lane are its 19 smallest in ascending order and 19-35 the rest (a permutation, so ties and
+ * infinities come out as a sort gives them). Checked against a sort in tests/stereo/test_cloud_kernels.py. */
+#define CK_LANES 8
+static const uint8_t ck_nearest19[][2] = {
+    {0, 32}, {1, 33}, {2, 34}, {3, 35}, {0, 16}, {1, 17}, {2, 18}, {3, 19}, {4, 20}, {5, 21}, {6, 22}, {7, 23},
+    {8, 24}, {9, 25}, {10, 26}, {11, 27}, {12, 28}, {13, 29}, {14, 30}, {15, 31}, {16, 32}, {17, 33}, {18, 34},
+    {19, 35}, {0, 8}, {1, 9}, {2, 10}, {3, 11}, {4, 12}, {5, 13}, {6, 14}, {7, 15}, {16, 24}, {17, 25},
+    {18, 26}, {19, 27}, {20, 28}, {21, 29}, {22, 30}, {23, 31}, {8, 32}, {9, 33}, {10, 34}, {11, 35}, {8, 16},
+    {9, 17}, {10, 18}, {11, 19}, {12, 20}, {13, 21}, {14, 22}, {15, 23}, {24, 32}, {25, 33}, {26, 34}, {27, 35},
+    {0, 4}, {1, 5}, {2, 6}, {3, 7}, {8, 12}, {9, 13}, {10, 14}, {11, 15}, {16, 20}, {17, 21}, {18, 22},
+    {19, 23}, {24, 28}, {25, 29}, {26, 30}, {27, 31}, {4, 32}, {5, 33}, {6, 34}, {7, 35}, {4, 16}, {5, 17},
+    {6, 18}, {7, 19}, {12, 24}, {13, 25}, {14, 26}, {15, 27}, {20, 32}, {21, 33}, {22, 34}, {23, 35}, {4, 8},
+    {5, 9}, {6, 10}, {7, 11}, {12, 16}, {13, 17}, {14, 18}, {15, 19}, {20, 24}, {21, 25}, {22, 26}, {23, 27},
+    {28, 32}, {29, 33}, {30, 34}, {31, 35}, {0, 2}, {1, 3}, {4, 6}, {5, 7}, {8, 10}, {9, 11}, {12, 14},
+    {13, 15}, {16, 18}, {17, 19}, {20, 22}, {21, 23}, {24, 26}, {25, 27}, {28, 30}, {29, 31}, {32, 34},
+    {33, 35}, {2, 32}, {3, 33}, {2, 16}, {3, 17}, {6, 20}, {7, 21}, {10, 24}, {11, 25}, {14, 28}, {15, 29},
+    {18, 32}, {19, 33}, {2, 8}, {3, 9}, {6, 12}, {7, 13}, {10, 16}, {11, 17}, {14, 20}, {15, 21}, {18, 24},
+    {19, 25}, {22, 28}, {23, 29}, {26, 32}, {27, 33}, {2, 4}, {3, 5}, {6, 8}, {7, 9}, {10, 12}, {11, 13},
+    {14, 16}, {15, 17}, {18, 20}, {19, 21}, {22, 24}, {23, 25}, {26, 28}, {27, 29}, {30, 32}, {31, 33}, {0, 1},
+    {2, 3}, {4, 5}, {6, 7}, {8, 9}, {10, 11}, {12, 13}, {14, 15}, {16, 17}, {18, 19}, {20, 21}, {22, 23},
+    {24, 25}, {26, 27}, {28, 29}, {30, 31}, {32, 33}, {34, 35}, {1, 32}, {3, 34}, {1, 16}, {3, 18}, {5, 20},
+    {7, 22}, {9, 24}, {11, 26}, {13, 28}, {15, 30}, {17, 32}, {1, 8}, {3, 10}, {5, 12}, {7, 14}, {9, 16},
+    {11, 18}, {13, 20}, {15, 22}, {17, 24}, {1, 4}, {3, 6}, {5, 8}, {7, 10}, {9, 12}, {11, 14}, {13, 16},
+    {15, 18}, {17, 20}, {1, 2}, {3, 4}, {5, 6}, {7, 8}, {9, 10}, {11, 12}, {13, 14}, {15, 16}, {17, 18},
+};
+
+typedef struct {
+    float near[CK_NEAR][CK_LANES]; /* lane l's distances in column l */
+    int64_t point[CK_LANES];
+    int count;
+} slow_lanes;
+
+/* Sort every lane's 19 smallest to the front, then each point's mean and exactness as the case defines them:
+ * the 19 nearest (missing ones infinite, so last) each capped at 3.6 spacings, summed in double in ascending
+ * order over 20. Unused lanes hold infinities and are not written. */
+static void finish_slow_lanes(slow_lanes *lanes, const double *spacing, float *mean, uint8_t *exact) {
+    for (int l = lanes->count; l < CK_LANES; ++l)
+        for (int j = 0; j < CK_NEAR; ++j)
+            lanes->near[j][l] = INFINITY;
+    for (size_t c = 0; c < sizeof ck_nearest19 / sizeof ck_nearest19[0]; ++c) {
+        float *restrict a = lanes->near[ck_nearest19[c][0]];
+        float *restrict b = lanes->near[ck_nearest19[c][1]];
+#pragma omp simd
+        for (int l = 0; l < CK_LANES; ++l) {
+            const float x = a[l], y = b[l];
+            a[l] = min_f(x, y);
+            b[l] = max_f(x, y);
+        }
+    }
+    for (int l = 0; l < lanes->count; ++l) {
+        const int64_t i = lanes->point[l];
+        const double reach = 3.6 * spacing[i];
+        double total = 0.0;
+        for (int j = 0; j < 19; ++j)
+            total += min_d((double)lanes->near[j][l], reach); /* infinite (missing): the cap */
+        mean[i] = (float)(total / 20.0);
+        /* at least 19 measured (the 19th smallest finite) and all within 0.95 of the cap */
+        exact[i] = (uint8_t)((double)lanes->near[18][l] <= 0.95 * reach);
+    }
+    lanes->count = 0;
+}
+
 int ck_neighbour_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
                        const double *spacing, const int32_t *offsets, float *mean, uint8_t *exact, int threads) {
     if (!grid || !at || !spacing || !offsets || !mean || !exact)
@@ -41,65 +108,60 @@ int ck_neighbour_means(const float *grid, int height, int width, const int64_t *
     int64_t shift[CK_NEAR];
     for (int j = 0; j < CK_NEAR; ++j)
         shift[j] = (int64_t)offsets[2 * j + 1] * width + offsets[2 * j];
-    /* Each point's mean is computed whole by one thread in a fixed order: identical for any thread count.
-     * Dynamic chunks because the edge points (the slow case) lie together in pixel order. */
-#pragma omp parallel for schedule(dynamic, 1024) num_threads(thread_count(threads)) \
-    if (count >= CK_PARALLEL_MIN)
-    for (int64_t i = 0; i < count; ++i) {
-        const int64_t c = at[i];
-        float near[CK_NEAR];
-        for (int j = 0; j < CK_NEAR; ++j) {
-            const int64_t o = c + shift[j];
-            /* float32 as numpy's einsum: (x*x + y*y) + z*z, then sqrt; NaN (no point) becomes inf */
-            float ox = grid[3 * o] - grid[3 * c], oy = grid[3 * o + 1] - grid[3 * c + 1];
-            float oz = grid[3 * o + 2] - grid[3 * c + 2];
-            float squared = ox * ox + oy * oy + oz * oz;
-            near[j] = isnan(squared) ? INFINITY : sqrtf(squared); /* sqrtf of NaN takes libm's slow path */
+    /* Each point's mean is computed whole by one thread in a fixed order: identical for any thread count and
+     * whichever points share its lanes. Dynamic blocks because the edge points (the slow case) lie together
+     * in pixel order. */
+    const int64_t block = 1024, blocks = (count + block - 1) / block;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(thread_count(threads)) if (count >= CK_PARALLEL_MIN)
+    for (int64_t b = 0; b < blocks; ++b) {
+        slow_lanes lanes;
+        lanes.count = 0;
+        const int64_t end = (b + 1) * block < count ? (b + 1) * block : count;
+        for (int64_t i = b * block; i < end; ++i) {
+            const int64_t c = at[i];
+            float near[CK_NEAR];
+            for (int j = 0; j < CK_NEAR; ++j) {
+                const int64_t o = c + shift[j];
+                /* float32 as numpy's einsum: (x*x + y*y) + z*z, then sqrt; NaN (no point) becomes inf */
+                float ox = grid[3 * o] - grid[3 * c], oy = grid[3 * o + 1] - grid[3 * c + 1];
+                float oz = grid[3 * o + 2] - grid[3 * c + 2];
+                near[j] = ox * ox + oy * oy + oz * oz;
+            }
+            /* The square roots four at a time (sqrtps rounds as sqrtss does); NaN (no point) becomes inf. */
+#pragma omp simd
+            for (int j = 0; j < CK_NEAR; ++j)
+                near[j] = near[j] == near[j] ? sqrtf(near[j]) : INFINITY;
+            /* Branch-free: the data decide every comparison, so branches would be mispredicted half the time. */
+            float sum = 0.0f, largest = -INFINITY, second = -INFINITY;
+            for (int j = 0; j < CK_BLOCK; ++j) {
+                sum += near[j];
+                second = max_f(second, min_f(largest, near[j]));
+                largest = max_f(largest, near[j]);
+            }
+            float others = INFINITY;
+            for (int j = CK_BLOCK; j < CK_NEAR; ++j)
+                others = min_f(others, near[j]);
+            if (isfinite(largest) && (double)second <= min_d((double)others, 3.5 * spacing[i])) {
+                mean[i] = (sum - largest) / 20.0f;
+                exact[i] = 1;
+                continue;
+            }
+            /* Else the 19 nearest of the 36, each at most 3.6 spacings (where the next pixels lie), and
+             * whether they lie within 0.95 of that (else a wider window must decide): in lanes. */
+            for (int j = 0; j < CK_NEAR; ++j)
+                lanes.near[j][lanes.count] = near[j];
+            lanes.point[lanes.count++] = i;
+            if (lanes.count == CK_LANES)
+                finish_slow_lanes(&lanes, spacing, mean, exact);
         }
-        /* Branch-free: the data decide every comparison, so branches would be mispredicted half the time. */
-        float sum = 0.0f, largest = -INFINITY, second = -INFINITY;
-        for (int j = 0; j < CK_BLOCK; ++j) {
-            sum += near[j];
-            second = max_f(second, min_f(largest, near[j]));
-            largest = max_f(largest, near[j]);
-        }
-        float others = INFINITY;
-        for (int j = CK_BLOCK; j < CK_NEAR; ++j)
-            others = min_f(others, near[j]);
-        if (isfinite(largest) && (double)second <= min_d((double)others, 3.5 * spacing[i])) {
-            mean[i] = (sum - largest) / 20.0f;
-            exact[i] = 1;
-            continue;
-        }
-        /* Else the 19 nearest of the 36, each at most 3.6 spacings (where the next pixels lie): the
-         * measured ones sorted (at an edge or hole most are missing, i.e. infinite), then the missing. */
-        float finite[CK_NEAR];
-        int measured = 0;
-        for (int j = 0; j < CK_NEAR; ++j) {
-            finite[measured] = near[j];
-            measured += near[j] < INFINITY;
-        }
-        for (int j = 1; j < measured; ++j) {
-            float v = finite[j];
-            int k = j - 1;
-            for (; k >= 0 && finite[k] > v; --k)
-                finite[k + 1] = finite[k];
-            finite[k + 1] = v;
-        }
-        const double reach = 3.6 * spacing[i];
-        const int used = measured < 19 ? measured : 19;
-        double total = 0.0;
-        for (int j = 0; j < used; ++j)
-            total += min_d((double)finite[j], reach);
-        for (int j = used; j < 19; ++j)
-            total += reach;
-        mean[i] = (float)(total / 20.0);
-        exact[i] = (uint8_t)(measured >= 19 && (double)finite[18] <= 0.95 * reach);
+        if (lanes.count)
+            finish_slow_lanes(&lanes, spacing, mean, exact);
     }
     return CK_OK;
 }
 
-/* Keeps the 19 smallest distances seen so far in best[] (ascending): d goes in where it belongs. */
+/* Keeps the 19 smallest squared distances seen so far in best[] (ascending): d goes in where it belongs; NaN
+ * (no point) never does. */
 static inline void keep_nearest(float best[19], float d) {
     if (!(d < best[18]))
         return;
@@ -109,12 +171,12 @@ static inline void keep_nearest(float best[19], float d) {
     best[k] = d;
 }
 
-/* The float32 distance from the point at pixel c to the one at pixel o, infinite where o has none. */
-static inline float grid_distance(const float *grid, int64_t c, int64_t o) {
+/* The float32 squared distance from the point at pixel c to the one at pixel o (ck_neighbour_means' sum), NaN
+ * where o has none. */
+static inline float grid_squared(const float *grid, int64_t c, int64_t o) {
     float ox = grid[3 * o] - grid[3 * c], oy = grid[3 * o + 1] - grid[3 * c + 1];
     float oz = grid[3 * o + 2] - grid[3 * c + 2];
-    float squared = ox * ox + oy * oy + oz * oz;
-    return isnan(squared) ? INFINITY : sqrtf(squared);
+    return ox * ox + oy * oy + oz * oz;
 }
 
 int ck_window_means(const float *grid, int height, int width, const int64_t *at, int64_t count,
@@ -140,6 +202,8 @@ int ck_window_means(const float *grid, int height, int width, const int64_t *at,
 #pragma omp parallel for schedule(dynamic, 4) num_threads(thread_count(threads)) if (count >= 64)
     for (int64_t i = 0; i < count; ++i) {
         const int64_t c = at[i];
+        /* The 19 smallest squared distances: their square roots are the 19 smallest distances, in the same
+         * order (sqrtf is monotonic), and only those 19 need one. */
         float best[19];
         for (int j = 0; j < 19; ++j)
             best[j] = INFINITY;
@@ -151,22 +215,22 @@ int ck_window_means(const float *grid, int height, int width, const int64_t *at,
                 /* the ring at Chebyshev radius r: its top and bottom rows whole, then the two side columns */
                 const int64_t top = c - (int64_t)r * width, bottom = c + (int64_t)r * width;
                 for (int dx = -r; dx <= r; ++dx) {
-                    keep_nearest(best, grid_distance(grid, c, top + dx));
-                    keep_nearest(best, grid_distance(grid, c, bottom + dx));
+                    keep_nearest(best, grid_squared(grid, c, top + dx));
+                    keep_nearest(best, grid_squared(grid, c, bottom + dx));
                 }
                 for (int dy = -r + 1; dy <= r - 1; ++dy) {
                     const int64_t row = c + (int64_t)dy * width;
-                    keep_nearest(best, grid_distance(grid, c, row - r));
-                    keep_nearest(best, grid_distance(grid, c, row + r));
+                    keep_nearest(best, grid_squared(grid, c, row - r));
+                    keep_nearest(best, grid_squared(grid, c, row + r));
                 }
             }
             done = h;
             const double beyond = (h + 1) * spacing[i];
             double total = 0.0;
             for (int j = 0; j < 19; ++j)
-                total += min_d((double)best[j], beyond);
+                total += min_d((double)sqrtf(best[j]), beyond);
             mean[i] = (float)(total / 20.0);
-            if ((double)best[18] <= 0.95 * beyond) {
+            if ((double)sqrtf(best[18]) <= 0.95 * beyond) {
                 settled[i] = 1;
                 break;
             }
@@ -674,6 +738,59 @@ int ck_cells_marked(const double *xy, int64_t n, int64_t stride, double x0, doub
     for (int64_t i = 0; i < n; ++i) {
         const int64_t c = raster_cell(xy[i * stride], xy[i * stride + 1], x0, y0, cell, rows, cols);
         out[i] = (uint8_t)(c >= 0 && mask[c] != 0);
+    }
+    return CK_OK;
+}
+
+/* ---- binary morphology with a disc of centred runs (cellctl.vision.sole_region) ---- */
+
+int ck_disc_dilate(const uint8_t *mask, int64_t rows, int64_t cols, int of_zero, const int32_t *half, int32_t reach,
+                   int invert, uint8_t *out, int16_t *scratch) {
+    if (!mask || !half || !out || !scratch)
+        return CK_ERR_NULL;
+    if (rows < 1 || cols < 1 || rows > CK_MAX_RASTER || cols > CK_MAX_RASTER || reach < 0 || reach > CK_MAX_RASTER ||
+        (of_zero != 0 && of_zero != 1) || (invert != 0 && invert != 1))
+        return CK_ERR_SIZE;
+    for (int32_t k = 0; k <= 2 * reach; ++k)
+        if (half[k] < 0 || half[k] > CK_MAX_RASTER)
+            return CK_ERR_RANGE;
+    /* Per row, each cell's distance along the row to the nearest source cell (`far` where the row has none):
+     * a cell is in the dilation where, for some row offset d of the disc, the row r + d has a source cell
+     * within the disc's run half[d + reach] of its column. Cells off the raster are never sources (OpenCV's
+     * border for a dilation; for an erosion, done as the complement's dilation, they count as marked). */
+    const int16_t far = INT16_MAX;
+    const uint8_t source = of_zero ? 0 : 1;
+    for (int64_t r = 0; r < rows; ++r) {
+        const uint8_t *m = mask + r * cols;
+        int16_t *h = scratch + r * cols;
+        int32_t last = -1; /* column of the last source cell seen, -1: none yet */
+        for (int64_t c = 0; c < cols; ++c) {
+            if ((m[c] != 0) == source)
+                last = (int32_t)c;
+            h[c] = last < 0 ? far : (int16_t)(c - last);
+        }
+        last = -1;
+        for (int64_t c = cols - 1; c >= 0; --c) {
+            if ((m[c] != 0) == source)
+                last = (int32_t)c;
+            if (last >= 0 && last - c < h[c])
+                h[c] = (int16_t)(last - c);
+        }
+    }
+    const uint8_t hit = invert ? 0 : 1;
+    for (int64_t r = 0; r < rows; ++r) {
+        uint8_t *o = out + r * cols;
+        for (int64_t c = 0; c < cols; ++c)
+            o[c] = 0;
+        const int64_t lo = r - reach < 0 ? -r : -(int64_t)reach, hi = r + reach >= rows ? rows - 1 - r : reach;
+        for (int64_t d = lo; d <= hi; ++d) {
+            const int16_t *h = scratch + (r + d) * cols;
+            const int16_t run = (int16_t)half[d + reach];
+            for (int64_t c = 0; c < cols; ++c)
+                o[c] |= (uint8_t)(h[c] <= run);
+        }
+        for (int64_t c = 0; c < cols; ++c)
+            o[c] = o[c] ? hit : (uint8_t)(1 - hit);
     }
     return CK_OK;
 }

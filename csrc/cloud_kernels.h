@@ -143,4 +143,16 @@ int ck_cell_counts(const double *xy, int64_t n, int64_t stride, double x0, doubl
 int ck_cells_marked(const double *xy, int64_t n, int64_t stride, double x0, double y0, double cell,
                     const uint8_t *mask, int64_t rows, int64_t cols, uint8_t *out);
 
+/*
+ * Binary dilation of a raster by a disc made of centred runs (OpenCV's elliptic structuring element, or any
+ * element whose row d, -reach..reach, is the run of columns -half[d + reach]..half[d + reach]): out = 1 where
+ * a source cell lies within the disc around the cell (the complement with invert 1), else 0. Sources: the
+ * non-zero cells of mask (of_zero 0) or its zero cells (of_zero 1: the complement's dilation, i.e. an
+ * erosion); cells off the raster are never sources, as OpenCV's default border makes them for a dilation and
+ * (complemented) for an erosion. mask, out: rows x cols; half: 2 reach + 1 runs; scratch: rows x cols.
+ */
+#define CK_MAX_RASTER 20000
+int ck_disc_dilate(const uint8_t *mask, int64_t rows, int64_t cols, int of_zero, const int32_t *half, int32_t reach,
+                   int invert, uint8_t *out, int16_t *scratch);
+
 #endif

@@ -315,3 +315,31 @@ def cells_marked(xy: np.ndarray, origin: tuple[float, float], cell_mm: float, ma
     )
     _check(rc, "cells marked")
     return out[: len(xy)].view(bool)
+
+
+def disc_dilate(mask: np.ndarray, half_widths: np.ndarray, of_zero: bool = False, invert: bool = False) -> np.ndarray:
+    """Binary dilation (uint8 0/1) of a uint8 raster's non-zero cells (of its zero cells with of_zero) by a disc
+    of centred runs: row d (-reach..reach) of the disc spans columns -half_widths[d + reach]..half_widths[d +
+    reach]; cells off the raster are no sources. invert: the complement (an erosion, with of_zero, as cv2
+    erodes with its default border)."""
+    mask = np.ascontiguousarray(mask, np.uint8)
+    half = np.ascontiguousarray(half_widths, np.int32)
+    if mask.ndim != 2 or mask.size == 0:
+        raise ValueError(f"mask must be a non-empty 2-D raster, got shape {mask.shape}")
+    if half.ndim != 1 or len(half) % 2 != 1:
+        raise ValueError(f"the disc needs an odd number of runs, got shape {half.shape}")
+    out = np.empty(mask.shape, np.uint8)
+    scratch = np.empty(mask.shape, np.int16)
+    rc = lib.ck_disc_dilate(
+        _ptr("const uint8_t *", mask),
+        mask.shape[0],
+        mask.shape[1],
+        int(of_zero),
+        _ptr("const int32_t *", half),
+        len(half) // 2,
+        int(invert),
+        _ptr("uint8_t *", out),
+        _ptr("int16_t *", scratch),
+    )
+    _check(rc, "disc dilation")
+    return out

@@ -76,9 +76,13 @@ def cloud_from_disparity(
     # A flat patch (clipped highlight, covered lens) matches at any disparity and can still pass the
     # left-right check: such pixels are not measurements.
     measured = (fixed != INVALID) & (_local_std(grey_left[rows, cols]) >= MIN_TEXTURE_DN)
-    ys, xs = np.nonzero(measured)
-    disparity = fixed[ys, xs] / float(DISP_SCALE) + shift
-    colours = _smoothed_colours(rect_left[rows, cols])[ys, xs]
+    # The measured pixels by their flat index, in the order np.nonzero gives them: the maps are read with it
+    # as 1-D takes (numpy's two-index gather costs ~5 times as much on ~5 10^5 pixels).
+    flat = np.flatnonzero(measured)
+    ys = flat // fixed.shape[1]
+    xs = flat - ys * fixed.shape[1]
+    disparity = fixed.ravel()[flat] / float(DISP_SCALE) + shift
+    colours = np.take(_smoothed_colours(rect_left[rows, cols]).reshape(-1, 3), flat, axis=0)
     xs, ys = xs + x0, ys + y0
     # Only the measured pixels through Q ([X Y Z W] = Q [x y d 1], cv2.reprojectImageTo3D's formula), as
     # a perspective transform of (x, y, d): no H x W x 3 map to build and gather from.

@@ -84,10 +84,9 @@ class Footprint:
 
     def largest_region(self) -> Footprint:
         """Only the largest 8-connected region, with its holes filled."""
-        count, labels, stats, _ = cv2.connectedComponentsWithStats(self.mask, connectivity=8)
+        labels, largest = largest_component(self.mask)
         mask = np.zeros_like(self.mask)
-        if count > 1:
-            largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        if largest > 0:
             region = (labels == largest).astype(np.uint8)
             contours, _ = cv2.findContours(region, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
             cv2.drawContours(mask, contours, -1, 1, thickness=cv2.FILLED)
@@ -164,6 +163,17 @@ class Footprint:
         if width == 0:
             return slice(0, self.mask.shape[0]), slice(0, self.mask.shape[1])
         return slice(max(y - margin, 0), y + height + margin), slice(max(x - margin, 0), x + width + margin)
+
+
+def largest_component(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """The 8-connected components of a uint8 mask (labels, as cv2.connectedComponentsWithStats numbers them)
+    and the label of the largest (the first of equal ones; 0: none). Areas by counting the labels: OpenCV's
+    statistics cost ~4 x the labelling itself on the footprint's raster."""
+    count, labels = cv2.connectedComponents(mask, connectivity=8)
+    if count < 2:
+        return labels, 0
+    areas = np.bincount(labels.ravel(), minlength=count)
+    return labels, 1 + int(np.argmax(areas[1:]))
 
 
 _STRICT_MM = 1e-3  # far below a cell, far above float32 rounding of the distances

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.footprint import largest_component
 from cellctl.vision.table import TablePlane
 
 COARSE_SCALE = 4  # the coarse match runs at 1/4 of the resolution: 1/16 of the pixels, 1/4 of the disparities
@@ -158,10 +159,9 @@ def _largest_object(shape: tuple[int, ...], xs: np.ndarray, ys: np.ndarray, abov
     mask[ys[above], xs[above]] = 1
     opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))  # single-pixel mismatches
     joined = cv2.morphologyEx(opened, cv2.MORPH_CLOSE, np.ones((JOIN_PX, JOIN_PX), np.uint8))
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(joined, connectivity=8)
-    if count < 2:
+    labels, largest = largest_component(joined)
+    if largest == 0:
         return np.zeros(len(xs), bool)
-    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     return (labels[ys, xs] == largest) & above
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import open3d as o3d
 
 from cellctl.errors import FailureKind
+from cellctl.stereo.kernels import disc_dilate
 from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
@@ -71,11 +72,14 @@ def colour_split(colours: np.ndarray, points: np.ndarray, footprint: Footprint, 
     """
     everything = np.ones(len(high), bool)
     table = table_sample(points)
-    interior = high[footprint.eroded(5.0).contains(points[high, :2])]
-    outside = table[~footprint.dilated(10.0).contains(points[table, :2])]
+    # Rows are gathered with np.take (the same rows as indexing; ~3 x faster on ~10^5 rows); the raster kernels
+    # read the x y of x y z rows in place.
+    interior = high[footprint.eroded(5.0).contains(np.take(points, high, axis=0))]
+    outside = table[~footprint.dilated(10.0).contains(np.take(points, table, axis=0))]
     if interior.size < 100 or outside.size < 100:
         return ColourSplit(everything, False, 0.0)
-    sole_c, table_c = colours[interior].astype(np.float64), colours[outside].astype(np.float64)
+    sole_c = np.take(colours, interior, axis=0).astype(np.float64)
+    table_c = np.take(colours, outside, axis=0).astype(np.float64)
     pooled = 0.5 * (np.cov(sole_c.T) + np.cov(table_c.T)) + np.eye(3) * 1e-3
     sole_mean, table_mean = sole_c.mean(axis=0), table_c.mean(axis=0)  # each taken once (~10^5 rows)
     difference = sole_mean - table_mean
@@ -84,7 +88,7 @@ def colour_split(colours: np.ndarray, points: np.ndarray, footprint: Footprint, 
     if separation < MIN_COLOUR_SEPARATION:
         return ColourSplit(everything, False, separation)
     threshold = direction @ (0.5 * (sole_mean + table_mean))
-    return ColourSplit(colours[high].astype(np.float64) @ direction > threshold, True, separation)
+    return ColourSplit(np.take(colours, high, axis=0).astype(np.float64) @ direction > threshold, True, separation)
 
 
 def change_split(
@@ -105,8 +109,9 @@ def change_split(
     assert cloud.rectified is not None  # a taught table is only used on a stereo cloud
     current, reference = cloud.rectified[0], taught.left
     table = table_sample(points)
-    outside = table[~footprint.dilated(15.0).contains(points[table, :2])]
-    test = ChangeTest.fit(current, reference, np.round(cloud.pixels[outside]).astype(np.int64))
+    outside = table[~footprint.dilated(15.0).contains(np.take(points, table, axis=0))]
+    outside_pixels = np.take(cloud.pixels, outside, axis=0)
+    test = ChangeTest.fit(current, reference, np.round(outside_pixels).astype(np.int64))
     if test is None:
         return None
     # The masks are read near the sole only (its points, the outline's checks, the image edge): computed in
@@ -114,15 +119,19 @@ def change_split(
     left_box, right_box = _change_boxes(cloud, high, current.shape)
     changed = test.changed(current, reference, left_box)
     # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
-    right_table = cloud.pixels[outside] - np.column_stack([cloud.disparity[outside], np.zeros(len(outside))])
+    right_table = outside_pixels - np.column_stack([cloud.disparity[outside], np.zeros(len(outside))])
     right_test = ChangeTest.fit(cloud.rectified[1], taught.right, np.round(right_table).astype(np.int64))
     changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right, right_box)
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
-    near = near[footprint.dilated(EDGE_BAND_MM).contains(points[near, :2])]
+    near = near[footprint.dilated(EDGE_BAND_MM).contains(np.take(points, near, axis=0))]
     candidates = np.concatenate([high, near])
-    x, y = np.round(cloud.pixels[candidates]).astype(np.int64).T
-    return ChangeSplit(np.sort(candidates[changed[y, x]]), changed, changed_right)
+    x, y = np.round(np.take(cloud.pixels, candidates, axis=0)).astype(np.int64).T
+    # Sorted as np.sort would give them (high and near are disjoint): marked on the points, read back in order
+    # (one pass over the points instead of a sort of the ~2 10^5 chosen).
+    chosen = np.zeros(len(points), bool)
+    chosen[candidates[changed[y, x]]] = True
+    return ChangeSplit(np.flatnonzero(chosen), changed, changed_right)
 
 
 def _change_boxes(
@@ -131,7 +140,7 @@ def _change_boxes(
     """(rows, columns) of the left and right images round the high points, CHANGE_MARGIN_PX out (the right
     one shifted by their disparities)."""
     height, width = shape[:2]
-    x, y = cloud.pixels[high].T
+    x, y = np.take(cloud.pixels, high, axis=0).T
     d = cloud.disparity[high]
     m = CHANGE_MARGIN_PX
     rows = slice(max(int(y.min()) - m, 0), min(int(y.max()) + m + 1, height))
@@ -218,7 +227,7 @@ def without_outliers(cloud: StereoCloud, index: np.ndarray, points: np.ndarray) 
         _, inliers = o3d_cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
         return index[np.asarray(inliers, dtype=np.int64)]
     spacing = calib.baseline_mm / cloud.disparity[index]  # between pixels at the point: Z / f = B / d
-    return index[statistical_inliers(cloud.pixels[index], points[index], spacing)]
+    return index[statistical_inliers(np.take(cloud.pixels, index, axis=0), np.take(points, index, axis=0), spacing)]
 
 
 def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:
@@ -227,7 +236,7 @@ def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:
         return None
     width, height = cloud.image_size
     mask = np.zeros((height, width), np.uint8)
-    x, y = np.round(cloud.pixels[index]).astype(int).T
+    x, y = np.round(np.take(cloud.pixels, index, axis=0)).astype(int).T
     mask[y, x] = 1
     closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
@@ -245,7 +254,7 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
     if changed_left is None or index.size == 0:
         return 0.0
     width, height = cloud.image_size
-    x, y = np.round(cloud.pixels[index]).astype(int).T
+    x, y = np.round(np.take(cloud.pixels, index, axis=0)).astype(int).T
     # The changed regions the sole's measured pixels lie in (8-connected), as a mask and their box; labelled
     # within the box of the changed pixels only (the change masks are computed round the sole).
     changed_rows = np.flatnonzero(np.any(changed_left, axis=1))
@@ -282,23 +291,19 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
 
 
 def disc_closing(mask: np.ndarray, size: int) -> np.ndarray:
-    """cv2.morphologyEx(mask, MORPH_CLOSE, the size x size MORPH_ELLIPSE element), the same cells, ~4 x faster.
+    """cv2.morphologyEx(mask, MORPH_CLOSE, the size x size MORPH_ELLIPSE element) of a 0/1 uint8 mask: the
+    same cells, in C (cellctl.stereo.kernels.disc_dilate), ~3 x faster than as the union of its rectangles.
 
-    OpenCV's disc is a stack of centred runs, widest in the middle row: the union of the centred rectangles
-    at its steps. A dilation by a union is the maximum of the dilations by its parts, an erosion the minimum
-    of the erosions, and OpenCV filters a rectangle separably (each as cv2 does it, borders included)."""
-    rectangles = _disc_rectangles(size)
-    dilated = np.zeros_like(mask)
-    for rectangle in rectangles:
-        np.maximum(dilated, cv2.dilate(mask, rectangle), out=dilated)
-    closed = np.ones_like(mask)
-    for rectangle in rectangles:
-        np.minimum(closed, cv2.erode(dilated, rectangle), out=closed)
-    return closed
+    OpenCV's disc is a stack of centred runs, widest in the middle row. A cell is in the dilation where some
+    row of the disc finds a marked cell within its run along that row; the erosion is the dilation of the
+    unmarked cells, complemented (cells off the raster count as unmarked for the dilation and as marked for the
+    erosion, OpenCV's default border)."""
+    half_widths = _disc_runs(size)
+    return disc_dilate(disc_dilate(mask, half_widths), half_widths, of_zero=True, invert=True)
 
 
-def _disc_rectangles(size: int) -> list[np.ndarray]:
-    """The centred rectangles whose union is OpenCV's size x size elliptic element (odd size)."""
+def _disc_runs(size: int) -> np.ndarray:
+    """Half widths of the centred runs, row by row, of OpenCV's size x size elliptic element (odd size)."""
     if size < 1 or size % 2 == 0:
         raise ValueError(f"the disc must have an odd size, got {size}")
     disc, middle = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)), size // 2
@@ -308,13 +313,7 @@ def _disc_rectangles(size: int) -> list[np.ndarray]:
         half = middle - int(columns[0])
         assert int(columns[-1]) == middle + half and len(columns) == 2 * half + 1  # a centred run
         half_widths.append(half)
-    # For each run width, the rows whose run is at least that wide (contiguous about the middle row).
-    rectangles = []
-    for half in sorted(set(half_widths)):
-        rows = [abs(k - middle) for k, h in enumerate(half_widths) if h >= half]
-        assert len(rows) == 2 * max(rows) + 1
-        rectangles.append(np.ones((2 * max(rows) + 1, 2 * half + 1), np.uint8))
-    return rectangles
+    return np.array(half_widths, np.int32)
 
 
 def cut_by_border(cloud: StereoCloud, index: np.ndarray) -> tuple[FailureKind | None, str | None]:
@@ -322,7 +321,7 @@ def cut_by_border(cloud: StereoCloud, index: np.ndarray) -> tuple[FailureKind | 
     if index.size == 0:
         return FailureKind.NO_SOLE, "no sole in view: no sole points left after outlier removal"
     width, height = cloud.image_size
-    x, y = cloud.pixels[index].T
+    x, y = np.take(cloud.pixels, index, axis=0).T
     d = cloud.disparity[index]
     m = BORDER_MARGIN_PX
     # x - d < m: the right camera does not see the point (it left the right image on the left).

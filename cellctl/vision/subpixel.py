@@ -35,14 +35,19 @@ class PatchFit:
 
     params: np.ndarray  # K x 3 (a, b, c)
     ok: np.ndarray  # K bool: converged with enough textured pixels
-    pixels: list[np.ndarray]  # per patch, the (x, y) pixels used (M_k x 2)
-    ids: np.ndarray  # the same pixels stacked: patch of each (N, sorted)...
+    ids: np.ndarray  # the pixels used, patch after patch: patch of each (N, sorted)...
     xy: np.ndarray  # ... and its (x, y) (N x 2)
+
+    @property
+    def pixels(self) -> list[np.ndarray]:
+        """Per patch, the (x, y) pixels used (M_k x 2): split when asked (the fit itself never needs them)."""
+        return np.split(self.xy, np.cumsum(np.bincount(self.ids, minlength=len(self.params)))[:-1])
 
     def disparities(self, centres: np.ndarray) -> np.ndarray:
         """The fitted disparity at every pixel of `xy` (N), for patch centres K x 2."""
-        a, b, c = self.params[self.ids].T
-        offset = self.xy - np.asarray(centres, np.float64)[self.ids]
+        # Rows gathered with np.take: the same rows as indexing, ~3 x faster on ~10^5 of them.
+        a, b, c = np.take(self.params, self.ids, axis=0).T
+        offset = self.xy - np.take(np.asarray(centres, np.float64), self.ids, axis=0)
         return a + b * offset[:, 0] + c * offset[:, 1]
 
 
@@ -118,8 +123,7 @@ def merged_fits(parts: list[tuple[np.ndarray, PatchFit]], count: int) -> PatchFi
     ids = np.concatenate([group[fit.ids] for group, fit in parts])
     order = np.argsort(ids, kind="stable")  # patch after patch, each patch's pixels in their order
     ids, xy = ids[order], np.concatenate([fit.xy for _, fit in parts])[order]
-    sizes = np.bincount(ids, minlength=count)
-    return PatchFit(params, ok, np.split(xy, np.cumsum(sizes)[:-1]), ids, xy)
+    return PatchFit(params, ok, ids, xy)
 
 
 def disc_pixels(mask: np.ndarray, centres: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
@@ -131,7 +135,7 @@ def disc_pixels(mask: np.ndarray, centres: np.ndarray, radius_px: float) -> tupl
     py = (centres[:, 1:2] + offsets[:, 1]).ravel()
     ids = np.repeat(np.arange(len(centres)), len(offsets))
     inside = np.flatnonzero((px >= 0) & (px < width) & (py >= 0) & (py < height))
-    on = inside[mask[py[inside], px[inside]]]
+    on = inside[np.take(np.ascontiguousarray(mask), py[inside] * width + px[inside])]  # mask[py, px] by flat index
     return ids[on], np.column_stack([px[on], py[on]]).astype(np.float64)
 
 
@@ -148,9 +152,11 @@ def fit_disparity_planes(
     start: K x 3 initial (a, b, c). Patches are sorted by id in the returned pixel lists.
     """
     order = np.argsort(ids, kind="stable")
-    ids = np.asarray(ids, np.int64)[order]
-    x = np.asarray(pixels, np.float64)[order, 0].astype(np.float32)
-    y_image = np.asarray(pixels, np.float64)[order, 1].astype(np.float32)
+    ids = np.take(np.asarray(ids, np.int64), order)
+    # Gathers with np.take: the same values as indexing, a fraction of the time on ~10^5 pixels.
+    ordered = np.take(np.asarray(pixels, np.float64), order, axis=0)
+    x = ordered[:, 0].astype(np.float32)
+    y_image = ordered[:, 1].astype(np.float32)
     # Rectified pixels are only ever sampled on their own row: blurring and differentiating the rows the
     # patches cover (plus the filters' reach) gives the same samples at a fraction of the whole images' cost.
     top, bottom = _row_span(y_image, left.shape[0])
@@ -158,23 +164,25 @@ def fit_disparity_planes(
     centres = np.asarray(centres, np.float64).reshape(-1, 2)
     count = len(centres)
     params = np.array(start, np.float64).reshape(count, 3)
-    dx = x - centres[ids, 0]
-    dy = y_image - centres[ids, 1]
+    dx = x - np.take(centres[:, 0], ids)
+    dy = y_image - np.take(centres[:, 1], ids)
     sums = PatchSums(ids, count)
     sizes = sums.sizes
     last_step = np.full(count, np.inf)
     starts = np.concatenate([[0], np.cumsum(sizes)])
-    right_at = _Sampler(y)
     # Patches of image pixels lie on whole rows: there the right image is sampled in C (ck_patch_sample).
     rows = y.astype(np.int32) if np.array_equal(y, np.round(y)) and len(y) else None
-    # The left image is sampled where its pixels are: at whole pixels the bicubic sample is the pixel itself.
+    right_at = _Sampler(y) if rows is None else None
+    # The left image is sampled where its pixels are: at whole pixels the bicubic sample is the pixel itself
+    # (read by flat index from the contiguous rows).
     columns = x.astype(np.int64) if rows is not None and np.array_equal(x, np.round(x)) else None
+    flat = None if rows is None or columns is None else rows.astype(np.int64) * left.shape[1] + columns
     for sigma, iterations in BLUR_LEVELS:
         l_img = cv2.GaussianBlur(left, (0, 0), sigma) if sigma > 0 else left
         r_img = cv2.GaussianBlur(right, (0, 0), sigma) if sigma > 0 else right
         # The right image and its x gradient as two channels: one remap samples both at the same points.
         r_both = cv2.merge([r_img, cv2.Sobel(r_img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)])
-        l_val = _sample(l_img, x, y) if columns is None else l_img[rows, columns].astype(np.float64)
+        l_val = _sample(l_img, x, y) if flat is None else np.take(np.ascontiguousarray(l_img), flat).astype(np.float64)
         l_dev = l_val - sums.means_at_pixels(l_val)  # the left patch does not move: its statistics are fixed per level
         l_energy = sums(l_dev**2)
         for _ in range(iterations):
@@ -182,6 +190,7 @@ def fit_disparity_planes(
             # per-patch sums and 3 x 3 solves, in C (csrc/cloud_kernels.c); the numpy formulation the step
             # follows is _gauss_newton_step, the tests' reference.
             if rows is None:
+                assert right_at is not None
                 samples = right_at(r_both, patch_shift(starts, params, x, dx, dy, KERNEL_THREADS))
             else:  # on whole rows: shift and bicubic sample in one C pass (cv2.remap's values to ~1e-6)
                 samples = patch_sample(starts, params, x, dx, dy, rows, r_both, KERNEL_THREADS)
@@ -190,7 +199,7 @@ def fit_disparity_planes(
             last_step = np.abs(step[:, 0])
     ok = (sizes >= MIN_PATCH_PIXELS) & (last_step < 0.02) & np.all(np.isfinite(params), axis=1)
     xy = np.column_stack([x, y_image]).astype(np.float64)
-    return PatchFit(params, ok, np.split(xy, np.cumsum(sizes)[:-1]), ids, xy)
+    return PatchFit(params, ok, ids, xy)
 
 
 # Rows beyond the patches that the filters reach: the widest Gaussian's kernel (OpenCV: radius 4 sigma for

@@ -9,6 +9,7 @@ import pytest
 from cellctl.stereo.kernels import (
     cell_counts,
     cells_marked,
+    disc_dilate,
     neighbour_means,
     patch_sample,
     patch_shift,
@@ -55,6 +56,63 @@ def test_neighbour_means_follow_the_numpy_rule(seed: int) -> None:
     assert 0 < np.count_nonzero(~expected_exact)  # the cloud has edges, holes and specks: not only the block case
     np.testing.assert_array_equal(exact, expected_exact)
     np.testing.assert_array_equal(mean, expected_mean)  # float32, summed in the same order
+
+
+def _block_case(grid: np.ndarray, at: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """The points whose mean is the block's (the first case of the rule)."""
+    flat = grid.reshape(3, -1)
+    offset = flat[
+        :, at[None, :] + (outliers._NEAR_OFFSETS[:, 1, None] * grid.shape[2] + outliers._NEAR_OFFSETS[:, 0, None])
+    ]
+    offset = offset - flat[:, at][:, None, :]
+    near = np.nan_to_num(np.sqrt((offset[0] * offset[0] + offset[1] * offset[1]) + offset[2] * offset[2]), nan=np.inf)
+    block = np.sort(near[:20], axis=0)
+    return np.isfinite(block[19]) & (block[18] <= np.fmin(near[20:].min(axis=0), 3.5 * spacing))
+
+
+def _sequential_slow_means(grid: np.ndarray, at: np.ndarray, spacing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The slow case's rule with the kernel's own summation order: each point's 36 distances sorted (missing
+    ones infinite), the first 19 each capped at 3.6 spacings and summed in double in ascending order."""
+    flat = grid.reshape(3, -1)
+    offset = flat[
+        :, at[None, :] + (outliers._NEAR_OFFSETS[:, 1, None] * grid.shape[2] + outliers._NEAR_OFFSETS[:, 0, None])
+    ]
+    offset = offset - flat[:, at][:, None, :]
+    squared = (offset[0] * offset[0] + offset[1] * offset[1]) + offset[2] * offset[2]  # float32, as the kernel
+    near = np.sort(np.nan_to_num(np.sqrt(squared), nan=np.inf), axis=0)[:19]
+    reach = 3.6 * spacing
+    capped = np.fmin(near.astype(np.float64), reach)
+    total = np.cumsum(capped, axis=0)[-1]  # one addition after the other
+    return (total / 20.0).astype(np.float32), near[18] <= 0.95 * reach
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_neighbour_means_slow_case_sorts_ties_holes_and_partial_lane_groups(seed: int) -> None:
+    """Points whose block is incomplete or not the nearest go through the kernel's sorting network a group of
+    lanes at a time: ties (a quantised grid), holes of every density and any count of such points give the
+    sorted rule's means, on one thread and on two."""
+    rng = np.random.default_rng(seed)
+    height, width = 60, 70 + seed
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
+    z = rng.normal(0.0, (0.05, 0.4, 1.5, 4.0)[seed], (height, width)).astype(np.float32)
+    grid = np.stack([0.4 * xs, 0.4 * ys, z])
+    if seed % 2 == 0:
+        grid = np.round(grid * 4.0) / 4.0  # equal distances everywhere
+    grid[:, rng.random((height, width)) < (0.05, 0.3, 0.6, 0.15)[seed]] = np.nan
+    rows, cols = np.nonzero(np.isfinite(grid[2, 3:-3, 3:-3]))
+    at = (rows + 3) * width + cols + 3
+    at = at[: len(at) - seed]  # a count that leaves the last group of lanes part full
+    spacing = rng.uniform(0.3, 0.5, len(at))
+    mean, exact = neighbour_means(grid, at, spacing, outliers._NEAR_OFFSETS, threads=1)
+    expected_mean, expected_exact = _numpy_neighbour_means(grid, at, spacing)
+    slow_mean, slow_exact = _sequential_slow_means(grid, at, spacing)
+    slow = np.flatnonzero(~_block_case(grid, at, spacing))
+    assert len(slow) > 100  # (1024-point blocks: each ends with a part-full group of lanes)
+    np.testing.assert_array_equal(exact, expected_exact)
+    np.testing.assert_array_equal(mean[slow], slow_mean[slow])
+    np.testing.assert_array_equal(exact[slow], slow_exact[slow])
+    for a, b in zip((mean, exact), neighbour_means(grid, at, spacing, outliers._NEAR_OFFSETS, threads=2), strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_neighbour_means_refuse_points_at_the_grid_edge() -> None:
@@ -421,3 +479,46 @@ def test_cell_counts_and_marks_refuse_bad_input() -> None:
         cells_marked(xy, (0.0, 0.0), -1.0, np.ones((4, 4), np.uint8))
     with pytest.raises(ValueError, match="raster"):
         cells_marked(xy, (0.0, 0.0), 0.25, np.ones(4, np.uint8))
+
+
+def _ellipse_runs(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's size x size elliptic element and the half widths of its centred runs, row by row."""
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    return disc, np.array([size // 2 - int(np.flatnonzero(row)[0]) for row in disc], np.int32)
+
+
+@pytest.mark.parametrize("size", [1, 3, 5, 9, 17, 31, 61])
+def test_disc_dilation_and_erosion_are_opencvs(size: int) -> None:
+    """The disc kernel dilates as cv2.dilate and (of the zero cells, complemented) erodes as cv2.erode with
+    OpenCV's elliptic element and default border: blobs at and off the raster's edges, holes, specks, thin
+    rasters, an empty and a full one."""
+    rng = np.random.default_rng(size)
+    disc, half = _ellipse_runs(size)
+    shapes = [(120, 170), (37, 211), (1, 90), (80, 1), (2, 2)]
+    for k, shape in enumerate(shapes * 4):
+        mask = np.zeros(shape, np.uint8)
+        for _ in range(3):
+            centre = (int(rng.integers(0, shape[1])), int(rng.integers(0, shape[0])))
+            axes = (int(rng.integers(1, 70)), int(rng.integers(1, 50)))
+            cv2.ellipse(mask, centre, axes, float(rng.uniform(0, 180)), 0, 360, 1, -1)
+        mask &= (rng.random(shape) < rng.uniform(0.6, 1.0)).astype(np.uint8)
+        mask[rng.random(shape) < 0.01] = 1
+        if k == 5:
+            mask[:] = 0
+        if k == 6:
+            mask[:] = 1
+        np.testing.assert_array_equal(disc_dilate(mask, half), cv2.dilate(mask, disc))
+        np.testing.assert_array_equal(disc_dilate(mask, half, of_zero=True, invert=True), cv2.erode(mask, disc))
+        np.testing.assert_array_equal(disc_dilate(mask, half, invert=True), 1 - cv2.dilate(mask, disc))
+
+
+def test_disc_dilation_refuses_bad_input() -> None:
+    mask = np.ones((10, 10), np.uint8)
+    with pytest.raises(ValueError, match="odd number of runs"):
+        disc_dilate(mask, np.array([1, 2], np.int32))
+    with pytest.raises(ValueError, match="outside its array"):
+        disc_dilate(mask, np.array([0, -1, 0], np.int32))
+    with pytest.raises(ValueError, match="non-empty 2-D"):
+        disc_dilate(np.ones(10, np.uint8), np.array([1], np.int32))
+    with pytest.raises(ValueError, match="out of range"):
+        disc_dilate(np.ones((1, 30000), np.uint8), np.array([1], np.int32))

@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 
 from cellctl.vision.cloud import StereoCloud
+from cellctl.vision.footprint import largest_component
 from cellctl.vision.sole_region import disc_closing, unmeasured_fraction
 
 
@@ -55,3 +56,19 @@ def test_disc_closing_is_opencvs_closing_with_its_disc() -> None:
             mask &= (rng.random(shape) < 0.85).astype(np.uint8)
             mask[rng.random(shape) < 0.01] = 1
             np.testing.assert_array_equal(disc_closing(mask, size), cv2.morphologyEx(mask, cv2.MORPH_CLOSE, disc))
+
+
+def test_largest_component_is_opencvs_largest_by_its_statistics() -> None:
+    """Labels counted with numpy name the same largest component as OpenCV's statistics (ties: the first)."""
+    rng = np.random.default_rng(7)
+    for k in range(40):
+        shape = (int(rng.integers(1, 160)), int(rng.integers(1, 160)))
+        mask = (rng.random(shape) < rng.uniform(0.0, 0.7)).astype(np.uint8)
+        if k % 4 == 0:  # two equal squares: the first in raster order wins
+            mask[:] = 0
+            mask[:3, :3] = 1
+            mask[-3:, -3:] = 1
+        count, expected_labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        labels, largest = largest_component(mask)
+        np.testing.assert_array_equal(labels, expected_labels)
+        assert largest == (1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA])) if count > 1 else 0)
