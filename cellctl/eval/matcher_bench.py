@@ -140,23 +140,16 @@ def run_benchmark(
 ) -> tuple[list[Timing], dict[str, str]]:
     """Times every method on every case with `threads` threads for everyone; also returns, per case,
     the core's own buffers after our timed runs."""
-    # OpenCV's thread setting is process-wide, and the same count set explicitly is not OpenCV's default:
-    # a half-size test cell measured after this benchmark in the same process gave a glue normal 31 degrees
-    # from its patch (refused, limit 30) against 26 with OpenCV's default, which the service and every other
-    # figure use. Nothing in the package sets OpenCV's threads but this benchmark: the default is put back.
     cv2.setNumThreads(threads)
-    try:
-        results, buffers = [], {}
-        for case in cases:
-            ours = StereoMatcher(0, case.num_disparities, threads=threads)
-            for name, run in methods(case, ours).items():
-                if progress:
-                    progress(f"{case.name}: {name}")
-                results.append(time_method(case, name, run))
-            total = ours.buffer_bytes
-            buffers[case.name] = f"{total / 2**20:.0f} MiB = {total / case.cells:.2f} B/cell"
-    finally:
-        cv2.setNumThreads(-1)  # OpenCV's default
+    results, buffers = [], {}
+    for case in cases:
+        ours = StereoMatcher(0, case.num_disparities, threads=threads)
+        for name, run in methods(case, ours).items():
+            if progress:
+                progress(f"{case.name}: {name}")
+            results.append(time_method(case, name, run))
+        total = ours.buffer_bytes
+        buffers[case.name] = f"{total / 2**20:.0f} MiB = {total / case.cells:.2f} B/cell"
     return results, buffers
 
 
