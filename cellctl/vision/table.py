@@ -8,12 +8,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.subpixel import refine_patches
 
 TABLE_INLIER_MM = 1.5  # RANSAC inlier distance for the table plane
+TABLE_RANSAC_HYPOTHESES = 300
+TABLE_REFITS = 10  # least-squares refits at most; they stop once their inliers no longer change
 
 
 @dataclass(frozen=True)
@@ -58,27 +59,54 @@ class TablePlane:
 
 
 def find_table(points: np.ndarray, sample: int = 60000, seed: int = 0, refit_stride: int = 4) -> TablePlane | None:
-    """RANSAC (Open3D) on a subsample, then a least-squares refit to the inliers of every `refit_stride`-th point.
+    """RANSAC on a subsample, then least-squares refits to the inliers of every `refit_stride`-th point.
 
     The refit matters: heights are measured from this plane, and RANSAC's three-point hypothesis on a
     subsample is only good to about the inlier distance. A quarter of the points (~200000 table points)
-    fixes the plane to about a micrometre of statistical error; all of them only cost more time.
+    fixes the plane to about a micrometre of statistical error; all of them only cost more time. The
+    refits run until their inliers stop changing, so the plane does not depend on which hypothesis won.
     """
     rng = np.random.default_rng(seed)
     subset = points[rng.choice(len(points), size=min(sample, len(points)), replace=False)]
-    o3d.utility.random.seed(seed)
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(subset))
-    model, inliers = cloud.segment_plane(distance_threshold=TABLE_INLIER_MM, ransac_n=3, num_iterations=300)
-    if len(inliers) < 0.2 * len(subset):
+    found = _ransac_plane(subset, rng)
+    if found is None or found[1] < 0.2 * len(subset):
         return None
-    plane = TablePlane(np.asarray(model[:3], np.float64), float(model[3]))
-    scale = float(np.linalg.norm(plane.normal))
-    plane = TablePlane(plane.normal / scale, plane.offset / scale)
+    plane = found[0]
     spread = points[::refit_stride]  # measured pixels in image order: a stride samples the whole view
-    for _ in range(2):  # refit, then refit once more on the refined inliers
-        near = np.abs(plane.heights(spread)) < TABLE_INLIER_MM
+    near = np.abs(plane.heights(spread)) < TABLE_INLIER_MM
+    for _ in range(TABLE_REFITS):
         plane = TablePlane.fit(spread[near])
+        again = np.abs(plane.heights(spread)) < TABLE_INLIER_MM
+        if np.array_equal(again, near):
+            break
+        near = again
     return plane
+
+
+def _ransac_plane(points: np.ndarray, rng: np.random.Generator) -> tuple[TablePlane, int] | None:
+    """The three-point plane with the most points within TABLE_INLIER_MM, and that count.
+
+    Written here rather than Open3D's segment_plane: on the same points, seed set, Open3D 0.20's parallel
+    RANSAC returned different planes from call to call (3 planes in 12 calls on a simulated half-size cell's
+    cloud, whose refits then differed by 0.3 mm in height), so the same images gave different heights.
+    """
+    triples = points[rng.integers(0, len(points), size=(TABLE_RANSAC_HYPOTHESES, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    usable = lengths > 1e-9  # three points on a line define no plane
+    if not usable.any():
+        return None
+    normals = normals[usable] / lengths[usable, None]
+    offsets = -np.einsum("ij,ij->i", normals, triples[usable, 0])
+    counts = np.zeros(len(normals), np.int64)
+    for start in range(0, len(normals), 32):  # 32 hypotheses at a time: an N x 32 block of distances
+        block = slice(start, start + 32)
+        counts[block] = (np.abs(points @ normals[block].T + offsets[block]) < TABLE_INLIER_MM).sum(axis=0)
+    best = int(np.argmax(counts))  # the first of equal counts: deterministic
+    normal, offset = normals[best], float(offsets[best])
+    if offset < 0:  # as TablePlane.fit: the camera (origin) on the positive side
+        normal, offset = -normal, -offset
+    return TablePlane(normal, offset), int(counts[best])
 
 
 def refine_table(cloud: StereoCloud, plane: TablePlane, spacing_px: int = 80, radius_px: float = 16.0) -> TablePlane:
