@@ -125,19 +125,6 @@ def check_steep_wall(
     return None
 
 
-def edge_offsets(
-    outline: np.ndarray,
-    outward: np.ndarray,
-    level: np.ndarray,
-    changed: np.ndarray,
-    table_to_pixel: Callable[[np.ndarray], np.ndarray],
-    table_level: Footprint | None = None,
-    outermost: bool = False,
-) -> np.ndarray:
-    """`edge_offset_pair`'s innermost reading, or with `outermost` its outermost."""
-    return edge_offset_pair(outline, outward, level, changed, table_to_pixel, table_level)[1 if outermost else 0]
-
-
 def edge_offset_pair(
     outline: np.ndarray,
     outward: np.ndarray,
@@ -192,7 +179,7 @@ def edge_offset_pair(
 def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
     """The outline (points 1 mm apart, closed) against the edges the cameras' change masks show there.
 
-    `offsets`: per camera, `edge_offsets` along the outline. Their mean per point, a running median over
+    `offsets`: per camera, one of `edge_offset_pair`'s readings along the outline. Their mean per point, a running median over
     EDGE_OFFSET_WINDOW_MM, must stay within MAX_EDGE_OFFSET_MM of the outline everywhere it is known.
     """
     stacked = np.vstack(offsets)

@@ -140,7 +140,7 @@ def silhouette_offsets(
     measured height. Where the camera sees the wall it is the wall's foot on the table, or the top edge again if
     the wall is lit like the table (no change); one camera cannot tell the two apart (the same ray at two
     heights), so there the reading nearer the outline is taken. `stereo_offsets` decides with the other camera
-    instead. outermost: as in edge_checks.edge_offsets.
+    instead. outermost: as in edge_checks.edge_offset_pair.
     """
     foot, top, sees_wall = _readings(ring, outward, edge_height, (changed, to_pixel, centre), table_level)
     which = 1 if outermost else 0
@@ -200,7 +200,7 @@ def edge_shift(
     outline; 0 where the evidence does not hold.
 
     left, right: each camera's silhouette offsets (`silhouette_offsets`, the innermost of equally good steps);
-    outer: the same read outermost (edge_checks.edge_offsets), as the edge-offset check reads them; without it
+    outer: the same read outermost (edge_checks.edge_offset_pair), as the edge-offset check reads them; without it
     the innermost readings stand for both. A move is the mean of both cameras' local edges (running medians
     over EDGE_OFFSET_WINDOW_MM) where they agree within EDGE_MOVE_AGREE_MM and lie more than EDGE_MOVE_MIN_MM
     and at most EDGE_MOVE_MAX_MM from the outline:

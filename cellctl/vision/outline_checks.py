@@ -75,7 +75,7 @@ def _check_outline_images(
     # Per camera, its silhouette's edge at the height where it lies (cellctl.vision.image_edge.stereo_offsets):
     # the top edge from the inward side of a wall; from the outward side the foot on the table or the top edge
     # where the wall is lit so that it hardly differs from the table, whichever the other camera confirms.
-    # Read twice: the innermost of equally good steps, then the outermost (edge_checks.edge_offsets): where
+    # Read twice: the innermost of equally good steps, then the outermost (edge_checks.edge_offset_pair): where
     # evidence is missing (changed pixels excused on table-level cells) neither reading may clear the outline.
     # Where the outermost finds no edge (unknown to the end of the search: a wide shadow) the innermost stands.
     cameras = (

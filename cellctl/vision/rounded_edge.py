@@ -29,7 +29,7 @@ import numpy as np
 
 from cellctl.vision.checks import MIN_TESTABLE
 from cellctl.vision.defaults import GLUE_OFFSET_MM
-from cellctl.vision.edge_checks import EDGE_INNER_MM, EDGE_OUTER_MM, edge_offsets
+from cellctl.vision.edge_checks import EDGE_INNER_MM, EDGE_OUTER_MM, edge_offset_pair
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import projections, table_level
 from cellctl.vision.reconstruction import Reconstruction
@@ -111,8 +111,8 @@ def silhouette_bounds(
     zero = np.zeros(len(outline))
     low, high = [], []
     for changed, to_pixel in cameras:
-        at_level = edge_offsets(outline, outward, level, changed, to_pixel, table_level)
-        at_table = edge_offsets(outline, outward, zero, changed, to_pixel, table_level)
+        at_level = edge_offset_pair(outline, outward, level, changed, to_pixel, table_level)[0]
+        at_table = edge_offset_pair(outline, outward, zero, changed, to_pixel, table_level)[0]
         # A camera on the inner side reads nearer at the depth's level; one that sees the wall (the foot at the
         # table is its edge) reads nearer at the table: the nearer reading is the inner bound either way.
         both = np.isfinite(at_level) & np.isfinite(at_table)

@@ -1,4 +1,4 @@
-"""The outline against where the camera's change mask ends along its normal (edge_checks.edge_offsets), on a
+"""The outline against where the camera's change mask ends along its normal (edge_checks.edge_offset_pair), on a
 synthetic round sole (a cylinder) seen by a pinhole camera with the real rig's pixel size, off to one side."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cellctl.errors import FailureKind
-from cellctl.vision.edge_checks import check_edge_offsets, edge_offsets
+from cellctl.vision.edge_checks import check_edge_offsets, edge_offset_pair
 from cellctl.vision.footprint import Footprint
 
 RADIUS = 50.0
@@ -50,7 +50,7 @@ def offsets(outline_radius: np.ndarray, changed: np.ndarray) -> np.ndarray:
     outline = outline_radius[:, None] * outward
     sees_wall = np.sum(outward * (CAMERA[:2] - outline), axis=1) > 0
     level = np.where(sees_wall, 0.0, HEIGHT)  # the wall's foot where it is seen, else the top edge
-    return edge_offsets(outline, outward, level, changed, project, table_level())
+    return edge_offset_pair(outline, outward, level, changed, project, table_level())[0]
 
 
 def test_the_true_outline_lies_on_the_edge_seen_also_past_a_shadow(changed: np.ndarray) -> None:
@@ -94,7 +94,7 @@ def offsets_on(level_cells: Footprint, outline_radius: np.ndarray, changed: np.n
     outline = outline_radius[:, None] * outward
     sees_wall = np.sum(outward * (CAMERA[:2] - outline), axis=1) > 0
     level = np.where(sees_wall, 0.0, HEIGHT)
-    return edge_offsets(outline, outward, level, changed, project, level_cells, outermost=worst)
+    return edge_offset_pair(outline, outward, level, changed, project, level_cells)[1 if worst else 0]
 
 
 def test_an_outline_short_with_the_depth_is_refused_when_the_missing_evidence_counts_against_it(
