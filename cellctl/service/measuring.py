@@ -24,7 +24,7 @@ from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_fr
 from cellctl.service.recipes import Recipe
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.reconstruction import SoleReconstructor
-from cellctl.vision.runtime import keep_freed_memory, one_blas_thread, settle_garbage_collector
+from cellctl.vision.runtime import keep_freed_memory, one_blas_thread, settle_garbage_collector, warm_heap
 from cellctl.vision.teach import TaughtTable, TeachError, load_taught
 from firmware_io.handshake import Trigger
 from firmware_io.registers import ErrorCode
@@ -76,6 +76,7 @@ class CellMeasurer:
             reconstructor = self._reconstructor_for(depth_range)
             measure_frame(frame, reconstructor, settings)
             log.info("warmed up depth range %g..%g mm in %.1f s", *depth_range, time.monotonic() - start)
+        warm_heap()  # the daemon's thread runs the cycles too: a larger sole's first cycle finds its pages mapped
         settle_garbage_collector()
         self.warmed_up = True
 

@@ -10,7 +10,7 @@ import ctypes.util
 import gc
 import logging
 
-import numpy  # noqa: F401  threadpoolctl sees only the libraries loaded: numpy's BLAS must be
+import numpy  # also so that threadpoolctl sees numpy's BLAS: it finds only the libraries already loaded
 from threadpoolctl import threadpool_info, threadpool_limits
 
 log = logging.getLogger(__name__)
@@ -77,3 +77,19 @@ def keep_freed_memory() -> bool:
         log.info("the C library's malloc settings could not be set (not glibc?): freed memory goes back as before")
         return False
     return True
+
+
+# Memory touched at warm-up so that a sole larger than the warm-up pair's does not fault its arrays in: in the
+# demo the largest sole (296 mm), first seen after the warm-up, spent 47-81 ms in its reprojection against 10-14
+# in later cycles; with this much touched at warm-up, 15-19 ms (docs/benchmarks.md). A generous bound, not a
+# measured need: it stays resident (keep_freed_memory).
+WARM_HEAP_BYTES = 256 << 20
+_WARM_BLOCK_BYTES = 8 << 20  # under the mmap threshold above, so the blocks come from the heap and stay in it
+
+
+def warm_heap(total_bytes: int = WARM_HEAP_BYTES) -> None:
+    """Touch `total_bytes` of the calling thread's malloc heap, then free it: with keep_freed_memory's settings
+    glibc keeps those pages, so the first cycle of a larger sole than the warm-up's finds them mapped instead
+    of faulting each one in. Call on the thread that runs the cycles, after keep_freed_memory()."""
+    blocks = [numpy.ones(_WARM_BLOCK_BYTES // 8) for _ in range(max(total_bytes // _WARM_BLOCK_BYTES, 0))]
+    del blocks

@@ -35,3 +35,29 @@ def test_keep_freed_memory_lets_the_next_cycle_reuse_what_the_last_one_freed() -
         pytest.skip("not glibc: its malloc settings are not available here")
     faults_of_a_40_mb_array()  # the heap grows once
     assert faults_of_a_40_mb_array() < 50  # then the freed block is used again (0 here; mapped anew: 532)
+
+
+def test_warm_heap_leaves_pages_mapped_for_a_larger_cycle() -> None:
+    # A fresh process each, so that nothing earlier grew the heap: the faults of ~60 MB of cycle-sized arrays.
+    import subprocess
+    import sys
+
+    script = (
+        "import resource, sys, numpy as np\n"
+        "from cellctl.vision.runtime import keep_freed_memory, warm_heap\n"
+        "if not keep_freed_memory(): print(-1); sys.exit()\n"
+        "if sys.argv[1] == 'warm': warm_heap(96 << 20)\n"
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+        "arrays = [np.ones(3 << 17) for _ in range(20)]\n"  # 20 x 3 MB, each under glibc's default mmap threshold
+        "print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)\n"
+    )
+    faults = {
+        mode: int(
+            subprocess.run([sys.executable, "-c", script, mode], capture_output=True, text=True, check=True).stdout
+        )
+        for mode in ("cold", "warm")
+    }
+    if faults["cold"] < 0:
+        pytest.skip("not glibc: its malloc settings are not available here")
+    assert faults["cold"] > 10_000  # 60 MB is ~15000 pages, each faulted in on first touch
+    assert faults["warm"] < 0.05 * faults["cold"]
