@@ -123,30 +123,6 @@ def _nearer(foot: np.ndarray, top: np.ndarray, to: np.ndarray | float) -> np.nda
     return np.where(foot_off < np.nan_to_num(np.abs(top - to), nan=np.inf), foot, top)
 
 
-def silhouette_offsets(
-    ring: np.ndarray,
-    outward: np.ndarray,
-    edge_height: np.ndarray,
-    changed: np.ndarray,
-    to_pixel: Callable[[np.ndarray], np.ndarray],
-    centre: np.ndarray,
-    table_level: Footprint | None = None,
-    outermost: bool = False,
-) -> np.ndarray:
-    """Where one camera's silhouette puts the edge, in mm along the outward normal from each outline point.
-
-    A silhouette gives a ray, not a point: the edge lies where the ray meets the height of whatever part of the
-    sole makes the silhouette. Where the sole hides the wall from the camera, that is the top edge, at its
-    measured height. Where the camera sees the wall it is the wall's foot on the table, or the top edge again if
-    the wall is lit like the table (no change); one camera cannot tell the two apart (the same ray at two
-    heights), so there the reading nearer the outline is taken. `stereo_offsets` decides with the other camera
-    instead. outermost: as in edge_checks.edge_offset_pair.
-    """
-    foot, top, sees_wall = _readings(ring, outward, edge_height, (changed, to_pixel, centre), table_level)
-    which = 1 if outermost else 0
-    return np.where(sees_wall, _nearer(foot[which], top[which], 0.0), top[which])
-
-
 def stereo_offsets(
     ring: np.ndarray,
     outward: np.ndarray,
@@ -154,10 +130,15 @@ def stereo_offsets(
     cameras: tuple[Camera, Camera],
     table_level: Footprint | None = None,
 ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """Both cameras' silhouette offsets (`silhouette_offsets`), ((left, right) innermost, (left, right)
-    outermost: edge_checks.edge_offset_pair), where a camera sees the wall read at the height the other camera
-    confirms: of its foot and top readings the one nearer the other camera's unambiguous reading (its top
-    edge, where the wall is hidden from it); where the other sees the wall too, the one nearer the outline.
+    """Where each camera's silhouette puts the edge, in mm along the outward normal from each outline point:
+    ((left, right) innermost, (left, right) outermost of equally good steps: edge_checks.edge_offset_pair; where
+    the outermost finds no edge, unknown to the end of its search as beside a wide shadow, the innermost stands).
+
+    The silhouette is the top edge where the sole hides its wall from the camera, read at its measured height.
+    Where the camera sees the wall it is the wall's foot on the table, or the top edge again if the wall is lit
+    like the table; one camera cannot tell the two apart (the same ray at two heights), so there the reading
+    is the one nearer the other camera's unambiguous reading (its top edge, where the wall is hidden from it);
+    where the other sees the wall too, the one nearer the outline.
 
     The nearer-the-outline rule alone reads in the outline's favour: with the outline 1 mm beyond a dark wall's
     foot, the top reading of the camera that sees that wall lies on the outline (the ray to the foot crosses
@@ -176,7 +157,8 @@ def stereo_offsets(
 
     inner = read(foot_l[0], top_l[0], wall_l, top_r[0], wall_r), read(foot_r[0], top_r[0], wall_r, top_l[0], wall_l)
     outer = read(foot_l[1], top_l[1], wall_l, top_r[1], wall_r), read(foot_r[1], top_r[1], wall_r, top_l[1], wall_l)
-    return inner, outer
+    left, right = (np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True))
+    return inner, (left, right)
 
 
 def _local(offsets: np.ndarray) -> np.ndarray:
@@ -199,8 +181,8 @@ def edge_shift(
     """How far to move each outline point along its outward normal (+: out, -: in), smoothed along the
     outline; 0 where the evidence does not hold.
 
-    left, right: each camera's silhouette offsets (`silhouette_offsets`, the innermost of equally good steps);
-    outer: the same read outermost (edge_checks.edge_offset_pair), as the edge-offset check reads them; without it
+    left, right: each camera's silhouette offsets (`stereo_offsets`, the innermost of equally good steps);
+    outer: the same read outermost (`stereo_offsets`), as the edge-offset check reads them; without it
     the innermost readings stand for both. A move is the mean of both cameras' local edges (running medians
     over EDGE_OFFSET_WINDOW_MM) where they agree within EDGE_MOVE_AGREE_MM and lie more than EDGE_MOVE_MIN_MM
     and at most EDGE_MOVE_MAX_MM from the outline:
@@ -284,9 +266,8 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
     (left_pixel, left_centre), (right_pixel, right_centre) = projections(reconstruction)
     cameras = ((changed_left, left_pixel, left_centre), (changed_right, right_pixel, right_centre))
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)
-    outer_left, outer_right = (np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True))
     silent = depth_silent(ring, outward, reconstruction.table_points)
-    shift = edge_shift(inner[0], inner[1], silent, (outer_left, outer_right), PLACE_EDGE_INWARD)
+    shift = edge_shift(inner[0], inner[1], silent, outer, PLACE_EDGE_INWARD)
     if not np.any(shift):
         return outline
     return ring + shift[:, None] * outward

@@ -77,7 +77,6 @@ def _check_outline_images(
     # where the wall is lit so that it hardly differs from the table, whichever the other camera confirms.
     # Read twice: the innermost of equally good steps, then the outermost (edge_checks.edge_offset_pair): where
     # evidence is missing (changed pixels excused on table-level cells) neither reading may clear the outline.
-    # Where the outermost finds no edge (unknown to the end of the search: a wide shadow) the innermost stands.
     cameras = (
         (reconstruction.changed_left, left_pixel, left_centre),
         (changed_right, right_pixel, right_centre),
@@ -86,7 +85,7 @@ def _check_outline_images(
     problem = check_edge_offsets(list(inner))
     if problem is not None:
         return problem
-    return check_edge_offsets([np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True)])
+    return check_edge_offsets(list(outer))
 
 
 HEIGHT_MAP_CELL_MM = 1.0
