@@ -72,21 +72,11 @@ def check_edge_profile(
     more than EDGE_MAX_DROP_MM below it. detail: words added to a refusal (cellctl.vision.rounded_edge.detail:
     the edge and the curve in numbers), asked for only then.
     """
-    inner = np.array(EDGE_INNER_MM)
-    heights = np.column_stack([surface_height(outline - d * outward) for d in inner])
-    outer = surface_height(outline - EDGE_OUTER_MM * outward)
-    weight = np.isfinite(heights).astype(np.float64)
-    z = np.nan_to_num(heights)
-    # Per-row least-squares line z = a + b d over the finite samples (sums of products).
-    s0, s1, s2 = weight.sum(1), (weight * inner).sum(1), (weight * inner**2).sum(1)
-    t0, t1 = (weight * z).sum(1), (weight * z * inner).sum(1)
-    det = s0 * s2 - s1 * s1
-    usable = (s0 >= 4) & np.isfinite(outer) & (np.abs(det) > 1e-9)
+    fall = top_falls(outline, outward, surface_height, (EDGE_OUTER_MM,))[:, 0]
+    usable = np.isfinite(fall)
     if np.count_nonzero(usable) < MIN_TESTABLE * len(outline):
         return None  # too little surface measured near the edge: the other checks and the glue path speak
-    b = (s0 * t1 - s1 * t0)[usable] / det[usable]
-    a = (t0[usable] - b * s1[usable]) / s0[usable]
-    drop = float(np.median(a + b * EDGE_OUTER_MM - outer[usable]))
+    drop = float(np.median(fall[usable]))
     if drop > EDGE_MAX_DROP_MM:
         more = detail() if detail is not None else ""
         return CheckFailure(
@@ -96,6 +86,31 @@ def check_edge_profile(
             "and the glue path near it is on a curve, not a flat top" + (f" ({more})" if more else ""),
         )
     return None
+
+
+def top_falls(
+    outline: np.ndarray,
+    outward: np.ndarray,
+    surface_height: Callable[[np.ndarray], np.ndarray],
+    at: tuple[float, ...],
+) -> np.ndarray:
+    """Per outline point (N) and distance in `at` (K): how far the measured top lies below the line through its
+    heights further in (EDGE_INNER_MM, 3-8 mm: the top before any rounding), N x K, NaN where unknown. On a
+    sharp edge ~0 (the height noise); on a rounded one it grows towards the outline."""
+    inner = np.array(EDGE_INNER_MM)
+    heights = np.column_stack([surface_height(outline - d * outward) for d in inner])
+    weight = np.isfinite(heights).astype(np.float64)
+    z = np.nan_to_num(heights)
+    # Per-row least-squares line z = a + b d over the finite samples (sums of products).
+    s0, s1, s2 = weight.sum(1), (weight * inner).sum(1), (weight * inner**2).sum(1)
+    t0, t1 = (weight * z).sum(1), (weight * z * inner).sum(1)
+    det = s0 * s2 - s1 * s1
+    fitted = (s0 >= 4) & (np.abs(det) > 1e-9)
+    b = (s0 * t1 - s1 * t0) / np.where(fitted, det, 1.0)
+    a = (t0 - b * s1) / np.maximum(s0, 1.0)
+    near = np.column_stack([surface_height(outline - d * outward) for d in at])
+    line = a[:, None] + b[:, None] * np.array(at)[None, :]
+    return np.where(fitted[:, None], line - near, np.nan)
 
 
 def check_steep_wall(

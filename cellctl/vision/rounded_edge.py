@@ -29,7 +29,7 @@ import numpy as np
 
 from cellctl.vision.checks import MIN_TESTABLE
 from cellctl.vision.defaults import GLUE_OFFSET_MM
-from cellctl.vision.edge_checks import EDGE_INNER_MM, EDGE_OUTER_MM, edge_offset_pair
+from cellctl.vision.edge_checks import EDGE_OUTER_MM, edge_offset_pair, top_falls
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import projections, table_level
 from cellctl.vision.reconstruction import Reconstruction
@@ -37,34 +37,8 @@ from cellctl.vision.reconstruction import Reconstruction
 FALL_AT_MM = (EDGE_OUTER_MM, 1.0, 1.5, 2.0, 2.5, 3.0)  # distances in from the outline where the fall is read
 
 
-def falls(
-    outline: np.ndarray,
-    outward: np.ndarray,
-    surface_height: Callable[[np.ndarray], np.ndarray],
-    at: tuple[float, ...] = FALL_AT_MM,
-) -> np.ndarray:
-    """Per outline point (N) and distance in `at` (K): how far the measured top lies below the line through its
-    heights further in (edge_checks.EDGE_INNER_MM, 3-8 mm: the top before any rounding), N x K, NaN where
-    unknown. On a sharp edge ~0 (the height noise); on a rounded one it grows towards the outline."""
-    inner = np.array(EDGE_INNER_MM)
-    heights = np.column_stack([surface_height(outline - d * outward) for d in inner])
-    weight = np.isfinite(heights).astype(np.float64)
-    z = np.nan_to_num(heights)
-    # Per-row least-squares line z = a + b d over the finite samples (sums of products).
-    s0, s1, s2 = weight.sum(1), (weight * inner).sum(1), (weight * inner**2).sum(1)
-    t0, t1 = (weight * z).sum(1), (weight * z * inner).sum(1)
-    det = s0 * s2 - s1 * s1
-    fitted = (s0 >= 4) & (np.abs(det) > 1e-9)
-    safe = np.where(fitted, det, 1.0)
-    b = (s0 * t1 - s1 * t0) / safe
-    a = (t0 - b * s1) / np.maximum(s0, 1.0)
-    near = np.column_stack([surface_height(outline - d * outward) for d in at])
-    line = a[:, None] + b[:, None] * np.array(at)[None, :]
-    return np.where(fitted[:, None], line - near, np.nan)
-
-
 def fall_profile(fall: np.ndarray) -> np.ndarray:
-    """The median of `falls` round the outline per distance (K), NaN where fewer than MIN_TESTABLE of the points
+    """The median of `edge_checks.top_falls` round the outline per distance (K), NaN where fewer than MIN_TESTABLE of the points
     are known: a rounded edge runs round the sole, a single bad patch does not move the median."""
     known = np.isfinite(fall)
     enough = known.mean(axis=0) >= MIN_TESTABLE
@@ -164,7 +138,7 @@ def detail(
 ) -> str:
     """`describe` for a reconstruction's outline (points 1 mm apart, closed): the silhouettes' bounds where a
     taught table gave both change masks, the fall profile always."""
-    profile = fall_profile(falls(outline, outward, surface_height))
+    profile = fall_profile(top_falls(outline, outward, surface_height, FALL_AT_MM))
     left, right = reconstruction.changed_left, reconstruction.changed_right
     bounds = None
     if left is not None and right is not None and reconstruction.calibration is not None:

@@ -8,7 +8,7 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.vision import rounded_edge
-from cellctl.vision.edge_checks import check_edge_profile
+from cellctl.vision.edge_checks import check_edge_profile, top_falls
 from tests.vision.test_outline_checks import HEIGHT, RADIUS, measured, ring, top
 
 CAMERA = np.array([0.0, 0.0, 550.0])  # above the sole's middle, like the cell's: it sees no wall
@@ -37,12 +37,14 @@ def fillet_fall(radius: float, d: np.ndarray) -> np.ndarray:
 
 def test_the_fall_profile_is_flat_on_a_sharp_edge_and_follows_a_fillet() -> None:
     outline, outward = ring()
-    sharp = rounded_edge.fall_profile(rounded_edge.falls(outline, outward, measured(top(), 0.3)))
+    sharp = rounded_edge.fall_profile(top_falls(outline, outward, measured(top(), 0.3), rounded_edge.FALL_AT_MM))
     assert np.all(np.abs(sharp) < 1e-6)
     assert abs(rounded_edge.profile_tilt_deg(sharp, 2.0)) < 1e-3
     # A 4 mm fillet whose outer 0.5 mm has no depth: the outline found lies 0.5 mm in.
     inner, inner_outward = ring(RADIUS - 0.5)
-    profile = rounded_edge.fall_profile(rounded_edge.falls(inner, inner_outward, measured(top(4.0), 0.5)))
+    profile = rounded_edge.fall_profile(
+        top_falls(inner, inner_outward, measured(top(4.0), 0.5), rounded_edge.FALL_AT_MM)
+    )
     at = np.array(rounded_edge.FALL_AT_MM)
     # The line through 3-8 mm in is the flat top but for its first sample (3.5 mm from the true edge, still
     # 0.03 mm down the fillet): the fall is the fillet's own.
@@ -84,6 +86,8 @@ def test_the_edge_profile_refusal_carries_the_numbers_and_a_pass_asks_for_none()
     inner, inner_outward = ring(RADIUS - 1.0)
     problem = check_edge_profile(inner, inner_outward, measured(top(4.0), 1.0), detail)
     assert problem is not None and "rounded" in problem.reason and "(the numbers)" in problem.reason
-    profile = rounded_edge.fall_profile(rounded_edge.falls(inner, inner_outward, measured(top(4.0), 1.0)))
+    profile = rounded_edge.fall_profile(
+        top_falls(inner, inner_outward, measured(top(4.0), 1.0), rounded_edge.FALL_AT_MM)
+    )
     words = rounded_edge.describe(profile, None, 2.0)
     assert "slopes" in words and "degrees" in words
