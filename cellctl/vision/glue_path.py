@@ -20,7 +20,8 @@ GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local pl
 # 20: 1.42, 1.65; /work/notes/wrong6-diag/calib.py): the matcher's error is correlated beyond the patches'
 # overlap. The choice between the fits is taken at break-even, so the noise is taken at its tail: variances
 # scaled by this ratio squared (1.5 and 2.0 give the same verdicts; 1.5 let noise flip a few worst points to
-# the cubic, up to +1 degree on a plain black sole).
+# the cubic, up to +1 degree on a plain black sole). The heights' choice of fit (surface.path_heights) takes the
+# noise the same way.
 GLUE_SLOPE_NOISE_RATIO = 1.75
 
 
