@@ -20,7 +20,8 @@ GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local pl
 # 20: 1.42, 1.65; /work/notes/wrong6-diag/calib.py): the matcher's error is correlated beyond the patches'
 # overlap. The choice between the fits is taken at break-even, so the noise is taken at its tail: variances
 # scaled by this ratio squared (1.5 and 2.0 give the same verdicts; 1.5 let noise flip a few worst points to
-# the cubic, up to +1 degree on a plain black sole).
+# the cubic, up to +1 degree on a plain black sole). The heights' choice of fit (surface.path_heights) takes the
+# noise the same way.
 GLUE_SLOPE_NOISE_RATIO = 1.75
 
 
@@ -58,12 +59,14 @@ def glue_path(
             f"({missing.size} of {len(path_xy)} path points)"
         )
     # Neighbouring patches overlap but their noise does not all average out; the surface is smooth, so a
-    # plane fitted to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
-    # for a sloping surface also where the path turns round a pointed end), as wide as the noise needs.
+    # local fit to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
+    # for a sloping surface also where the path turns round a pointed end), of the width and shape whose
+    # expected error (the samples' noise, the fit's bias on a curved top) is smallest (surface.path_heights).
     sigma = PATH_SMOOTHING_MM / spacing_mm
     raw = without_single_outliers(samples.z[: len(path_xy)])
-    z = path_heights(path_xy, raw)  # a local plane fit as wide as the local noise needs (cellctl.vision.surface)
     inner = without_single_outliers(samples.z[len(path_xy) :])
+    path_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(path_xy, raw, spacing_mm)
+    z = path_heights(path_xy, raw, path_variance)
     # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
     # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).
     # The slope across is a difference of heights over that base: on the weak texture of black soles 10 mm
@@ -73,9 +76,7 @@ def glue_path(
     # Where the slope changes along the path within the fit (a tall sole's heel seat running into its waist)
     # the plane takes up the slope a few mm away; there the fit adds the slope's change along the path, where
     # that lowers the expected error (cellctl.vision.local_fit.slope_gradients).
-    variance = GLUE_SLOPE_NOISE_RATIO**2 * np.concatenate(
-        [sample_variance(path_xy, raw, spacing_mm), sample_variance(inner_xy, inner, spacing_mm)]
-    )
+    variance = np.concatenate([path_variance, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(inner_xy, inner, spacing_mm)])
     gradient, _ = slope_gradients(
         path_xy,
         np.column_stack([path_inward[:, 1], -path_inward[:, 0]]),  # the tangent

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cellctl.stereo.pointgrid import PointGrid
-from cellctl.vision.local_fit import local_planes
+from cellctl.vision.local_fit import FOLD_TURN_DEG, GRADIENT_RIDGE_MM2
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
 from cellctl.vision.workers import worker
@@ -171,16 +171,18 @@ def _robust_plane(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray
     return z0, normal
 
 
-# Heights along a closed path (the glue path) from its patches' noisy heights: a local plane fit whose width
-# grows with the local noise, so that its error stays about the same. The patches' heights scatter ~0.15 mm
-# on light soles and ~0.35 mm on black rubber (the matcher's noise on weak texture, correlated over a few mm);
-# a fit of width w averages it by ~1 / sqrt(w), so the width goes with the noise squared: PATH_SMOOTHING_MM at
-# PATH_NOISE_REF_MM and below, up to PATH_SMOOTHING_MAX_MM. Wider costs accuracy where the top is curved
-# (a fixed 12 mm put two light matrix soles' glue heights 1.0 mm off that 6 mm kept within 0.5).
+# Heights along a closed path (the glue path) from its patches' noisy heights: a local fit along the path, of a
+# width and shape chosen per point for the smallest expected error. The patches' heights scatter ~0.15 mm on light
+# soles and ~0.35 mm on black rubber (the matcher's noise on weak texture, correlated over a few mm): a wide fit
+# averages it, but a plane wider than a curved top bends (a plane of 12 mm put two light matrix soles' glue
+# heights 1.0 mm off that 6 mm kept within 0.5; on black soles the old rule's noise-driven 12 mm put 2001's worst
+# point 0.69 mm high by the fit alone, where 6 mm costs 0.24). The candidates are planes and planes plus the
+# height's curve along the path (u^2, u the distance along the tangent) at each width of PATH_SMOOTHING_STEPS_MM;
+# each candidate's expected squared error is its noise variance (the samples' own, propagated exactly through its
+# linear rows) plus its squared bias, estimated as the squared difference from the least biased candidate less
+# that difference's noise variance (path_heights).
 PATH_SMOOTHING_MM = 6.0
-PATH_SMOOTHING_MAX_MM = 12.0
-PATH_SMOOTHING_STEPS_MM = (6.0, 8.0, 10.0, 12.0)  # fits made; a width between two is interpolated
-PATH_NOISE_REF_MM = 0.2
+PATH_SMOOTHING_STEPS_MM = (6.0, 8.0, 10.0, 12.0)  # candidate widths (Gaussian sigma of the fits' weights)
 PATH_NOISE_LAG = 2  # samples: the noise from second differences at this lag (a smooth top's curve drops out)
 PATH_NOISE_WINDOW = 8  # samples either side over which the local noise is taken
 
@@ -198,26 +200,97 @@ def path_noise(z: np.ndarray, lag: int = PATH_NOISE_LAG, window: int = PATH_NOIS
     return np.where(count > 0, np.sqrt(total / np.maximum(count, 1)), np.nan)
 
 
-def path_smoothing_widths(z: np.ndarray) -> np.ndarray:
-    """Per sample of a closed path: the local plane fit's width for its heights (see PATH_SMOOTHING_MM)."""
-    noise = np.nan_to_num(path_noise(z), nan=0.0)
-    return np.clip(PATH_SMOOTHING_MM * (noise / PATH_NOISE_REF_MM) ** 2, PATH_SMOOTHING_MM, PATH_SMOOTHING_MAX_MM)
+def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """Heights at the samples (xy K x 2, heights z K, NaN: unknown) of a closed path, each from the local fit of
+    smallest expected error (see PATH_SMOOTHING_STEPS_MM): `variance` (K, mm^2) is each sample's noise variance
+    counted with its correlation to its neighbours (glue_path.sample_variance), so that a fit's variance is
+    sum(row^2 x variance) (local_fit.slope_gradients).
+
+    The reference for the bias is the plane plus the curve along the path at the widest width: no bias from the
+    top's curve along the path and the least noise of such fits. Where the path turns more than
+    local_fit.FOLD_TURN_DEG within that fit's reach (round a pointed end) the distance along one tangent means
+    nothing: there only planes compete and the narrowest is the reference."""
+    result = np.full(len(z), np.nan)
+    finite = np.isfinite(z)
+    if not finite.any():
+        return result
+    known = np.where(np.isfinite(variance), variance, np.nanmedian(variance) if np.isfinite(variance).any() else 0.0)
+    tangent = np.roll(xy, -1, axis=0) - np.roll(xy, 1, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    geometry = _RowGeometry(xy, xy[finite], tangent)
+    # planes narrow to wide, then the curved fits narrow to wide
+    rows = [geometry.rows(width, curved) for curved in (False, True) for width in PATH_SMOOTHING_STEPS_MM]
+    samples, noise = z[finite], known[finite]
+    estimates = np.array([r @ samples for r in rows])
+    variances = np.array([(r * r) @ noise for r in rows])
+    reach = max(1, int(round(2.0 * PATH_SMOOTHING_STEPS_MM[-1] / _median_spacing(xy))))
+    turn = np.min([np.sum(tangent * np.roll(tangent, k, axis=0), axis=1) for k in range(-reach, reach + 1)], axis=0)
+    straight = turn > np.cos(np.radians(FOLD_TURN_DEG))
+    planes = len(PATH_SMOOTHING_STEPS_MM)
+    reference = np.where(straight[:, None], rows[-1], rows[0])
+    reference_estimate = np.where(straight, estimates[-1], estimates[0])
+    error = np.empty_like(estimates)
+    for i, r in enumerate(rows):
+        difference = r - reference
+        difference *= difference
+        error[i] = np.maximum((estimates[i] - reference_estimate) ** 2 - difference @ noise, 0.0) + variances[i]
+    error[planes:, ~straight] = np.inf
+    best = np.argmin(error, axis=0)
+    return estimates[best, np.arange(len(z))]
 
 
-def path_heights(xy: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Heights at the samples (xy K x 2, heights z K, NaN: unknown) of a closed path, from local plane fits
-    (cellctl.vision.local_fit) of a width that grows with the local noise (`path_smoothing_widths`)."""
-    widths = path_smoothing_widths(z)
-    steps = np.asarray(PATH_SMOOTHING_STEPS_MM)
-    upper = np.clip(np.searchsorted(steps, widths), 1, len(steps) - 1)
-    lower = upper - 1
-    share = (widths - steps[lower]) / (steps[upper] - steps[lower])
-    # Each width's fit only where it is used (a light sole's path needs the narrowest alone).
-    fits = np.full((len(steps), len(z)), np.nan)
-    for i, width in enumerate(steps):
-        used = np.flatnonzero(((lower == i) & (share < 1.0)) | ((upper == i) & (share > 0.0)))
-        if used.size:
-            fits[i, used] = local_planes(xy[used], xy, z, float(width))[0]
-    columns = np.arange(len(z))
-    low = np.where(share < 1.0, (1.0 - share) * fits[lower, columns], 0.0)
-    return low + np.where(share > 0.0, share * fits[upper, columns], 0.0)
+def height_rows(at: np.ndarray, xy: np.ndarray, sigma_mm: float, tangent: np.ndarray | None = None) -> np.ndarray:
+    """Rows (K x M) of the linear estimators of the height at points `at` (K x 2) from samples at xy (M x 2): the
+    plane of local_fit.local_planes (same weights and ridge), plus the curve along `tangent` (K x 2, unit; u^2, u
+    the distance along it) when given."""
+    return _RowGeometry(at, xy, tangent).rows(sigma_mm, tangent is not None)
+
+
+class _RowGeometry:
+    """The offsets of the samples from each query, shared by the fits of every width."""
+
+    def __init__(self, at: np.ndarray, xy: np.ndarray, tangent: np.ndarray | None) -> None:
+        self.dx = xy[None, :, 0] - at[:, None, 0]
+        self.dy = xy[None, :, 1] - at[:, None, 1]
+        self.squared = self.dx * self.dx + self.dy * self.dy
+        # the weighted sums' terms: the plane's, then the curve's (u^2 and its products)
+        terms = [self.dx, self.dy, self.dx * self.dx, self.dx * self.dy, self.dy * self.dy]
+        self.u2 = None
+        if tangent is not None:
+            u = self.dx * tangent[:, 0:1] + self.dy * tangent[:, 1:2]
+            self.u2 = u * u
+            terms += [self.u2, self.dx * self.u2, self.dy * self.u2, self.u2 * self.u2]
+        self.terms = terms
+
+    def rows(self, sigma_mm: float, curved: bool) -> np.ndarray:
+        w = np.exp(self.squared / (-2.0 * sigma_mm**2))
+        count = 9 if curved else 5
+        s = w.sum(axis=1)
+        m = [np.einsum("km,km->k", w, term) for term in self.terms[:count]]
+        ridge = GRADIENT_RIDGE_MM2 * s
+        size = 4 if curved else 3
+        normal = np.empty((len(s), size, size))
+        normal[:, 0, 0] = s
+        normal[:, 0, 1] = normal[:, 1, 0] = m[0]
+        normal[:, 0, 2] = normal[:, 2, 0] = m[1]
+        normal[:, 1, 1] = m[2] + ridge
+        normal[:, 1, 2] = normal[:, 2, 1] = m[3]
+        normal[:, 2, 2] = m[4] + ridge
+        if curved:
+            normal[:, 0, 3] = normal[:, 3, 0] = m[5]
+            normal[:, 1, 3] = normal[:, 3, 1] = m[6]
+            normal[:, 2, 3] = normal[:, 3, 2] = m[7]
+            normal[:, 3, 3] = m[8]
+        unit = np.zeros((len(s), size, 1))
+        unit[:, 0, 0] = 1.0
+        c = np.linalg.solve(normal, unit)[..., 0]  # the height's row of the inverse (normal is symmetric)
+        combination = c[:, 0:1] + c[:, 1:2] * self.dx + c[:, 2:3] * self.dy
+        if curved:
+            assert self.u2 is not None
+            combination += c[:, 3:4] * self.u2
+        combination *= w
+        return combination
+
+
+def _median_spacing(xy: np.ndarray) -> float:
+    return float(np.median(np.linalg.norm(np.diff(xy, axis=0), axis=1))) if len(xy) > 1 else 1.0

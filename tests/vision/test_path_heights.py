@@ -1,17 +1,13 @@
-"""Glue path heights from noisy patch heights: a fit as wide as the local noise needs (cellctl.vision.surface)."""
+"""Glue path heights from noisy patch heights: per point the local fit (width, plane or plane plus the curve along
+the path) of smallest expected error (cellctl.vision.surface.path_heights)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from cellctl.vision.glue_path import GLUE_SLOPE_NOISE_RATIO, sample_variance
 from cellctl.vision.local_fit import local_planes
-from cellctl.vision.surface import (
-    PATH_SMOOTHING_MAX_MM,
-    PATH_SMOOTHING_MM,
-    path_heights,
-    path_noise,
-    path_smoothing_widths,
-)
+from cellctl.vision.surface import PATH_SMOOTHING_MM, PATH_SMOOTHING_STEPS_MM, height_rows, path_heights
 
 SPACING = 2.0  # mm, the glue path's default
 
@@ -35,37 +31,74 @@ def correlated_noise(n: int, sd: float, seed: int, length: int = 1) -> np.ndarra
     return sd * smooth / smooth.std()
 
 
-def test_a_quiet_path_keeps_the_narrow_fit_exactly() -> None:
-    """Light soles (patch scatter ~0.15 mm): the 6 mm fit as before, however curved the top (second
-    differences do not see a smooth curve)."""
+def heights(xy: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """path_heights with the noise model glue_path gives it."""
+    return path_heights(xy, z, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(xy, z, SPACING))
+
+
+def test_the_plane_rows_are_local_planes() -> None:
     xy = ellipse_path()
-    z = top(xy) + correlated_noise(len(xy), 0.12, 1)
-    assert np.all(path_smoothing_widths(z) == PATH_SMOOTHING_MM)
-    np.testing.assert_allclose(path_heights(xy, z), local_planes(xy, xy, z, PATH_SMOOTHING_MM)[0], atol=1e-9)
-    assert np.nanmax(path_noise(top(xy))) < 0.02
+    z = top(xy) + correlated_noise(len(xy), 0.3, 4)
+    for width in PATH_SMOOTHING_STEPS_MM:
+        np.testing.assert_allclose(height_rows(xy, xy, width) @ z, local_planes(xy, xy, z, width)[0], atol=1e-9)
 
 
-def test_a_noisy_stretch_is_fitted_wider_and_comes_closer_to_the_surface() -> None:
-    """Black rubber (patch scatter 0.5 mm, correlated) on half the path: the fit widens there only, and the
-    worst height error drops against the fixed narrow fit, over many noise draws."""
+def test_the_curved_fit_follows_a_curve_along_the_path_exactly() -> None:
+    """On a straight path a height quadratic in the distance along it is fitted exactly by the curved rows (the
+    plane of the same width bends it by ~ curvature x width^2 / 2)."""
+    xy = np.column_stack([np.arange(-150.0, 150.0, SPACING), np.full(150, 5.0)])
+    z = 10.0 + 0.01 * xy[:, 0] ** 2
+    tangent = np.tile([1.0, 0.0], (len(xy), 1))
+    inner = slice(30, -30)
+    curved = height_rows(xy, xy, 12.0, tangent) @ z
+    np.testing.assert_allclose(curved[inner], z[inner], atol=1e-6)
+    assert np.min(np.abs(height_rows(xy, xy, 12.0) @ z - z)[inner]) > 1.0
+
+
+def test_a_quiet_curved_path_is_not_bent() -> None:
+    """Light soles (patch scatter ~0.12 mm) on a curved top: no worse than the narrow plane, over noise draws."""
+    xy = ellipse_path()
+    truth = top(xy)
+    worst_narrow, worst_chosen = [], []
+    for seed in range(10):
+        z = truth + correlated_noise(len(xy), 0.12, seed)
+        worst_narrow.append(np.max(np.abs(local_planes(xy, xy, z, PATH_SMOOTHING_MM)[0] - truth)))
+        worst_chosen.append(np.max(np.abs(heights(xy, z) - truth)))
+    assert np.mean(worst_chosen) < np.mean(worst_narrow)
+
+
+def test_a_noisy_stretch_comes_closer_to_the_surface_than_the_narrow_plane() -> None:
+    """Black rubber (patch scatter 0.5 mm, correlated) on half the path: the worst height error there drops
+    against the narrow plane, over many noise draws."""
     xy = ellipse_path()
     truth = top(xy)
     noisy = np.arange(len(xy)) < len(xy) // 2
-    worst_fixed, worst_adaptive = [], []
+    worst_fixed, worst_chosen = [], []
     for seed in range(20):
         z = truth + np.where(noisy, correlated_noise(len(xy), 0.5, seed), correlated_noise(len(xy), 0.1, seed))
-        widths = path_smoothing_widths(z)
-        assert np.median(widths[noisy][20:-20]) > 0.9 * PATH_SMOOTHING_MAX_MM
-        assert np.all(widths[~noisy][20:-20] == PATH_SMOOTHING_MM)
         worst_fixed.append(np.max(np.abs(local_planes(xy, xy, z, PATH_SMOOTHING_MM)[0] - truth)[noisy]))
-        worst_adaptive.append(np.max(np.abs(path_heights(xy, z) - truth)[noisy]))
-    assert np.mean(worst_adaptive) < 0.8 * np.mean(worst_fixed)
+        worst_chosen.append(np.max(np.abs(heights(xy, z) - truth)[noisy]))
+    assert np.mean(worst_chosen) < 0.8 * np.mean(worst_fixed)
+
+
+def test_a_noisy_curved_top_comes_closer_than_the_wide_plane() -> None:
+    """Black rubber (0.35 mm) on a top that bends along the path (a waist: 3 mm down over ~20 mm): the wide plane
+    that the noise alone would ask for bends it; the chosen fits come closer, over noise draws."""
+    xy = ellipse_path()
+    waist = 3.0 * np.exp(-0.5 * ((xy[:, 0] - 20.0) / 10.0) ** 2) * (xy[:, 1] > 0)
+    truth = top(xy) - waist
+    worst_wide, worst_chosen = [], []
+    for seed in range(10):
+        z = truth + correlated_noise(len(xy), 0.35, seed)
+        worst_wide.append(np.max(np.abs(local_planes(xy, xy, z, PATH_SMOOTHING_STEPS_MM[-1])[0] - truth)))
+        worst_chosen.append(np.max(np.abs(heights(xy, z) - truth)))
+    assert np.mean(worst_chosen) < 0.8 * np.mean(worst_wide)
 
 
 def test_unknown_heights_are_left_out() -> None:
     xy = ellipse_path()
     z = top(xy) + correlated_noise(len(xy), 0.4, 3)
     z[40:44] = np.nan
-    heights = path_heights(xy, z)
-    assert np.all(np.isfinite(heights))
-    assert np.max(np.abs(heights - top(xy))) < 1.0
+    result = heights(xy, z)
+    assert np.all(np.isfinite(result))
+    assert np.max(np.abs(result - top(xy))) < 1.0
