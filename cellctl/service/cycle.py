@@ -79,8 +79,8 @@ def outliving_the_cycle(reconstruction: Reconstruction) -> Reconstruction:
     The result outlives its cycle: the artifact writer holds it until its PLY and overlay are written, the
     operator station until the next cycle ends, the image log while it waits. The rasters are ~20 MB a cycle
     (two float32 1280 x 1024 images alone are 10 MB), and held into the next cycles they split the heap the
-    cycles allocate from: in the demo glibc had to grow it by 20-60 MB over 20 cycles, in cycles 7-19, each new
-    page a fault in the measurement (0.3-2k a cycle). Without them the heap stays as the warm-up left it."""
+    cycles allocate from: in the demo glibc grew it by 58 MB in cycles 7-19 although a third of it was free, each
+    new page a fault in the measurement (0.3-2k in each of 6 cycles). Without them the heap stays as the warm-up left it."""
     return replace(
         reconstruction,
         rectified=None,

@@ -54,7 +54,7 @@ def settle_garbage_collector() -> None:
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
 _MMAP_THRESHOLD_BYTES = 256 << 20
 _TRIM_THRESHOLD_BYTES = 1 << 30
-_ARENAS = 1
+_ARENAS = 1  # every thread on the main heap, which the trim threshold keeps and warm_heap warms
 
 
 def keep_freed_memory() -> bool:
@@ -71,10 +71,11 @@ def keep_freed_memory() -> bool:
     that allocates gets an arena of its own (up to 8 per core): the cycle's worker threads (the glue path's,
     the change test's, the artifact writer) then grew and shrank heaps of their own, which the trim threshold
     does not govern (glibc unmaps a thread heap as soon as it is all free) and which warm_heap cannot reach.
-    The demo counted 0.5-3k faults in those threads in one cycle of four on the way, 13.6k in the warm-up's
-    measurement; with one arena, none after the warm-up (docs/benchmarks.md). The threads take turns on the
-    arena's lock, which the cycle's few large allocations do not notice. Call it before the process starts
-    threads: a thread that has allocated keeps its arena."""
+    In the demo those threads took 1-6k faults in the cycles where a larger sole came first and again in a few
+    later ones (16-17.5k over 20 cycles), and 13.6k in the warm-up's measurement; with one arena 34 in the
+    warm-up and at most ~10 a cycle but for one or two heap growths of 0.3-0.8k (docs/benchmarks.md, ninth
+    round). The threads share the arena's lock; the measuring thread's CPU per cycle did not change beyond the
+    host's noise. Call it before the process starts threads: a thread that has allocated keeps its arena."""
     name = ctypes.util.find_library("c")
     try:
         libc = ctypes.CDLL(name) if name else None
