@@ -26,7 +26,7 @@ import numpy as np
 
 from cellctl.cameras.base import StereoFrame
 from cellctl.service.journal import CycleRecord, Journal
-from cellctl.service.png_bands import write_png_in_bands
+from cellctl.service.png_bands import held_copy, write_png_in_bands
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.export import cloud_normals, write_cloud_ply, write_glue_csv, write_glue_ply
 from cellctl.vision.measurement import SoleMeasurement
@@ -234,7 +234,7 @@ def artifact_steps(
         write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
 
     def draw() -> None:
-        picture.append(draw_on_left(job.frame.left, calib, job.measurement))
+        picture.append(held_copy(draw_on_left(job.frame.left, calib, job.measurement)))  # held into the PNG's bands
 
     def write_png() -> None:
         write_png_in_bands(overlay, picture[0], pause)
