@@ -22,11 +22,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from cellctl.cameras.base import StereoFrame
 from cellctl.service.journal import CycleRecord, Journal
+from cellctl.service.png_bands import held_copy, write_png_in_bands
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.export import cloud_normals, write_cloud_ply, write_glue_csv, write_glue_ply
 from cellctl.vision.measurement import SoleMeasurement
@@ -35,9 +35,7 @@ from cellctl.vision.reconstruction import Reconstruction
 
 log = logging.getLogger(__name__)
 
-# Huffman coding only: lossless, ~20 % faster and smaller than zlib level 1 on camera images (63 vs 79 ms).
-PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
-MAX_PENDING = 4  # jobs kept waiting for idle time (each holds a frame pair and a cloud, ~20 MB)
+MAX_PENDING = 4  # jobs kept waiting for idle time (each holds a frame pair and the sole's points, ~10 MB)
 # The writer thread keeps normal priority: a niced thread that holds the GIL (Open3D's PLY writer, numpy)
 # and is then starved by the scheduler blocks the daemon's thread behind it (seen at load 20: cycles over
 # the PLC link's 5 s liveness). Starting steps only while idle is what keeps it out of the cycles.
@@ -205,12 +203,23 @@ class ArtifactWriter:
 
     def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
         """What is written, as short steps (tests replace them to see the scheduling alone)."""
-        return artifact_steps(job, self.calib)
+        return artifact_steps(job, self.calib, self._pause)
+
+    def _pause(self) -> None:
+        """Within a step, between its parts: the writer's thread waits while a cycle runs (flush's caller,
+        writing at stop, does not)."""
+        if threading.current_thread() is self._thread:
+            with self._work:
+                self._work.wait_for(lambda: self._idle or self._closing)
 
 
-def artifact_steps(job: ArtifactJob, calib: Calibration) -> list[Callable[[], None]]:
-    """A job's files as short steps (tens of ms each), into its staging folder: a trigger arriving meanwhile waits
-    for at most one of them."""
+def artifact_steps(
+    job: ArtifactJob, calib: Calibration, pause: Callable[[], None] = lambda: None
+) -> list[Callable[[], None]]:
+    """A job's files as short steps (tens of ms each), into its staging folder: a trigger arriving meanwhile runs
+    beside at most one of them. The overlay's PNG, the longest (60-70 ms of CPU on the cell PC, up to 320 ms in
+    the loaded demo), is written in bands of rows with `pause()` before each (cellctl.service.png_bands), so it
+    stops within a band (~5 ms) of a trigger instead of running beside the next cycle's match."""
     ply, overlay = _paths(job, job.staging)
     picture: list[np.ndarray] = []
 
@@ -225,11 +234,10 @@ def artifact_steps(job: ArtifactJob, calib: Calibration) -> list[Callable[[], No
         write_glue_ply(folder / f"cycle-{job.cycle}-glue.ply", path.points, path.normals, "table", path.closed)
 
     def draw() -> None:
-        picture.append(draw_on_left(job.frame.left, calib, job.measurement))
+        picture.append(held_copy(draw_on_left(job.frame.left, calib, job.measurement)))  # held into the PNG's bands
 
     def write_png() -> None:
-        if not cv2.imwrite(str(overlay), picture[0], PNG_FAST):
-            raise OSError(f"cannot write {overlay}")
+        write_png_in_bands(overlay, picture[0], pause)
 
     return [write_ply, write_glue, draw, write_png]
 

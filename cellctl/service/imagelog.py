@@ -32,7 +32,7 @@ from cellctl.service.config import ImageLogConfig
 from cellctl.service.cycle import Measured
 from cellctl.service.events import CellEvent, CellState, CycleDone
 from cellctl.service.journal import CycleRecord
-from cellctl.service.png_bands import write_png_in_bands
+from cellctl.service.png_bands import held_copy, write_png_in_bands
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.overlay import draw_overlay, draw_refused
 
@@ -133,7 +133,7 @@ class ImageLog:
             steps = (
                 ("left", lambda: frame.left),
                 ("right", lambda: frame.right),
-                ("overlay", lambda: self._overlay(record, frame, measured)),
+                ("overlay", lambda: held_copy(self._overlay(record, frame, measured))),  # held into its bands
             )
             for kind, picture in steps:
                 self._wait_between_cycles()

@@ -76,7 +76,7 @@ class CellMeasurer:
             reconstructor = self._reconstructor_for(depth_range)
             measure_frame(frame, reconstructor, settings)
             log.info("warmed up depth range %g..%g mm in %.1f s", *depth_range, time.monotonic() - start)
-        warm_heap()  # the daemon's thread runs the cycles too: a larger sole's first cycle finds its pages mapped
+        warm_heap()  # every thread of the cycles allocates from it (one arena): a larger sole finds its pages mapped
         settle_garbage_collector()
         self.warmed_up = True
 

@@ -13,6 +13,7 @@ mod 256), deflate with Huffman coding only. Any PNG reader gets the same pixels 
 
 from __future__ import annotations
 
+import mmap
 import struct
 import zlib
 from collections.abc import Callable
@@ -23,6 +24,23 @@ import numpy as np
 BAND_ROWS = 64  # ~5 ms of encoding per band at 1280 px colour
 _SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _COLOUR_TYPE = {1: 0, 3: 2, 4: 6}  # grey, RGB, RGBA
+
+
+def held_buffer(shape: tuple[int, ...]) -> np.ndarray:
+    """A zeroed uint8 array in an anonymous mapping of its own, outside malloc's heap, for a picture a writer
+    thread holds across cycles (written band by band between them). Held in the heap such a buffer splits the
+    heap the cycles allocate from, and glibc grows it under a later cycle, whose measurement then faults the new
+    pages in (docs/benchmarks.md, ninth round). Its own mapping is faulted in by the writer's thread and goes
+    back whole when the array is freed."""
+    count = int(np.prod(shape))
+    return np.frombuffer(mmap.mmap(-1, max(count, 1)), np.uint8, count).reshape(shape)
+
+
+def held_copy(image: np.ndarray) -> np.ndarray:
+    """`image` (uint8) copied into a held_buffer."""
+    held = held_buffer(image.shape)
+    held[...] = image
+    return held
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
@@ -37,9 +55,12 @@ def write_png_in_bands(path: Path, image: np.ndarray, pause: Callable[[], None])
     if image.dtype != np.uint8 or channels not in _COLOUR_TYPE or image.shape[0] == 0 or image.shape[1] == 0:
         raise ValueError(f"PNG bands: an 8-bit grey, BGR or BGRA image, got {image.dtype} {image.shape}")
     height, width = image.shape[:2]
-    if channels >= 3:  # PNG stores RGB(A)
-        image = image[..., [2, 1, 0, 3][:channels]]
-    rows = np.ascontiguousarray(image).reshape(height, width * channels)
+    # The rows and the band's buffer outside the heap: they are held while the writer pauses for a cycle.
+    rows = held_buffer((height, width * channels))
+    pixels = rows.reshape(height, width, channels)
+    for channel, source in enumerate([2, 1, 0, 3][:channels] if channels >= 3 else [0]):  # PNG stores RGB(A)
+        pixels[..., channel] = image[..., source] if channels >= 3 else image.reshape(height, width)
+    buffer = held_buffer((BAND_ROWS, width * channels + 1))
     header = struct.pack(">IIBBBBB", width, height, 8, _COLOUR_TYPE[channels], 0, 0, 0)
     deflate = zlib.compressobj(1, zlib.DEFLATED, 15, 9, zlib.Z_HUFFMAN_ONLY)
     with open(path, "wb") as out:
@@ -47,7 +68,7 @@ def write_png_in_bands(path: Path, image: np.ndarray, pause: Callable[[], None])
         for top in range(0, height, BAND_ROWS):
             pause()
             band = rows[top : top + BAND_ROWS]
-            filtered = np.empty((len(band), band.shape[1] + 1), np.uint8)
+            filtered = buffer[: len(band)]
             filtered[:, 0] = 2  # Up: each byte minus the one above it (zero above the first row)
             filtered[:, 1:] = band
             filtered[1:, 1:] -= band[:-1]

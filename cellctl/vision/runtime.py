@@ -50,10 +50,11 @@ def settle_garbage_collector() -> None:
 
 
 # glibc's mallopt parameters (malloc.h) and the values set: above any array a cycle makes (the largest are
-# ~12 MB), and far above what a cycle frees at once.
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+# ~12 MB), and far above what a cycle frees at once; one arena for every thread (below).
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_ARENA_MAX = -1, -3, -8
 _MMAP_THRESHOLD_BYTES = 256 << 20
 _TRIM_THRESHOLD_BYTES = 1 << 30
+_ARENAS = 1  # every thread on the main heap, which the trim threshold keeps and warm_heap warms
 
 
 def keep_freed_memory() -> bool:
@@ -64,7 +65,17 @@ def keep_freed_memory() -> bool:
     the next cycle takes it again page by page, each page a fault the kernel zeroes. Measured on the simulated
     cell: 12-14k faults (30-140 ms of system time under load) in each of the first cycles after the warm-up,
     ~1k from the seventh; with these settings 0-3k in the first cycle of each new sole size, then none. The
-    process keeps the heap of its largest cycle (it reaches that peak every cycle anyway)."""
+    process keeps the heap of its largest cycle (it reaches that peak every cycle anyway).
+
+    Every thread made after this call allocates from the one main heap (M_ARENA_MAX 1). By default each thread
+    that allocates gets an arena of its own (up to 8 per core): the cycle's worker threads (the glue path's,
+    the change test's, the artifact writer) then grew and shrank heaps of their own, which the trim threshold
+    does not govern (glibc unmaps a thread heap as soon as it is all free) and which warm_heap cannot reach.
+    In the demo those threads took 1-6k faults in the cycles where a larger sole came first and again in a few
+    later ones (16-17.5k over 20 cycles), and 13.6k in the warm-up's measurement; with one arena 34 in the
+    warm-up and at most ~10 a cycle but for one or two heap growths of 0.3-0.8k (docs/benchmarks.md, ninth
+    round). The threads share the arena's lock; the measuring thread's CPU per cycle did not change beyond the
+    host's noise. Call it before the process starts threads: a thread that has allocated keeps its arena."""
     name = ctypes.util.find_library("c")
     try:
         libc = ctypes.CDLL(name) if name else None
@@ -72,7 +83,9 @@ def keep_freed_memory() -> bool:
     except OSError:
         mallopt = None
     if mallopt is None or not (
-        mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES) and mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD_BYTES)
+        mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
+        and mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD_BYTES)
+        and mallopt(_M_ARENA_MAX, _ARENAS)
     ):
         log.info("the C library's malloc settings could not be set (not glibc?): freed memory goes back as before")
         return False
@@ -88,8 +101,8 @@ _WARM_BLOCK_BYTES = 8 << 20  # under the mmap threshold above, so the blocks com
 
 
 def warm_heap(total_bytes: int = WARM_HEAP_BYTES) -> None:
-    """Touch `total_bytes` of the calling thread's malloc heap, then free it: with keep_freed_memory's settings
-    glibc keeps those pages, so the first cycle of a larger sole than the warm-up's finds them mapped instead
-    of faulting each one in. Call on the thread that runs the cycles, after keep_freed_memory()."""
+    """Touch `total_bytes` of the malloc heap, then free it: with keep_freed_memory's settings glibc keeps those
+    pages, so the first cycle of a larger sole than the warm-up's finds them mapped instead of faulting each
+    one in, in whichever thread allocates (one arena for all). Call after keep_freed_memory()."""
     blocks = [numpy.ones(_WARM_BLOCK_BYTES // 8) for _ in range(max(total_bytes // _WARM_BLOCK_BYTES, 0))]
     del blocks

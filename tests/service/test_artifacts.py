@@ -128,3 +128,60 @@ def test_a_job_the_thread_cannot_finish_by_stop_is_given_up_without_a_trace(jour
     assert kept[1] is None and kept[2] is not None  # ...but cycle 1 was given up: no folder, no row
     assert [p.name for p in (journal.state_dir / "cycles").iterdir()] == [Path(kept[2]).parent.name]
     assert not any((journal.state_dir / "partial").iterdir())
+
+
+class BandWriter(StepWriter):
+    """One step in two parts with the writer's pause between them, as the overlay PNG's bands are written."""
+
+    def __init__(self, keep: int) -> None:
+        super().__init__(keep)
+        self.first_part = threading.Event()
+        self.go_on = threading.Event()
+
+    def _steps(self, job: ArtifactJob) -> list[Callable[[], None]]:
+        def step() -> None:
+            self.first_part.set()
+            self.go_on.wait(10)
+            self._pause()
+            self.ran.append(job.cycle)
+
+        return [step]
+
+
+def test_a_step_begun_before_a_trigger_stops_at_its_next_part_until_the_cycle_is_over(journal: Journal) -> None:
+    writer = BandWriter(keep=3)
+    writer.set_idle(True)
+    submit(writer, journal, 1)
+    assert writer.first_part.wait(10)  # the writer's thread is in the step's first part...
+    writer.set_idle(False)  # ...when a trigger comes
+    writer.go_on.set()
+    threading.Event().wait(0.3)
+    assert writer.ran == []  # held at the pause while the cycle runs
+    writer.set_idle(True)
+    assert writer.flush(timeout_s=10.0)
+    writer.close()
+    assert writer.ran == [1]
+
+
+def test_the_overlay_png_is_written_in_bands_with_a_pause_before_each(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import cv2
+
+    import cellctl.service.artifacts as artifacts
+    from cellctl.service.png_bands import BAND_ROWS
+
+    calib = default_rig()
+    width, height = calib.image_size
+    left = np.random.default_rng(0).integers(0, 256, (height, width, 3), np.uint8)
+    frame = StereoFrame(left, left, 0.0, 0.0, {})
+    job = ArtifactJob(1, 1, tmp_path / "cycles" / "1", frame, None, None)  # type: ignore[arg-type]
+    job.staging.mkdir(parents=True)
+    pauses: list[int] = []
+    drawn = left[::-1].copy()  # the overlay as drawn (the drawing itself is tested with the overlay module)
+    monkeypatch.setattr(artifacts, "draw_on_left", lambda image, calib, measurement: drawn)
+    *_, draw, write_png = artifacts.artifact_steps(job, calib, lambda: pauses.append(1))
+    draw()
+    write_png()
+    assert len(pauses) == -(-height // BAND_ROWS)
+    assert np.array_equal(cv2.imread(str(job.staging / "cycle-1-overlay.png")), drawn)

@@ -61,3 +61,37 @@ def test_warm_heap_leaves_pages_mapped_for_a_larger_cycle() -> None:
         pytest.skip("not glibc: its malloc settings are not available here")
     assert faults["cold"] > 10_000  # 60 MB is ~15000 pages, each faulted in on first touch
     assert faults["warm"] < 0.05 * faults["cold"]
+
+
+def test_warm_heap_serves_the_threads_made_after_keep_freed_memory() -> None:
+    # The measurement's worker threads (glue path, change test, artifact writer) allocate too: with one arena
+    # for all threads they take the pages warm_heap touched; each with an arena of its own, it faults them in.
+    import subprocess
+    import sys
+
+    script = (
+        "import ctypes, resource, sys, threading, numpy as np\n"
+        "from cellctl.vision.runtime import keep_freed_memory, warm_heap\n"
+        "if not keep_freed_memory(): print(-1); sys.exit()\n"
+        "if sys.argv[1] == 'own-arenas': ctypes.CDLL('libc.so.6').mallopt(-8, 8)\n"  # 8 arenas: its own
+        "warm_heap(96 << 20)\n"
+        "faults = []\n"
+        "def worker():\n"
+        "    before = resource.getrusage(resource.RUSAGE_THREAD).ru_minflt\n"
+        "    arrays = [np.ones(3 << 17) for _ in range(20)]\n"  # 20 x 3 MB, as in the test above
+        "    faults.append(resource.getrusage(resource.RUSAGE_THREAD).ru_minflt - before)\n"
+        "thread = threading.Thread(target=worker)\n"
+        "thread.start()\n"
+        "thread.join()\n"
+        "print(faults[0])\n"
+    )
+    faults = {
+        mode: int(
+            subprocess.run([sys.executable, "-c", script, mode], capture_output=True, text=True, check=True).stdout
+        )
+        for mode in ("own-arenas", "one-arena")
+    }
+    if faults["one-arena"] < 0:
+        pytest.skip("not glibc: its malloc settings are not available here")
+    assert faults["own-arenas"] > 10_000  # the thread's own heap: ~15000 pages faulted in on first touch
+    assert faults["one-arena"] < 0.05 * faults["own-arenas"]
