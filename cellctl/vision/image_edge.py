@@ -16,13 +16,16 @@ crossed band; a contact shadow on textured table is measured there). After a mov
 compares the outline with the masks it was moved onto, so there it refuses only errors beyond the cap or
 where the cameras disagree; the depth-step and right-image tests stay independent of the move.
 
-Inward moves (the depth step fattened past both masks) are built and tested (`edge_shift(inward_too=True)`)
-but off (PLACE_EDGE_INWARD): the constant's comment and docs/sole-benchmark.md say why.
+Inward moves (PLACE_EDGE_INWARD) take the outline off a narrow blob of depth beyond the edge, per point where both
+cameras agree, only over whole stretches and only over stretches no longer than two census windows: a longer
+stretch beyond both silhouettes is the matcher's disparity smeared outward along the edge, which smears the
+heights inside it as well, so there the outline stays and the edge-offset check refuses it (`edge_shift`).
 
 A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
 the edge lies where the silhouette's ray meets the top edge's measured height. Where a camera sees the wall,
 its silhouette is the foot or, for a wall lit like the table, the top edge, which one camera cannot tell
-apart: `stereo_offsets` takes the one the other camera's unambiguous reading confirms.
+apart: `stereo_offsets` takes the one the other camera's unambiguous reading confirms, and where both cameras
+see the wall, the foot or top reading of each that agree with each other (`_paired`).
 """
 
 from __future__ import annotations
@@ -39,11 +42,13 @@ from cellctl.vision.reconstruction import SOLE_MATCHER_PARAMS, Reconstruction
 from cellctl.vision.surface import SoleSurface
 
 PLACE_EDGE_FROM_IMAGES = True  # outward moves; the module docstring says what guards them
-# Inward moves (the depth step fattened past both masks) are built and tested but off: on the matrices they
-# measure four more soles right, and they make two soles valid that then fail on something no check sees (a
-# black toe's cloud 1.1-1.4 mm high, glue height 1.23 mm off with the outline within 0.7 mm of the truth; a
-# 3 mm spike of the depth outline 1.5 mm out, narrower than the check's median): the edge-offset refusal there
-# is all that kept them out (docs/sole-benchmark.md, sixth round "offset6").
+# Inward moves: off narrow blobs of depth beyond the edge (a local mismatch a few mm wide), where both cameras
+# agree point by point over the whole blob (`edge_shift`). Measured on the matrices (docs/sole-benchmark.md,
+# seventh round "inward7"): 2027, 2036, 2051 and held-out 3026 newly right. The first version (offset6: running
+# medians, any length) made two soles valid and wrong that no other check sees, both left alone now: 2070's 25 mm
+# stretch 0.5-1.1 mm beyond a black pointed toe is smeared depth, and the cloud within 3 mm inside it lies
+# 1.2-1.8 mm high (glue height 1.27 mm off with the outline right); and 3065's narrow spike, where the
+# nearer-the-outline reading of two cameras that both see the wall (`_paired`) had hidden it from the check.
 PLACE_EDGE_INWARD = True
 EDGE_MOVE_MIN_MM = 0.5  # a sharp edge's offsets scatter by ~0.2 mm in the images: smaller is no evidence
 EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a texture line fools one mask)
@@ -164,12 +169,14 @@ def stereo_offsets(
     Where the camera sees the wall it is the wall's foot on the table, or the top edge again if the wall is lit
     like the table; one camera cannot tell the two apart (the same ray at two heights), so there the reading
     is the one nearer the other camera's unambiguous reading (its top edge, where the wall is hidden from it);
-    where the other sees the wall too, the one nearer the outline.
+    where the other sees the wall too, of each camera's two the pair that agrees best (`_paired`).
 
     The nearer-the-outline rule alone reads in the outline's favour: with the outline 1 mm beyond a dark wall's
     foot, the top reading of the camera that sees that wall lies on the outline (the ray to the foot crosses
     the top's height ~1 mm further out) and was taken, so an outline 0.5-1 mm beyond a black pointed toe passed
-    the edge-offset check with the other camera's correct -0.9 mm halved by the mean."""
+    the edge-offset check with the other camera's correct -0.9 mm halved by the mean. Where both cameras see the
+    wall it did the same: 3065's left top reading lay on a 1.4 mm spike of the outline (a second step of its
+    mask) while its foot, -1.4 mm, agreed with the right camera's -1.1."""
     (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = (
         _readings(ring, outward, edge_height, camera, table_level) for camera in cameras
     )
@@ -225,7 +232,9 @@ def edge_shift(
       median would keep most of it) the mean of both cameras' innermost readings where they agree within
       EDGE_MOVE_AGREE_MM, put the edge more than EDGE_MOVE_MIN_MM (at most EDGE_MOVE_MAX_MM) inside, and the
       outermost agree that it is inside (no changed band beyond the outline that could be the sole's); only
-      where every point of the stretch beyond the edge qualifies (neighbouring readings agree), and only where
+      where every point of the stretch that either camera puts beyond the edge qualifies (neighbouring readings
+      agree: a camera that sees no blob at its end leaves it, and a move of the rest would leave a notch), and
+      only where
       the outline lies beyond both silhouettes for no longer than `longest_blob_mm` (`blob_length_mm`; default
       any length): a longer
       stretch is the matcher's disparity smeared outward along the edge, which smears the heights inside it too
@@ -253,7 +262,8 @@ def edge_shift(
         point = 0.5 * (left + right)
         inward = (np.abs(left - right) <= EDGE_MOVE_AGREE_MM) & (point < -EDGE_MOVE_MIN_MM)
         inward &= (point >= -EDGE_MOVE_MAX_MM) & (outer_left < -EDGE_MOVE_MIN_MM) & (outer_right < -EDGE_MOVE_MIN_MM)
-        inward = _whole_stretches(inward & ~out, point < -EDGE_MOVE_MIN_MM)
+        either = (point < -EDGE_MOVE_MIN_MM) | (left < -EDGE_MOVE_MIN_MM) | (right < -EDGE_MOVE_MIN_MM)
+        inward = _whole_stretches(inward & ~out, either)
         beyond = np.nan_to_num(point, nan=0.0) < -SMEARED_EDGE_MM
     inward &= _stretch_lengths(beyond) <= longest_blob_mm
     moved_in = np.where(inward, smooth_along(np.where(inward, point, 0.0), INWARD_SMOOTHING_MM), 0.0)

@@ -125,19 +125,22 @@ def test_inward_moves_take_a_narrow_blob_point_by_point_but_not_a_smeared_edge()
     """A blob of depth 3 mm wide beyond the edge (both cameras 1.1 mm inside the outline there): moved in per
     point, where a running median would keep most of it. A stretch of 30 mm beyond the edge is the disparity
     smeared along it (heights inside it smeared too): not moved, the edge-offset check refuses it. A blob with
-    one point where the cameras disagree: none of it moves."""
+    one point where the cameras disagree, or one camera alone seeing it at its end: none of it moves."""
     n = 300
     left, right = np.zeros(n), np.zeros(n)
     left[50:53] = right[50:53] = -1.1
     left[100:130] = right[100:130] = -1.0
     left[200:204] = right[200:204] = -1.1
     right[202] = -0.4  # the two cameras 0.7 mm apart at one point of the blob
+    left[250:253] = right[250:253] = -1.1
+    left[253], right[253] = 0.1, -0.9  # at its end one camera sees the blob, the other does not (3065)
     shift = edge_shift(left, right, longest_blob_mm=7.0)
     assert shift[51] < -0.8 and np.all(shift[50:53] < -0.6)
     assert np.all(shift[:49] == 0.0) and np.all(shift[54:200] == 0.0) and np.all(shift[200:] == 0.0)
+    assert np.all(shift[245:260] == 0.0)
     assert check_edge_offsets([left - shift, right - shift]) is not None  # the blob left alone is refused
     rest = left - shift
-    rest[195:210] = 0.0
+    rest[195:210] = rest[245:260] = 0.0
     failure = check_edge_offsets([rest, rest])  # and so is the smeared stretch
     assert failure is not None and "1.0 mm inside the outline at outline point 1" in failure.reason
     # Without the bound the smeared stretch moves too (as the running-median rule moved it).
