@@ -63,6 +63,10 @@ EDGE_MOVE_MAX_MM = 1.5
 # outward along its edge: on a black pointed toe the cloud within 3 mm inside such an edge lies 1.2-1.8 mm high
 # (the top falls there, the smear does not), so the glue heights there are not the sole's and it is not moved.
 SMEARED_EDGE_MM = 0.25
+# A blob survives the footprint's 1 mm opening only if wider than 1 mm: two or more outline points (1 mm apart). A
+# lone point where both cameras read 0.5-0.7 mm inside is the readings' scatter (0.25 mm steps), and was wrong on
+# 2032 (the outline there already 0.8 mm short of the edge).
+MIN_BLOB_POINTS = 2
 BLOB_CENSUS_WINDOWS = 2.0
 INWARD_SMOOTHING_MM = 0.75  # a blob's flanks are ~1 mm wide: the move no smoother than the depth outline itself
 # The guard (`depth_silent`): a move must cross ground where depth measured nothing at the table's height, in a
@@ -139,10 +143,13 @@ def _nearer(foot: np.ndarray, top: np.ndarray, to: np.ndarray | float) -> np.nda
 def _paired(
     foot_l: np.ndarray, top_l: np.ndarray, foot_r: np.ndarray, top_r: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Where both cameras see the wall: per point each camera's foot or top reading, the pair that agrees best
-    (both cameras look at the one edge); of equally good pairs the one nearer the outline. Where no pair has
-    both readings, each camera's reading nearer the outline."""
-    pairs = ((foot_l, foot_r), (foot_l, top_r), (top_l, foot_r), (top_l, top_r))
+    """Where both cameras see the wall: per point one camera's foot and the other's top reading, the pair that
+    agrees best (both cameras look at the one edge); of equally good pairs the one nearer the outline. Readings
+    of one kind share their bias (a foot reading lies inside the edge by however far up the wall the mask ends,
+    for both cameras alike: tall white walls), so two foot or two top readings agreeing is no evidence; where
+    no foot-and-top pair agrees within EDGE_MOVE_AGREE_MM, each camera's reading nearer the outline, as for one
+    camera."""
+    pairs = ((foot_l, top_r), (top_l, foot_r))
     apart = np.stack([np.nan_to_num(np.abs(a - b), nan=np.inf) for a, b in pairs])
     off = np.stack([np.nan_to_num(np.abs(a) + np.abs(b), nan=np.inf) for a, b in pairs])
     best = np.min(apart, axis=0)
@@ -150,7 +157,7 @@ def _paired(
     pick = np.arange(len(best))
     left = np.stack([a for a, _ in pairs])[choice, pick]
     right = np.stack([b for _, b in pairs])[choice, pick]
-    none = ~np.isfinite(best)
+    none = ~(best <= EDGE_MOVE_AGREE_MM)
     return np.where(none, _nearer(foot_l, top_l, 0.0), left), np.where(none, _nearer(foot_r, top_r, 0.0), right)
 
 
@@ -235,7 +242,8 @@ def edge_shift(
       where every point of the stretch that either camera puts beyond the edge qualifies (neighbouring readings
       agree: a camera that sees no blob at its end leaves it, and a move of the rest would leave a notch), and
       only where
-      the outline lies beyond both silhouettes for no longer than `longest_blob_mm` (`blob_length_mm`; default
+      the blob is MIN_BLOB_POINTS or more points long and the outline lies beyond both silhouettes for no longer
+      than `longest_blob_mm` (`blob_length_mm`; default
       any length): a longer
       stretch is the matcher's disparity smeared outward along the edge, which smears the heights inside it too
       (SMEARED_EDGE_MM), so there the outline stays and the edge-offset check refuses it.
@@ -265,7 +273,7 @@ def edge_shift(
         either = (point < -EDGE_MOVE_MIN_MM) | (left < -EDGE_MOVE_MIN_MM) | (right < -EDGE_MOVE_MIN_MM)
         inward = _whole_stretches(inward & ~out, either)
         beyond = np.nan_to_num(point, nan=0.0) < -SMEARED_EDGE_MM
-    inward &= _stretch_lengths(beyond) <= longest_blob_mm
+    inward &= (_stretch_lengths(beyond) <= longest_blob_mm) & (_stretch_lengths(inward) >= MIN_BLOB_POINTS)
     moved_in = np.where(inward, smooth_along(np.where(inward, point, 0.0), INWARD_SMOOTHING_MM), 0.0)
     return np.where(inward, moved_in, shift)
 

@@ -132,6 +132,7 @@ def test_inward_moves_take_a_narrow_blob_point_by_point_but_not_a_smeared_edge()
     left[100:130] = right[100:130] = -1.0
     left[200:204] = right[200:204] = -1.1
     right[202] = -0.4  # the two cameras 0.7 mm apart at one point of the blob
+    left[150], right[150] = -0.62, -0.62  # one point: the readings' scatter, no blob
     left[250:253] = right[250:253] = -1.1
     left[253], right[253] = 0.1, -0.9  # at its end one camera sees the blob, the other does not (3065)
     shift = edge_shift(left, right, longest_blob_mm=7.0)
@@ -155,14 +156,17 @@ def test_stretch_lengths_run_around_the_closed_outline() -> None:
 
 
 def test_where_both_cameras_see_the_wall_the_readings_that_agree_are_taken() -> None:
-    """Both cameras see the wall: each camera's foot or top, whichever pair agrees best (3065: the left top
-    reading on the outline, +0.1, is a second step; its foot -1.4 agrees with the right's top -1.1). Nearer
-    the outline only among equally good pairs, or where one camera has no reading."""
-    foot_l, top_l = np.array([-1.38, -0.5, np.nan]), np.array([0.12, 0.5, np.nan])
-    foot_r, top_r = np.array([-1.88, -0.5, -0.62]), np.array([-1.12, 0.5, 0.12])
+    """Both cameras see the wall: one camera's foot and the other's top, whichever pair agrees best (3065: the
+    left top reading on the outline, +0.1, is a second step; its foot -1.4 agrees with the right's top -1.1).
+    Nearer the outline among equally good pairs, or where no such pair has both readings."""
+    foot_l, top_l = np.array([-1.38, -0.5, np.nan, -1.12]), np.array([0.12, 0.5, np.nan, 0.62])
+    foot_r, top_r = np.array([-1.88, 0.5, -0.62, -1.38]), np.array([-1.12, -0.5, 0.12, np.nan])
     left, right = _paired(foot_l, top_l, foot_r, top_r)
     assert left.tolist()[:2] == [-1.38, -0.5] and right.tolist()[:2] == [-1.12, -0.5]
     assert np.isnan(left[2]) and right[2] == 0.12
+    # Two foot readings agreeing is no evidence (2003: both 1.1-1.4 mm inside on a tall white wall, the outline
+    # right): each camera's reading nearer the outline.
+    assert left[3] == 0.62 and right[3] == -1.38
 
 
 def test_a_camera_that_sees_the_wall_is_read_at_the_height_the_other_confirms() -> None:
