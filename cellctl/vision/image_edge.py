@@ -16,13 +16,16 @@ crossed band; a contact shadow on textured table is measured there). After a mov
 compares the outline with the masks it was moved onto, so there it refuses only errors beyond the cap or
 where the cameras disagree; the depth-step and right-image tests stay independent of the move.
 
-Inward moves (the depth step fattened past both masks) are built and tested (`edge_shift(inward_too=True)`)
-but off (PLACE_EDGE_INWARD): the constant's comment and docs/sole-benchmark.md say why.
+Inward moves (PLACE_EDGE_INWARD) take the outline off a narrow blob of depth beyond the edge, per point where both
+cameras agree, only over whole stretches and only over stretches no longer than two census windows: a longer
+stretch beyond both silhouettes is the matcher's disparity smeared outward along the edge, which smears the
+heights inside it as well, so there the outline stays and the edge-offset check refuses it (`edge_shift`).
 
 A camera's silhouette is the top edge where the sole hides its wall from it (the wall faces away): there
 the edge lies where the silhouette's ray meets the top edge's measured height. Where a camera sees the wall,
 its silhouette is the foot or, for a wall lit like the table, the top edge, which one camera cannot tell
-apart: `stereo_offsets` takes the one the other camera's unambiguous reading confirms.
+apart: `stereo_offsets` takes the one the other camera's unambiguous reading confirms, and where both cameras
+see the wall, the foot or top reading of each that agree with each other (`_paired`).
 """
 
 from __future__ import annotations
@@ -35,16 +38,18 @@ import numpy as np
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
 from cellctl.vision.edge_checks import EDGE_OFFSET_WINDOW_MM, edge_offset_pair
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.reconstruction import Reconstruction
+from cellctl.vision.reconstruction import SOLE_MATCHER_PARAMS, Reconstruction
 from cellctl.vision.surface import SoleSurface
 
 PLACE_EDGE_FROM_IMAGES = True  # outward moves; the module docstring says what guards them
-# Inward moves (the depth step fattened past both masks) are built and tested but off: on the matrices they
-# measure four more soles right, and they make two soles valid that then fail on something no check sees (a
-# black toe's cloud 1.1-1.4 mm high, glue height 1.23 mm off with the outline within 0.7 mm of the truth; a
-# 3 mm spike of the depth outline 1.5 mm out, narrower than the check's median): the edge-offset refusal there
-# is all that kept them out (docs/sole-benchmark.md, sixth round "offset6").
-PLACE_EDGE_INWARD = False
+# Inward moves: off narrow blobs of depth beyond the edge (a local mismatch a few mm wide), where both cameras
+# agree point by point over the whole blob (`edge_shift`). Measured on the matrices (docs/sole-benchmark.md,
+# seventh round "inward7"): 2027, 2036, 2051 and held-out 3026 newly right. The first version (offset6: running
+# medians, any length) made two soles valid and wrong that no other check sees, both left alone now: 2070's 25 mm
+# stretch 0.5-1.1 mm beyond a black pointed toe is smeared depth, and the cloud within 3 mm inside it lies
+# 1.2-1.8 mm high (glue height 1.27 mm off with the outline right); and 3065's narrow spike, where the
+# nearer-the-outline reading of two cameras that both see the wall (`_paired`) had hidden it from the check.
+PLACE_EDGE_INWARD = True
 EDGE_MOVE_MIN_MM = 0.5  # a sharp edge's offsets scatter by ~0.2 mm in the images: smaller is no evidence
 EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a texture line fools one mask)
 EDGE_MOVE_SMOOTHING_MM = 1.5
@@ -52,6 +57,18 @@ EDGE_MOVE_SMOOTHING_MM = 1.5
 # table's disparity dragged onto a black edge; a depth step fattened past the masks). The masks' errors that
 # both cameras share are larger (a cast shadow's edge 2-3 mm beyond the sole): such a point is not moved.
 EDGE_MOVE_MAX_MM = 1.5
+# Inward moves: a blob of depth beyond the edge is a local mismatch, about a census window wide (9 px, 3.5 mm at
+# the default rig's 0.39 mm per pixel; `blob_length_mm`: two windows); the outline lies beyond the edge there by
+# more than the readings' scatter (~0.2 mm, 0.25 mm steps). A longer such stretch is the sole's disparity smeared
+# outward along its edge: on a black pointed toe the cloud within 3 mm inside such an edge lies 1.2-1.8 mm high
+# (the top falls there, the smear does not), so the glue heights there are not the sole's and it is not moved.
+SMEARED_EDGE_MM = 0.25
+# A blob survives the footprint's 1 mm opening only if wider than 1 mm: two or more outline points (1 mm apart). A
+# lone point where both cameras read 0.5-0.7 mm inside is the readings' scatter (0.25 mm steps), and was wrong on
+# 2032 (the outline there already 0.8 mm short of the edge).
+MIN_BLOB_POINTS = 2
+BLOB_CENSUS_WINDOWS = 2.0
+INWARD_SMOOTHING_MM = 0.75  # a blob's flanks are ~1 mm wide: the move no smoother than the depth outline itself
 # The guard (`depth_silent`): a move must cross ground where depth measured nothing at the table's height, in a
 # strip this wide along the outline, up to this far short of the proposed edge (the table is measured from there).
 SILENT_STRIP_MM = 1.0
@@ -123,6 +140,27 @@ def _nearer(foot: np.ndarray, top: np.ndarray, to: np.ndarray | float) -> np.nda
     return np.where(foot_off < np.nan_to_num(np.abs(top - to), nan=np.inf), foot, top)
 
 
+def _paired(
+    foot_l: np.ndarray, top_l: np.ndarray, foot_r: np.ndarray, top_r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where both cameras see the wall: per point one camera's foot and the other's top reading, the pair that
+    agrees best (both cameras look at the one edge); of equally good pairs the one nearer the outline. Readings
+    of one kind share their bias (a foot reading lies inside the edge by however far up the wall the mask ends,
+    for both cameras alike: tall white walls), so two foot or two top readings agreeing is no evidence; where
+    no foot-and-top pair agrees within EDGE_MOVE_AGREE_MM, each camera's reading nearer the outline, as for one
+    camera."""
+    pairs = ((foot_l, top_r), (top_l, foot_r))
+    apart = np.stack([np.nan_to_num(np.abs(a - b), nan=np.inf) for a, b in pairs])
+    off = np.stack([np.nan_to_num(np.abs(a) + np.abs(b), nan=np.inf) for a, b in pairs])
+    best = np.min(apart, axis=0)
+    choice = np.argmin(np.where(apart <= best + 1e-9, off, np.inf), axis=0)  # readings are 0.25 mm steps: ties
+    pick = np.arange(len(best))
+    left = np.stack([a for a, _ in pairs])[choice, pick]
+    right = np.stack([b for _, b in pairs])[choice, pick]
+    none = ~(best <= EDGE_MOVE_AGREE_MM)
+    return np.where(none, _nearer(foot_l, top_l, 0.0), left), np.where(none, _nearer(foot_r, top_r, 0.0), right)
+
+
 def stereo_offsets(
     ring: np.ndarray,
     outward: np.ndarray,
@@ -138,25 +176,31 @@ def stereo_offsets(
     Where the camera sees the wall it is the wall's foot on the table, or the top edge again if the wall is lit
     like the table; one camera cannot tell the two apart (the same ray at two heights), so there the reading
     is the one nearer the other camera's unambiguous reading (its top edge, where the wall is hidden from it);
-    where the other sees the wall too, the one nearer the outline.
+    where the other sees the wall too, of each camera's two the pair that agrees best (`_paired`).
 
     The nearer-the-outline rule alone reads in the outline's favour: with the outline 1 mm beyond a dark wall's
     foot, the top reading of the camera that sees that wall lies on the outline (the ray to the foot crosses
     the top's height ~1 mm further out) and was taken, so an outline 0.5-1 mm beyond a black pointed toe passed
-    the edge-offset check with the other camera's correct -0.9 mm halved by the mean."""
+    the edge-offset check with the other camera's correct -0.9 mm halved by the mean. Where both cameras see the
+    wall it did the same: 3065's left top reading lay on a 1.4 mm spike of the outline (a second step of its
+    mask) while its foot, -1.4 mm, agreed with the right camera's -1.1."""
     (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = (
         _readings(ring, outward, edge_height, camera, table_level) for camera in cameras
     )
 
-    def read(
-        foot: np.ndarray, top: np.ndarray, wall: np.ndarray, other_top: np.ndarray, other_wall: np.ndarray
-    ) -> np.ndarray:
-        witness = np.where(other_wall, np.nan, other_top)
-        by_other = np.where(np.isfinite(witness), _nearer(foot, top, witness), _nearer(foot, top, 0.0))
-        return np.where(wall, by_other, top)
+    def read(k: int) -> tuple[np.ndarray, np.ndarray]:
+        both = _paired(foot_l[k], top_l[k], foot_r[k], top_r[k])
+        result = []
+        for foot, top, wall, other_top, other_wall, paired in (
+            (foot_l[k], top_l[k], wall_l, top_r[k], wall_r, both[0]),
+            (foot_r[k], top_r[k], wall_r, top_l[k], wall_l, both[1]),
+        ):
+            witness = np.where(other_wall, np.nan, other_top)
+            by_other = np.where(np.isfinite(witness), _nearer(foot, top, witness), paired)
+            result.append(np.where(wall, by_other, top))
+        return result[0], result[1]
 
-    inner = read(foot_l[0], top_l[0], wall_l, top_r[0], wall_r), read(foot_r[0], top_r[0], wall_r, top_l[0], wall_l)
-    outer = read(foot_l[1], top_l[1], wall_l, top_r[1], wall_r), read(foot_r[1], top_r[1], wall_r, top_l[1], wall_l)
+    inner, outer = read(0), read(1)
     left, right = (np.where(np.isfinite(o), o, i) for o, i in zip(outer, inner, strict=True))
     return inner, (left, right)
 
@@ -177,24 +221,34 @@ def edge_shift(
     silent: Callable[[np.ndarray], np.ndarray] | None = None,
     outer: tuple[np.ndarray, np.ndarray] | None = None,
     inward_too: bool = True,
+    longest_blob_mm: float = float("inf"),
 ) -> np.ndarray:
     """How far to move each outline point along its outward normal (+: out, -: in), smoothed along the
     outline; 0 where the evidence does not hold.
 
     left, right: each camera's silhouette offsets (`stereo_offsets`, the innermost of equally good steps);
     outer: the same read outermost (`stereo_offsets`), as the edge-offset check reads them; without it
-    the innermost readings stand for both. A move is the mean of both cameras' local edges (running medians
-    over EDGE_OFFSET_WINDOW_MM) where they agree within EDGE_MOVE_AGREE_MM and lie more than EDGE_MOVE_MIN_MM
-    and at most EDGE_MOVE_MAX_MM from the outline:
+    the innermost readings stand for both.
 
-    - outward by the outermost readings (the depth stopped short: excused table-level samples beyond it are the
-      sole's edge band the matcher dragged to the table's height), where the innermost do not put the edge
-      inside and `silent` allows it;
-    - inward by the innermost readings, where the outermost agree that the edge is inside (no changed band
-      beyond the outline that could be the sole's).
+    - Outward by the outermost readings (the depth stopped short: excused table-level samples beyond it are the
+      sole's edge band the matcher dragged to the table's height): the mean of both cameras' local edges (running
+      medians over EDGE_OFFSET_WINDOW_MM) where they agree within EDGE_MOVE_AGREE_MM and lie more than
+      EDGE_MOVE_MIN_MM and at most EDGE_MOVE_MAX_MM from the outline, where the innermost do not put the edge
+      inside and `silent` allows it.
+    - Inward off a blob of depth beyond the edge (`inward_too`): per point (a blob is a few mm wide, a running
+      median would keep most of it) the mean of both cameras' innermost readings where they agree within
+      EDGE_MOVE_AGREE_MM, put the edge more than EDGE_MOVE_MIN_MM (at most EDGE_MOVE_MAX_MM) inside, and the
+      outermost agree that it is inside (no changed band beyond the outline that could be the sole's); only
+      where every point of the stretch that either camera puts beyond the edge qualifies (neighbouring readings
+      agree: a camera that sees no blob at its end leaves it, and a move of the rest would leave a notch), and
+      only where
+      the blob is MIN_BLOB_POINTS or more points long and the outline lies beyond both silhouettes for no longer
+      than `longest_blob_mm` (`blob_length_mm`; default
+      any length): a longer
+      stretch is the matcher's disparity smeared outward along the edge, which smears the heights inside it too
+      (SMEARED_EDGE_MM), so there the outline stays and the edge-offset check refuses it.
 
     Where the two readings contradict each other (an edge inside and another beyond), the point stays.
-    inward_too=False: outward moves only (the placement's default, PLACE_EDGE_INWARD).
 
     Beyond EDGE_MOVE_MAX_MM the point stays: no depth error of the kind the move corrects is that large, and the
     masks' own errors are (a cast shadow's edge 2-3 mm out); the edge-offset check then refuses it.
@@ -203,16 +257,53 @@ def edge_shift(
     outer_left, outer_right = (left, right) if outer is None else outer
     local_left, local_right = _local(left), _local(right)
     far_left, far_right = _local(outer_left), _local(outer_right)
-    near, far = 0.5 * (local_left + local_right), 0.5 * (far_left + far_right)
+    far = 0.5 * (far_left + far_right)
     out = (np.abs(far_left - far_right) <= EDGE_MOVE_AGREE_MM) & (far > EDGE_MOVE_MIN_MM) & (far <= EDGE_MOVE_MAX_MM)
     out &= (local_left > -EDGE_MOVE_MIN_MM) & (local_right > -EDGE_MOVE_MIN_MM)
-    inward = (np.abs(local_left - local_right) <= EDGE_MOVE_AGREE_MM) & (near < -EDGE_MOVE_MIN_MM) & inward_too
-    inward &= (near >= -EDGE_MOVE_MAX_MM) & (far_left < -EDGE_MOVE_MIN_MM) & (far_right < -EDGE_MOVE_MIN_MM)
     if silent is not None:
         out &= silent(np.where(out, far, 0.0))
-    allowed = out | inward
-    proposed = np.where(out, far, np.where(inward, near, 0.0))
-    return np.where(allowed, smooth_along(proposed, EDGE_MOVE_SMOOTHING_MM), 0.0)
+    shift = np.where(out, smooth_along(np.where(out, far, 0.0), EDGE_MOVE_SMOOTHING_MM), 0.0)
+    if not inward_too:
+        return shift
+    with warnings.catch_warnings():  # NaN readings compare False
+        warnings.simplefilter("ignore", RuntimeWarning)
+        point = 0.5 * (left + right)
+        inward = (np.abs(left - right) <= EDGE_MOVE_AGREE_MM) & (point < -EDGE_MOVE_MIN_MM)
+        inward &= (point >= -EDGE_MOVE_MAX_MM) & (outer_left < -EDGE_MOVE_MIN_MM) & (outer_right < -EDGE_MOVE_MIN_MM)
+        either = (point < -EDGE_MOVE_MIN_MM) | (left < -EDGE_MOVE_MIN_MM) | (right < -EDGE_MOVE_MIN_MM)
+        inward = _whole_stretches(inward & ~out, either)
+        beyond = np.nan_to_num(point, nan=0.0) < -SMEARED_EDGE_MM
+    inward &= (_stretch_lengths(beyond) <= longest_blob_mm) & (_stretch_lengths(inward) >= MIN_BLOB_POINTS)
+    moved_in = np.where(inward, smooth_along(np.where(inward, point, 0.0), INWARD_SMOOTHING_MM), 0.0)
+    return np.where(inward, moved_in, shift)
+
+
+def _stretch_lengths(flags: np.ndarray) -> np.ndarray:
+    """Per point of the closed outline (1 mm apart), the length of the run of consecutive flagged points it is in
+    (0 where not flagged)."""
+    if flags.all():
+        return np.full(len(flags), float(len(flags)))
+    if not flags.any():
+        return np.zeros(len(flags))
+    start = int(np.flatnonzero(~flags)[0])
+    rolled = np.roll(flags, -start)
+    label = np.cumsum(~rolled)
+    counts = np.bincount(label[rolled], minlength=int(label.max()) + 1)
+    return np.roll(np.where(rolled, counts[label], 0), start).astype(float)
+
+
+def _whole_stretches(allowed: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """`allowed` kept only on stretches of the closed outline where every point `wanted` is allowed: a stretch is
+    a run of consecutive wanted points (the outline beyond the edge both cameras show, on average)."""
+    keep = allowed & wanted
+    if wanted.all():
+        return keep if keep.all() else np.zeros_like(keep)
+    start = int(np.flatnonzero(~wanted)[0])  # roll so that no stretch wraps around the end
+    rolled_wanted, rolled_keep = np.roll(wanted, -start), np.roll(keep, -start)
+    label = np.cumsum(~rolled_wanted)  # one label per stretch (and the unwanted point before it)
+    broken = np.zeros(int(label.max()) + 1, bool)
+    np.logical_or.at(broken, label[rolled_wanted], ~rolled_keep[rolled_wanted])
+    return np.roll(rolled_keep & ~broken[label], start)
 
 
 def depth_silent(ring: np.ndarray, outward: np.ndarray, table_points: Footprint) -> Callable[[np.ndarray], np.ndarray]:
@@ -250,6 +341,17 @@ def depth_silent(ring: np.ndarray, outward: np.ndarray, table_points: Footprint)
     return silent
 
 
+def blob_length_mm(reconstruction: Reconstruction) -> float:
+    """The longest stretch of depth beyond the edge an inward move takes for a local mismatch: BLOB_CENSUS_WINDOWS
+    census windows (the sole matcher's width in pixels) at the left camera's height above the table."""
+    calib = reconstruction.calibration
+    assert calib is not None
+    window_px = SOLE_MATCHER_PARAMS["census_window"]
+    assert isinstance(window_px, tuple)
+    mm_per_px = abs(float(reconstruction.camera_to_table[2, 3])) / calib.focal_px
+    return BLOB_CENSUS_WINDOWS * float(window_px[0]) * mm_per_px
+
+
 def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:
     """The outline (closed, table mm) moved onto the edge both cameras show (1 mm spacing), or as it was."""
     changed_left, changed_right = reconstruction.changed_left, reconstruction.changed_right
@@ -267,7 +369,7 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
     cameras = ((changed_left, left_pixel, left_centre), (changed_right, right_pixel, right_centre))
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)
     silent = depth_silent(ring, outward, reconstruction.table_points)
-    shift = edge_shift(inner[0], inner[1], silent, outer, PLACE_EDGE_INWARD)
+    shift = edge_shift(inner[0], inner[1], silent, outer, PLACE_EDGE_INWARD, blob_length_mm(reconstruction))
     if not np.any(shift):
         return outline
     return ring + shift[:, None] * outward

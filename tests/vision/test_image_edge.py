@@ -9,7 +9,14 @@ import pytest
 
 from cellctl.vision.edge_checks import check_edge_offsets
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.image_edge import EDGE_MOVE_MAX_MM, depth_silent, edge_shift, stereo_offsets
+from cellctl.vision.image_edge import (
+    EDGE_MOVE_MAX_MM,
+    _paired,
+    _stretch_lengths,
+    depth_silent,
+    edge_shift,
+    stereo_offsets,
+)
 
 RADIUS = 50.0
 HEIGHT = 20.0
@@ -112,6 +119,54 @@ def test_no_move_where_the_outermost_reading_contradicts_or_the_edge_is_too_far(
     moved = inner - shift
     failure = check_edge_offsets([moved, moved])  # the points left alone are still refused
     assert failure is not None
+
+
+def test_inward_moves_take_a_narrow_blob_point_by_point_but_not_a_smeared_edge() -> None:
+    """A blob of depth 3 mm wide beyond the edge (both cameras 1.1 mm inside the outline there): moved in per
+    point, where a running median would keep most of it. A stretch of 30 mm beyond the edge is the disparity
+    smeared along it (heights inside it smeared too): not moved, the edge-offset check refuses it. A blob with
+    one point where the cameras disagree, or one camera alone seeing it at its end: none of it moves."""
+    n = 300
+    left, right = np.zeros(n), np.zeros(n)
+    left[50:53] = right[50:53] = -1.1
+    left[100:130] = right[100:130] = -1.0
+    left[200:204] = right[200:204] = -1.1
+    right[202] = -0.4  # the two cameras 0.7 mm apart at one point of the blob
+    left[150], right[150] = -0.62, -0.62  # one point: the readings' scatter, no blob
+    left[250:253] = right[250:253] = -1.1
+    left[253], right[253] = 0.1, -0.9  # at its end one camera sees the blob, the other does not (3065)
+    shift = edge_shift(left, right, longest_blob_mm=7.0)
+    assert shift[51] < -0.8 and np.all(shift[50:53] < -0.6)
+    assert np.all(shift[:49] == 0.0) and np.all(shift[54:200] == 0.0) and np.all(shift[200:] == 0.0)
+    assert np.all(shift[245:260] == 0.0)
+    assert check_edge_offsets([left - shift, right - shift]) is not None  # the blob left alone is refused
+    rest = left - shift
+    rest[195:210] = rest[245:260] = 0.0
+    failure = check_edge_offsets([rest, rest])  # and so is the smeared stretch
+    assert failure is not None and "1.0 mm inside the outline at outline point 1" in failure.reason
+    # Without the bound the smeared stretch moves too (as the running-median rule moved it).
+    assert np.all(edge_shift(left, right)[105:125] < -0.9)
+
+
+def test_stretch_lengths_run_around_the_closed_outline() -> None:
+    flags = np.array([1, 1, 0, 1, 1, 1, 0, 0, 1], bool)
+    assert _stretch_lengths(flags).tolist() == [3, 3, 0, 3, 3, 3, 0, 0, 3]
+    assert _stretch_lengths(np.ones(4, bool)).tolist() == [4, 4, 4, 4]
+    assert _stretch_lengths(np.zeros(4, bool)).tolist() == [0, 0, 0, 0]
+
+
+def test_where_both_cameras_see_the_wall_the_readings_that_agree_are_taken() -> None:
+    """Both cameras see the wall: one camera's foot and the other's top, whichever pair agrees best (3065: the
+    left top reading on the outline, +0.1, is a second step; its foot -1.4 agrees with the right's top -1.1).
+    Nearer the outline among equally good pairs, or where no such pair has both readings."""
+    foot_l, top_l = np.array([-1.38, -0.5, np.nan, -1.12]), np.array([0.12, 0.5, np.nan, 0.62])
+    foot_r, top_r = np.array([-1.88, 0.5, -0.62, -1.38]), np.array([-1.12, -0.5, 0.12, np.nan])
+    left, right = _paired(foot_l, top_l, foot_r, top_r)
+    assert left.tolist()[:2] == [-1.38, -0.5] and right.tolist()[:2] == [-1.12, -0.5]
+    assert np.isnan(left[2]) and right[2] == 0.12
+    # Two foot readings agreeing is no evidence (2003: both 1.1-1.4 mm inside on a tall white wall, the outline
+    # right): each camera's reading nearer the outline.
+    assert left[3] == 0.62 and right[3] == -1.38
 
 
 def test_a_camera_that_sees_the_wall_is_read_at_the_height_the_other_confirms() -> None:
