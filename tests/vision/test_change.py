@@ -132,7 +132,6 @@ def test_two_shadows_overlapping_in_a_narrow_band_beside_the_sole_stay_table() -
         assert not changed[83:130, 60:140].any(), sole
 
 
-
 def test_a_sole_whose_texture_follows_the_tables_at_a_tenth_of_its_contrast_is_not_table() -> None:
     # A grey sole's own texture correlates with the table's by chance in some 7 px windows (NCC above 0.5 in
     # one window in ten on the matrix's grey soles), at a texture gain of 0.0-0.3: no shadow darkens the table
