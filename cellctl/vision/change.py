@@ -198,7 +198,9 @@ class ChangeTest:
         textured = var_r > (TEXTURE_SIGMAS * self.sigma) ** 2
         # Votes of the textured windows covering each pixel: nearly all correlate, or nearly none does.
         share = cv2.blur(textured.astype(np.float32), window)
-        in_scale = texture_gain < MAX_TEXTURE_GAIN
+        # Nor by less than a shadow's least factor: a sole's own texture correlates with the table's by chance
+        # in some windows (NCC above TABLE_NCC in one in ten on the matrix's grey soles), at 0.0-0.3 of its scale.
+        in_scale = (texture_gain > MIN_TEXTURE_GAIN) & (texture_gain < MAX_TEXTURE_GAIN)
         table_like = np.greater(ncc, TABLE_NCC)
         table_like &= in_scale
         table_like &= textured

@@ -130,3 +130,25 @@ def test_two_shadows_overlapping_in_a_narrow_band_beside_the_sole_stay_table() -
             assert changed[22:78, 62:138].mean() > 0.99
         assert changed[81:89, 62:138].mean() < 0.05, sole  # the band is table
         assert not changed[83:130, 60:140].any(), sole
+
+
+def test_a_sole_whose_texture_follows_the_tables_at_a_tenth_of_its_contrast_is_not_table() -> None:
+    # A grey sole's own texture correlates with the table's by chance in some 7 px windows (NCC above 0.5 in
+    # one window in ten on the matrix's grey soles), at a texture gain of 0.0-0.3: no shadow darkens the table
+    # that much (the shadows the test accepts are 0.3-0.95). Here the whole sole does it: a faint copy of the
+    # table's texture at 0.12 of its contrast, at the table's mean brightness.
+    rng = np.random.default_rng(13)
+    shape = (160, 200)
+    reference = 110.0 + 6.0 * _smooth_noise(rng, shape)
+    current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    faint = 110.0 + 0.12 * (reference[40:120, 40:160] - 110.0) + rng.normal(0.0, 1.0, (80, 120)).astype(np.float32)
+    current[40:120, 40:160] = faint
+    table = np.ones(shape, bool)
+    table[30:130, 30:170] = False
+    test = ChangeTest.fit(current, reference, table)
+    assert test is not None
+    changed = test.changed(current, reference)
+    assert changed[43:117, 43:157].mean() > 0.9
+    outside = np.ones(shape, bool)
+    outside[39:121, 39:161] = False
+    assert not changed[outside].any()
