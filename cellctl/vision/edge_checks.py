@@ -71,7 +71,8 @@ MAX_EDGE_OFFSET_MM = 0.8
 # edge pixels, which the depth step (fattened 5 mm), the right image (1.5 mm in, 3 mm out), the edge offsets
 # (the same masks) and the 12 mm stretch rules do not see, while the glue line beside it is 1-1.3 mm off.
 # Longer notches with steep sides are caught at their corners (a right-angled corner 1.2 mm deep exceeds the
-# bound at h = 1.2 mm); long shallow dents are the other checks' part.
+# bound at h = 1.2 mm); long shallow dents (~1 mm over 6-16 mm) no shape
+# rule separates from the outline's scatter or a waist (a 26 mm waist bends 0.9 mm over 14 mm): not seen.
 MIN_CONCAVE_RADIUS_MM = 12.0
 NOTCH_MAX_HALF_CHORD_MM = 7
 
