@@ -69,10 +69,12 @@ MAX_EDGE_OFFSET_MM = 0.8
 # MAX_EDGE_OFFSET_MM (the glue tolerance of 1 mm less the outline's own scatter, as for the edge offsets).
 # Deeper is a notch no sole has: 2-4 mm long and 1-2 mm deep where both cameras' change masks missed the same
 # edge pixels, which the depth step (fattened 5 mm), the right image (1.5 mm in, 3 mm out), the edge offsets
-# (the same masks) and the 12 mm stretch rules do not see, while the glue line beside it is 1-1.3 mm off.
-# Longer notches with steep sides are caught at their corners (a right-angled corner 1.2 mm deep exceeds the
-# bound at h = 1.2 mm); long shallow dents (~1 mm over 6-16 mm) no shape
-# rule separates from the outline's scatter or a waist (a 26 mm waist bends 0.9 mm over 14 mm): not seen.
+# (the same masks) and the 12 mm stretch rules do not see. The outline there is not the sole's edge; the glue
+# line's closing bridges a narrow notch, but masks that miss the edge so are not to be trusted beside it (a
+# mask fill tried in session 7 published held-out 3014 with two such notches and the glue line 1.25 mm off at
+# a dent next to them). Reach: 1.2 mm deep over 2-4 mm, 1.5 mm over 2-6 mm. Long shallow dents (~1 mm over
+# 6-16 mm) no shape rule separates from the outline's scatter or a waist (a 26 mm waist bends 0.9 mm over
+# 14 mm): not seen.
 MIN_CONCAVE_RADIUS_MM = 12.0
 NOTCH_MAX_HALF_CHORD_MM = 7
 
