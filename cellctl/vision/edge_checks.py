@@ -1,7 +1,8 @@
 """Self-checks of the sole's edge itself (docs/measurements.md, Validity): the measured surface across the
 outline (a rounded top edge falls away before it) and where each camera's change mask ends along the
 outline's normal (a dent or bulge of 1-2 mm that the depth-step and right-image tests of
-cellctl.vision.checks pass). Each returns None or a `CheckFailure`.
+cellctl.vision.checks pass), and the outline's own shape (a notch sharper than a sole's edge bends). Each returns
+None or a `CheckFailure`.
 """
 
 from __future__ import annotations
@@ -56,6 +57,56 @@ EDGE_PROFILE_MIN_KNOWN = 0.7  # of a profile's samples in the image and not excu
 EDGE_PROFILE_MAX_MISFIT = 0.2  # of the known samples on the wrong side of the best step: no clear edge
 EDGE_OFFSET_WINDOW_MM = 5
 MAX_EDGE_OFFSET_MM = 0.8
+
+
+# The outline's shape against how a sole's edge can bend. A sole's edge turns inward (concave) only at its
+# waist, with a radius of tens of mm (the simulator's soles: 26 mm at the tightest over every end kind, the
+# cusps' concave sides included; a last's arch is not tighter); pointed and cusped ends are convex. Taken
+# as MIN_CONCAVE_RADIUS_MM, well below that (the glue line's edge is closed with a disc of this radius for
+# the same reason, cellctl.vision.measurement.GLUE_EDGE_CLOSE_MM). Per outline point and chord of half-length
+# h (1 mm steps up to NOTCH_MAX_HALF_CHORD_MM: windows up to 14 mm), the point may lie inside the chord by at
+# most the sagitta of an arc of that radius (h^2 / 2R: 0.17 mm at h = 2, 1.1 mm at h = 5) plus
+# MAX_EDGE_OFFSET_MM (the glue tolerance of 1 mm less the outline's own scatter, as for the edge offsets).
+# Deeper is a notch no sole has: 2-4 mm long and 1-2 mm deep where both cameras' change masks missed the same
+# edge pixels, which the depth step (fattened 5 mm), the right image (1.5 mm in, 3 mm out), the edge offsets
+# (the same masks) and the 12 mm stretch rules do not see. The outline there is not the sole's edge; the glue
+# line's closing bridges a narrow notch, but masks that miss the edge so are not to be trusted beside it (a
+# mask fill tried in session 7 published held-out 3014 with two such notches and the glue line 1.25 mm off at
+# a dent next to them). Reach: 1.2 mm deep over 2-4 mm, 1.5 mm over 2-6 mm. Long shallow dents (~1 mm over
+# 6-16 mm) no shape rule separates from the outline's scatter or a waist (a 26 mm waist bends 0.9 mm over
+# 14 mm): not seen.
+MIN_CONCAVE_RADIUS_MM = 12.0
+NOTCH_MAX_HALF_CHORD_MM = 7
+
+
+def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
+    """A notch in the outline (N x 2, counter-clockwise, points 1 mm apart, closed) sharper than a sole's edge
+    bends: a point lying inside the chord between its neighbours h mm either side by more than an arc of
+    MIN_CONCAVE_RADIUS_MM would, plus MAX_EDGE_OFFSET_MM."""
+    n = len(outline)
+    worst, at, chord_mm = 0.0, 0, 0.0
+    for h in range(1, min(NOTCH_MAX_HALF_CHORD_MM, (n - 1) // 2) + 1):
+        before, after = np.roll(outline, h, axis=0), np.roll(outline, -h, axis=0)
+        chord = after - before
+        length = np.linalg.norm(chord, axis=1)
+        rel = outline - before
+        # Left of the chord (counter-clockwise outline: towards the inside) is positive.
+        inside = (chord[:, 0] * rel[:, 1] - chord[:, 1] * rel[:, 0]) / np.maximum(length, 1e-9)
+        half = np.minimum(0.5 * length, MIN_CONCAVE_RADIUS_MM)
+        excess = inside - (MIN_CONCAVE_RADIUS_MM - np.sqrt(MIN_CONCAVE_RADIUS_MM**2 - half**2))
+        k = int(np.argmax(excess))
+        if excess[k] > worst:
+            worst, at, chord_mm = float(excess[k]), k, float(length[k])
+    if worst > MAX_EDGE_OFFSET_MM:
+        x, y = outline[at]
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the outline has a notch at outline point {at} ({x:.1f}, {y:.1f}) mm: {worst:.1f} mm deeper than a "
+            f"sole's edge can curve inward over a {chord_mm:.0f} mm chord (a radius of {MIN_CONCAVE_RADIUS_MM:g} mm "
+            f"at the tightest; limit {MAX_EDGE_OFFSET_MM:g} mm): both cameras' masks missed the same edge there, "
+            "the outline is not the sole's edge",
+        )
+    return None
 
 
 def check_edge_profile(

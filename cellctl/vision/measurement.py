@@ -36,6 +36,7 @@ from cellctl.vision.defaults import (
     PLAUSIBLE_HEIGHT_MM,
     PLAUSIBLE_LENGTH_MM,
 )
+from cellctl.vision.edge_checks import MIN_CONCAVE_RADIUS_MM
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.glue_path import glue_path
 from cellctl.vision.image_edge import onto_image_edge
@@ -65,10 +66,10 @@ OUTLINE_SMOOTHING_MM = 0.75
 # projections (the length) outward by 0.3-0.5 mm at 0.75 mm: the 2 mm it was tuned with.
 COLOUR_OUTLINE_SMOOTHING_MM = 2.0
 # Radius of the disc the glue line's edge is closed with: a sole's outline curves inward nowhere tighter
-# (simulated soles: 28 mm at least; a nozzle could not follow a tight notch either), while the measured
-# outline has dents of 1-2 mm depth and 4-8 mm width where edge pixels lost their depth. A disc of radius R
-# leaves R - sqrt(R^2 - w^2 / 4) of a dent w wide: 0.4 mm of a 6 mm dent at 12 mm.
-GLUE_EDGE_CLOSE_MM = 12.0
+# (edge_checks.MIN_CONCAVE_RADIUS_MM; simulated soles: 26 mm at least; a nozzle could not follow a tight notch
+# either), while the measured outline has dents of 1-2 mm depth and 4-8 mm width where edge pixels lost their
+# depth. A disc of radius R leaves R - sqrt(R^2 - w^2 / 4) of a dent w wide: 0.4 mm of a 6 mm dent at 12 mm.
+GLUE_EDGE_CLOSE_MM = MIN_CONCAVE_RADIUS_MM
 GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 

@@ -20,7 +20,12 @@ from cellctl.vision.checks import (
     hidden_from,
 )
 from cellctl.vision.closed_path import outward_normals, resample_closed
-from cellctl.vision.edge_checks import check_edge_offsets, check_edge_profile, check_steep_wall
+from cellctl.vision.edge_checks import (
+    check_edge_offsets,
+    check_edge_profile,
+    check_outline_notch,
+    check_steep_wall,
+)
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import edge_heights, projections, stereo_offsets, table_level
 from cellctl.vision.reconstruction import Reconstruction
@@ -50,9 +55,13 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
     problem = _check_outline_images(reconstruction, ring, outward, surface, heights)
     if problem is not None:
         return problem
-    # Last: a wall the checks above let through (measured all the way down to its foot) still puts the glue
-    # line on its steep face.
-    return check_steep_wall(ring, outward, heights)
+    # A wall the checks above let through (measured all the way down to its foot) still puts the glue line on
+    # its steep face.
+    problem = check_steep_wall(ring, outward, heights)
+    if problem is not None:
+        return problem
+    # Last: a short notch both cameras' masks share passes every check above; the outline's shape shows it.
+    return check_outline_notch(ring)
 
 
 def _check_outline_images(
