@@ -48,6 +48,9 @@ class SoleBenchRow:
     # contract allows (checks.MIN_GLUE_NZ: 60 degrees from vertical), e.g. a sloped side wall: no valid result
     # can hold the true glue path there.
     glue_line_steep_true: float | None = None
+    # A refusal's outline (where the measurement got that far): its farthest point from the true outline, mm.
+    # Says whether an "outline inconsistent" refusal's claim is true, whatever the variations say.
+    outline_error_max_mm: float | None = None
 
 
 def bench_soles(
@@ -143,7 +146,20 @@ def measure_scene(
         row.glue_height_error_max_mm = float(np.abs(points[:, 2] - height).max())
         cosines = np.clip(np.sum(normals * normal, axis=1), -1.0, 1.0)
         row.glue_normal_error_max_deg = float(np.degrees(np.arccos(cosines)).max())
+    elif isinstance(result, MeasurementRefused):
+        row.outline_error_max_mm = outline_error(scene, result)
     return row
+
+
+def outline_error(scene: SoleScene, refused: MeasurementRefused) -> float | None:
+    """The refused result's outline: its farthest point from the true footprint outline (mm), or None."""
+    assert scene.sole is not None
+    if refused.outline is None or refused.camera_to_table is None or len(refused.outline) == 0:
+        return None
+    transform = scene.table_from_measured(refused.camera_to_table)
+    xy = np.asarray(refused.outline, dtype=np.float64) @ transform[:2, :2].T + transform[:2, 3]
+    truth = scene.sole.footprint_table().astype(np.float32).reshape(-1, 1, 2)
+    return float(max(abs(cv2.pointPolygonTest(truth, (float(x), float(y)), True)) for x, y in xy))
 
 
 def glue_truth(scene: SoleScene, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

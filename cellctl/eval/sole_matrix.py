@@ -42,6 +42,11 @@ TOLERANCES: dict[str, float] = {
     "glue_normal_error_max_deg": 5.0,
 }
 MIN_MEASURED_FRACTION = 0.9
+# A missed sole refused as "outline inconsistent" whose refused outline lies farther than this from the true
+# outline somewhere: the refusal's claim (the outline is not the sole's edge) is true, and publishing that outline
+# could have put glue points outside the inset tolerance (the same 1.0 mm). Counted apart, as what the
+# segmentation missed and the self-checks caught; the verdict stays "missed" (a measurable sole not measured).
+OUTLINE_TRULY_OFF_MM = TOLERANCES["glue_inset_error_max_mm"]
 # A sole whose true half-areas differ by less than the measurement's threshold plus this may fairly be
 # refused as "too close to call": the measured footprint's halves scatter by a per cent or so.
 ENDS_CALL_MARGIN = 0.02
@@ -118,12 +123,18 @@ def _progress_text(result: MatrixRow) -> str:
     r = result.row
     head = f"sole {r.seed} {r.color} {r.variations}: {result.verdict}"
     if not r.valid:
-        return f"{head}: {r.reason}"
+        return f"{head}: {r.reason}{_outline_note(r)}"
     return (
         f"{head}: length {r.length_error_mm:+.2f}, heel {r.heel_error_mm:+.2f}, toe {r.toe_error_mm:+.2f} mm, "
         f"glue {r.glue_inset_error_max_mm:.2f} / {r.glue_height_error_max_mm:.2f} mm / "
         f"{r.glue_normal_error_max_deg:.1f} deg, {r.seconds:.2f} s"
     )
+
+
+def _outline_note(row: SoleBenchRow) -> str:
+    if row.outline_error_max_mm is None:
+        return ""
+    return f" [truth: the refused outline is up to {row.outline_error_max_mm:.1f} mm off the sole's edge]"
 
 
 def _stats(values: list[float | None]) -> str:
@@ -165,6 +176,7 @@ class Acceptance:
     fair_refusals: int
     missed: int  # refused with a reason the scene does not justify
     crashed: int  # the measurement raised an exception
+    missed_outline_off: int = 0  # of the missed: outline_inconsistent with the outline truly off (OUTLINE_TRULY_OFF_MM)
 
     @property
     def measured_fraction(self) -> float:
@@ -188,7 +200,15 @@ def acceptance(results: list[MatrixRow]) -> Acceptance:
         verdicts["fair refusal"],
         verdicts["missed"],
         verdicts["CRASH"],
+        sum(outline_truly_off(r) for r in results if r.verdict == "missed"),
     )
+
+
+def outline_truly_off(result: MatrixRow) -> bool:
+    """A refusal as "outline inconsistent" whose outline is farther than OUTLINE_TRULY_OFF_MM off the truth."""
+    error = result.row.outline_error_max_mm
+    failure = FailureKind.OUTLINE_INCONSISTENT.value
+    return result.row.failure == failure and error is not None and error > OUTLINE_TRULY_OFF_MM
 
 
 def matrix_markdown(results: list[MatrixRow], command: str) -> str:
@@ -197,7 +217,10 @@ def matrix_markdown(results: list[MatrixRow], command: str) -> str:
     lines = [
         f"Command: `{command}`. {acc.measured} of {acc.soles} soles measured "
         f"({100 * acc.measured_fraction:.0f} %), {acc.wrong} valid but outside a tolerance (WRONG), "
-        f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason, {acc.crashed} crashed. "
+        f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason "
+        f"({acc.missed_outline_off} of them as outline_inconsistent with the outline truly more than "
+        f"{OUTLINE_TRULY_OFF_MM:.1f} mm off the sole's edge: the segmentation missed, the check's claim is true), "
+        f"{acc.crashed} crashed. "
         f"Acceptance {'met' if acc.passed else 'NOT met'}.",
         "",
         "A row per variation over every sole that has it (soles mix variations, so a sole counts in several "
@@ -235,7 +258,10 @@ def matrix_markdown(results: list[MatrixRow], command: str) -> str:
                 f"{row.glue_height_error_max_mm:.2f} | {row.glue_normal_error_max_deg:.1f} |"
             )
         else:
-            lines.append(f"| {row.seed} | {row.color} | {row.variations} | {r.verdict}: {row.reason} | | | | | | |")
+            lines.append(
+                f"| {row.seed} | {row.color} | {row.variations} | {r.verdict}: {row.reason}{_outline_note(row)} "
+                "| | | | | | |"
+            )
     return "\n".join(lines)
 
 

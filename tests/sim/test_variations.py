@@ -14,7 +14,7 @@ import pytest
 
 from cellctl.cli import main
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import SoleBenchRow, glue_line_steep, measure_scene
+from cellctl.eval.sole_bench import SoleBenchRow, glue_line_steep, measure_scene, outline_error
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
 from cellctl.sim.matrix import END_VARIATIONS, MATRIX_COLOURS, MATRIX_ENTRIES, MatrixSole, matrix_soles
@@ -22,6 +22,7 @@ from cellctl.sim.render import SceneRenderer
 from cellctl.sim.scene import SoleScene
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
 from cellctl.sim.sole_profile import FOOT_MM, EdgeProfile, EndShape
+from cellctl.vision.sole_result import MeasurementRefused
 from tests.sim_rig import half_size_rig, write_half_size_rig
 
 
@@ -270,6 +271,33 @@ def test_judging_valid_and_refused_results() -> None:
     assert judge(sloped, replace(_row(), glue_line_steep_true=0.5)).verdict == "right"  # measured right stays right
     results = [judge(sole, _row()), judge(sole, refused)]
     assert acceptance(results).measured_fraction == 0.5 and not acceptance(results).passed
+
+
+def test_missed_outline_refusals_are_counted_by_their_outlines_truth() -> None:
+    sole = MatrixSole(1, "white", ("rim",))
+    refused = SoleBenchRow(1, "white", 250.0, False, "off", *(None,) * 6, 1.0, "rim", "outline_inconsistent")
+    off, near = replace(refused, outline_error_max_mm=2.5), replace(refused, outline_error_max_mm=0.4)
+    other = replace(off, failure=FailureKind.SURFACE_NOT_MEASURED.value)
+    results = [judge(sole, row) for row in (off, near, other, refused)]
+    assert [r.verdict for r in results] == ["missed"] * 4  # the verdict stays: a measurable sole not measured
+    assert acceptance(results).missed == 4 and acceptance(results).missed_outline_off == 1
+
+
+def test_outline_error_is_the_refused_outlines_farthest_point_from_the_truth() -> None:
+    scene = SoleScene.random(7, "white", half_size_rig())
+    assert scene.sole is not None
+    truth = scene.sole.footprint_table()
+    rectified_to_raw = np.eye(4)
+    rectified_to_raw[:3, :3] = scene.calib.R1.T
+    camera_to_table = scene.camera_pose @ rectified_to_raw  # the measured table frame is the scene's own
+    assert np.allclose(scene.table_from_measured(camera_to_table), np.eye(4))
+    shifted = truth + np.array([1.5, 0.0])  # the whole outline 1.5 mm along x: its farthest point ~1.5 mm off
+    refused = MeasurementRefused(
+        FailureKind.OUTLINE_INCONSISTENT, "off", 100, outline=shifted, camera_to_table=camera_to_table
+    )
+    assert outline_error(scene, refused) == pytest.approx(1.5, abs=0.05)
+    assert outline_error(scene, replace(refused, outline=truth)) == pytest.approx(0.0, abs=0.05)
+    assert outline_error(scene, replace(refused, outline=None)) is None
 
 
 @pytest.mark.parametrize(
