@@ -242,27 +242,37 @@ def edge_offset_pair(
     return readings[0], readings[1]
 
 
+def mean_of_known(readings: np.ndarray) -> np.ndarray:
+    """Per column of `readings` (cameras x outline points) the mean of the known (finite) ones, NaN where none."""
+    known = np.isfinite(readings)
+    return np.where(known.any(axis=0), np.nansum(readings, axis=0) / np.maximum(known.sum(axis=0), 1), np.nan)
+
+
+def running_median(offsets: np.ndarray) -> np.ndarray:
+    """Per point of a closed outline (points 1 mm apart) the median of `offsets` over EDGE_OFFSET_WINDOW_MM
+    centred on it, NaN where no more than half of the window is known."""
+    half = EDGE_OFFSET_WINDOW_MM // 2
+    window = np.stack([np.roll(offsets, s) for s in range(-half, half + 1)])
+    enough = np.isfinite(window).sum(axis=0) > half
+    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.where(enough, np.nanmedian(window, axis=0), np.nan)
+
+
 def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
     """The outline (points 1 mm apart, closed) against the edges the cameras' change masks show there.
 
     `offsets`: per camera, one of `edge_offset_pair`'s readings along the outline. Their mean per point, a running median over
     EDGE_OFFSET_WINDOW_MM, must stay within MAX_EDGE_OFFSET_MM of the outline everywhere it is known.
     """
-    stacked = np.vstack(offsets)
-    known = np.isfinite(stacked)
-    mean = np.where(known.any(axis=0), np.nansum(stacked, axis=0) / np.maximum(known.sum(axis=0), 1), np.nan)
+    mean = mean_of_known(np.vstack(offsets))
     if np.count_nonzero(np.isfinite(mean)) < MIN_TESTABLE * len(mean):
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"the sole's edge is not clear in the images: only {np.count_nonzero(np.isfinite(mean))} of "
             f"{len(mean)} outline points show one within {EDGE_SEARCH_MM:g} mm",
         )
-    half = EDGE_OFFSET_WINDOW_MM // 2
-    window = np.stack([np.roll(mean, s) for s in range(-half, half + 1)])
-    enough = np.isfinite(window).sum(axis=0) > half
-    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
-        warnings.simplefilter("ignore", RuntimeWarning)
-        local = np.where(enough, np.nanmedian(window, axis=0), 0.0)
+    local = np.nan_to_num(running_median(mean), nan=0.0)  # too little known: no evidence against the outline
     worst = int(np.argmax(np.abs(local)))
     if abs(local[worst]) > MAX_EDGE_OFFSET_MM:
         where = "beyond" if local[worst] > 0 else "inside"

@@ -36,7 +36,7 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
-from cellctl.vision.edge_checks import EDGE_OFFSET_WINDOW_MM, edge_offset_pair
+from cellctl.vision.edge_checks import edge_offset_pair, running_median
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import SOLE_MATCHER_PARAMS, Reconstruction
 from cellctl.vision.surface import SoleSurface
@@ -205,16 +205,6 @@ def stereo_offsets(
     return inner, (left, right)
 
 
-def _local(offsets: np.ndarray) -> np.ndarray:
-    """Running median over EDGE_OFFSET_WINDOW_MM of outline (points 1 mm apart); NaN without enough."""
-    half = EDGE_OFFSET_WINDOW_MM // 2
-    window = np.stack([np.roll(offsets, s) for s in range(-half, half + 1)])
-    enough = np.isfinite(window).sum(axis=0) > half
-    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.where(enough, np.nanmedian(window, axis=0), np.nan)
-
-
 def edge_shift(
     left: np.ndarray,
     right: np.ndarray,
@@ -255,8 +245,8 @@ def edge_shift(
     silent (proposed moves -> bool per point): whether depth is silent over each outward move (`depth_silent`);
     where it is not, the point stays, also after the smoothing, so the edge-offset check still judges it there."""
     outer_left, outer_right = (left, right) if outer is None else outer
-    local_left, local_right = _local(left), _local(right)
-    far_left, far_right = _local(outer_left), _local(outer_right)
+    local_left, local_right = running_median(left), running_median(right)
+    far_left, far_right = running_median(outer_left), running_median(outer_right)
     far = 0.5 * (far_left + far_right)
     out = (np.abs(far_left - far_right) <= EDGE_MOVE_AGREE_MM) & (far > EDGE_MOVE_MIN_MM) & (far <= EDGE_MOVE_MAX_MM)
     out &= (local_left > -EDGE_MOVE_MIN_MM) & (local_right > -EDGE_MOVE_MIN_MM)

@@ -29,7 +29,7 @@ import numpy as np
 
 from cellctl.vision.checks import MIN_TESTABLE
 from cellctl.vision.defaults import GLUE_OFFSET_MM
-from cellctl.vision.edge_checks import EDGE_OUTER_MM, edge_offset_pair, top_falls
+from cellctl.vision.edge_checks import EDGE_OUTER_MM, edge_offset_pair, mean_of_known, top_falls
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import projections, table_level
 from cellctl.vision.reconstruction import Reconstruction
@@ -92,14 +92,7 @@ def silhouette_bounds(
         both = np.isfinite(at_level) & np.isfinite(at_table)
         low.append(np.where(both, np.minimum(at_level, at_table), np.nan))
         high.append(np.where(both, np.maximum(at_level, at_table), np.nan))
-    return _mean(np.vstack(low)), _mean(np.vstack(high))
-
-
-def _mean(readings: np.ndarray) -> np.ndarray:
-    """Per column the mean of the known readings, NaN where none."""
-    known = np.isfinite(readings)
-    count = known.sum(axis=0)
-    return np.where(count > 0, np.where(known, readings, 0.0).sum(axis=0) / np.maximum(count, 1), np.nan)
+    return mean_of_known(np.vstack(low)), mean_of_known(np.vstack(high))
 
 
 def describe(profile: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None, glue_offset_mm: float) -> str:
