@@ -76,6 +76,20 @@ def disc_overlap(distance: np.ndarray | float, radius: float) -> np.ndarray:
     return (2.0 / np.pi) * (np.arccos(x) - x * np.sqrt(1.0 - x * x))
 
 
+def known_variance(variance: np.ndarray) -> np.ndarray:
+    """`variance` with its unknown (NaN) entries taken as the median of the known ones (0 if none is known)."""
+    return np.where(np.isfinite(variance), variance, np.nanmedian(variance) if np.isfinite(variance).any() else 0.0)
+
+
+def unfolded(tangent: np.ndarray, sigma_mm: float, spacing_mm: float) -> np.ndarray:
+    """Per point of a closed path (unit tangents K x 2, samples `spacing_mm` apart): whether the path turns less
+    than FOLD_TURN_DEG within 2 sigma either side, so that the distance along its tangent means something over a
+    fit of width `sigma_mm` (round a pointed end it mixes both sides)."""
+    reach = max(1, int(round(2.0 * sigma_mm / spacing_mm)))
+    turn = np.min([np.sum(tangent * np.roll(tangent, k, axis=0), axis=1) for k in range(-reach, reach + 1)], axis=0)
+    return turn > np.cos(np.radians(FOLD_TURN_DEG))
+
+
 def _plane_and_cubic(
     at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float, tangent: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -120,8 +134,7 @@ def slope_gradients(
     """
     finite = np.isfinite(z)
     xy, z = xy[finite], z[finite]
-    known = variance[finite]
-    known = np.where(np.isfinite(known), known, np.nanmedian(known) if np.isfinite(known).any() else 0.0)
+    known = known_variance(variance[finite])
     plane, plane_rows, cubic, cubic_rows = _plane_and_cubic(at, xy, z, sigma_mm, tangent)
 
     def fit_variance(rows: np.ndarray) -> np.ndarray:
@@ -131,7 +144,5 @@ def slope_gradients(
     difference_var = fit_variance(cubic_rows - plane_rows)
     bias_and_noise = np.sum((cubic - plane) ** 2, axis=1)
     better = bias_and_noise - difference_var + plane_var > cubic_var
-    reach = max(1, int(round(2.0 * sigma_mm / spacing_mm)))
-    turn = np.min([np.sum(tangent * np.roll(tangent, k, axis=0), axis=1) for k in range(-reach, reach + 1)], axis=0)
-    better &= turn > np.cos(np.radians(FOLD_TURN_DEG))
+    better &= unfolded(tangent, sigma_mm, spacing_mm)
     return np.where(better[:, None], cubic, plane), better

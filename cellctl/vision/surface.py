@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cellctl.stereo.pointgrid import PointGrid
-from cellctl.vision.local_fit import FOLD_TURN_DEG, GRADIENT_RIDGE_MM2
+from cellctl.vision.local_fit import GRADIENT_RIDGE_MM2, known_variance, unfolded
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
 from cellctl.vision.workers import worker
@@ -214,7 +214,7 @@ def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> np.ndar
     finite = np.isfinite(z)
     if not finite.any():
         return result
-    known = np.where(np.isfinite(variance), variance, np.nanmedian(variance) if np.isfinite(variance).any() else 0.0)
+    known = known_variance(variance)
     tangent = np.roll(xy, -1, axis=0) - np.roll(xy, 1, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     geometry = _RowGeometry(xy, xy[finite], tangent)
@@ -223,9 +223,7 @@ def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> np.ndar
     samples, noise = z[finite], known[finite]
     estimates = np.array([r @ samples for r in rows])
     variances = np.array([(r * r) @ noise for r in rows])
-    reach = max(1, int(round(2.0 * PATH_SMOOTHING_STEPS_MM[-1] / _median_spacing(xy))))
-    turn = np.min([np.sum(tangent * np.roll(tangent, k, axis=0), axis=1) for k in range(-reach, reach + 1)], axis=0)
-    straight = turn > np.cos(np.radians(FOLD_TURN_DEG))
+    straight = unfolded(tangent, PATH_SMOOTHING_STEPS_MM[-1], _median_spacing(xy))
     planes = len(PATH_SMOOTHING_STEPS_MM)
     reference = np.where(straight[:, None], rows[-1], rows[0])
     reference_estimate = np.where(straight, estimates[-1], estimates[0])
