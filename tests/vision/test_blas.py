@@ -37,11 +37,21 @@ def test_keep_freed_memory_lets_the_next_cycle_reuse_what_the_last_one_freed() -
     assert faults_of_a_40_mb_array() < 50  # then the freed block is used again (0 here; mapped anew: 532)
 
 
-def test_warm_heap_leaves_pages_mapped_for_a_larger_cycle() -> None:
-    # A fresh process each, so that nothing earlier grew the heap: the faults of ~60 MB of cycle-sized arrays.
+def _printed_by_fresh_processes(script: str, modes: tuple[str, ...]) -> dict[str, int]:
+    """Per mode, the integer `script` prints when run in a fresh Python process with the mode as its argument."""
     import subprocess
     import sys
 
+    return {
+        mode: int(
+            subprocess.run([sys.executable, "-c", script, mode], capture_output=True, text=True, check=True).stdout
+        )
+        for mode in modes
+    }
+
+
+def test_warm_heap_leaves_pages_mapped_for_a_larger_cycle() -> None:
+    # A fresh process each, so that nothing earlier grew the heap: the faults of ~60 MB of cycle-sized arrays.
     script = (
         "import resource, sys, numpy as np\n"
         "from cellctl.vision.runtime import keep_freed_memory, warm_heap\n"
@@ -51,12 +61,7 @@ def test_warm_heap_leaves_pages_mapped_for_a_larger_cycle() -> None:
         "arrays = [np.ones(3 << 17) for _ in range(20)]\n"  # 20 x 3 MB, each under glibc's default mmap threshold
         "print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)\n"
     )
-    faults = {
-        mode: int(
-            subprocess.run([sys.executable, "-c", script, mode], capture_output=True, text=True, check=True).stdout
-        )
-        for mode in ("cold", "warm")
-    }
+    faults = _printed_by_fresh_processes(script, ("cold", "warm"))
     if faults["cold"] < 0:
         pytest.skip("not glibc: its malloc settings are not available here")
     assert faults["cold"] > 10_000  # 60 MB is ~15000 pages, each faulted in on first touch
@@ -66,9 +71,6 @@ def test_warm_heap_leaves_pages_mapped_for_a_larger_cycle() -> None:
 def test_warm_heap_serves_the_threads_made_after_keep_freed_memory() -> None:
     # The measurement's worker threads (glue path, change test, artifact writer) allocate too: with one arena
     # for all threads they take the pages warm_heap touched; each with an arena of its own, it faults them in.
-    import subprocess
-    import sys
-
     script = (
         "import ctypes, resource, sys, threading, numpy as np\n"
         "from cellctl.vision.runtime import keep_freed_memory, warm_heap\n"
@@ -85,12 +87,7 @@ def test_warm_heap_serves_the_threads_made_after_keep_freed_memory() -> None:
         "thread.join()\n"
         "print(faults[0])\n"
     )
-    faults = {
-        mode: int(
-            subprocess.run([sys.executable, "-c", script, mode], capture_output=True, text=True, check=True).stdout
-        )
-        for mode in ("own-arenas", "one-arena")
-    }
+    faults = _printed_by_fresh_processes(script, ("own-arenas", "one-arena"))
     if faults["one-arena"] < 0:
         pytest.skip("not glibc: its malloc settings are not available here")
     assert faults["own-arenas"] > 10_000  # the thread's own heap: ~15000 pages faulted in on first touch
