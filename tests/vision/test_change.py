@@ -3,6 +3,8 @@ runs along a step of the table's own texture correlates with it too, but at ten 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
@@ -90,21 +92,10 @@ def test_a_box_gives_the_whole_images_pixels_inside_it_and_none_outside() -> Non
 
 
 def test_inside_a_grey_sole_on_a_grey_table_pixels_whose_texture_is_gone_are_changed_and_none_outside() -> None:
-    rng = np.random.default_rng(6)
-    shape = (160, 200)
-    reference = 110.0 + 6.0 * _smooth_noise(rng, shape)
-    current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current[40:120, 40:160] = 110.0 + 5.0 * _smooth_noise(rng, (80, 120))  # the table's mean brightness
-    table = np.ones(shape, bool)
-    table[30:130, 30:170] = False
-    test = ChangeTest.fit(current, reference, table)
-    assert test is not None
-    changed = test.changed(current, reference)
+    # The sole at the table's mean brightness, with a texture of its own.
+    changed = _changed_on_grey_table(6, lambda rng, reference: 110.0 + 5.0 * _smooth_noise(rng, (80, 120)))
     # The pixel test alone finds 79 % (a fifth of the pixels match the table's brightness by chance).
     assert changed[43:117, 43:157].mean() > 0.85
-    outside = np.ones(shape, bool)
-    outside[39:121, 39:161] = False
-    assert not changed[outside].any()
 
 
 def test_two_shadows_overlapping_in_a_narrow_band_beside_the_sole_stay_table() -> None:
@@ -137,18 +128,29 @@ def test_a_sole_whose_texture_follows_the_tables_at_a_tenth_of_its_contrast_is_n
     # one window in ten on the matrix's grey soles), at a texture gain of 0.0-0.3: no shadow darkens the table
     # that much (the shadows the test accepts are 0.3-0.95). Here the whole sole does it: a faint copy of the
     # table's texture at 0.12 of its contrast, at the table's mean brightness.
-    rng = np.random.default_rng(13)
+    changed = _changed_on_grey_table(
+        13,
+        lambda rng, reference: (
+            110.0 + 0.12 * (reference[40:120, 40:160] - 110.0) + rng.normal(0.0, 1.0, (80, 120)).astype(np.float32)
+        ),
+    )
+    assert changed[43:117, 43:157].mean() > 0.9
+
+
+def _changed_on_grey_table(seed: int, sole: Callable[[np.random.Generator, np.ndarray], np.ndarray]) -> np.ndarray:
+    """The change mask of a grey textured table with an 80 x 120 sole (`sole(rng, reference)`) at rows 40-120,
+    columns 40-160, fitted on the table round it; asserts that nothing more than a pixel outside it changed."""
+    rng = np.random.default_rng(seed)
     shape = (160, 200)
     reference = 110.0 + 6.0 * _smooth_noise(rng, shape)
     current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    faint = 110.0 + 0.12 * (reference[40:120, 40:160] - 110.0) + rng.normal(0.0, 1.0, (80, 120)).astype(np.float32)
-    current[40:120, 40:160] = faint
+    current[40:120, 40:160] = sole(rng, reference)
     table = np.ones(shape, bool)
     table[30:130, 30:170] = False
     test = ChangeTest.fit(current, reference, table)
     assert test is not None
     changed = test.changed(current, reference)
-    assert changed[43:117, 43:157].mean() > 0.9
     outside = np.ones(shape, bool)
     outside[39:121, 39:161] = False
     assert not changed[outside].any()
+    return changed
