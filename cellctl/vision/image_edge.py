@@ -36,7 +36,12 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
-from cellctl.vision.edge_checks import edge_offset_pair, running_median
+from cellctl.vision.edge_checks import (
+    MAX_EDGE_OFFSET_MM,
+    NOTCH_MAX_HALF_CHORD_MM,
+    edge_offset_pair,
+    running_median,
+)
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import SOLE_MATCHER_PARAMS, Reconstruction
 from cellctl.vision.surface import SoleSurface
@@ -50,6 +55,17 @@ PLACE_EDGE_FROM_IMAGES = True  # outward moves; the module docstring says what g
 # 1.2-1.8 mm high (glue height 1.27 mm off with the outline right); and 3065's narrow spike, where the
 # nearer-the-outline reading of two cameras that both see the wall (`_paired`) had hidden it from the check.
 PLACE_EDGE_INWARD = True
+# Outward moves on one camera's evidence, only to fill a notch in the outline that the other camera's change
+# mask left (`notch_fill`; docs/sole-benchmark.md, session 8 "edge8": held-out 3029, 3073, 4029, 4041).
+FILL_NOTCHES = True
+# The outline's course across a notch (`_rim`) is fitted to this many points (1 mm apart) on either side: 3 mm of
+# outline fixes a quadratic's curvature against the ~0.2 mm scatter of the outline's points.
+NOTCH_RIM_POINTS = 3
+# A notch is local: the rim's chord no longer than the notch check's widest window (edge_checks, 14 mm).
+NOTCH_MAX_CHORD_MM = 2 * NOTCH_MAX_HALF_CHORD_MM
+# A dent the edge-offset check accepts is no notch to fill: the outline must lie inside its own course by more
+# than that check's limit (the 1 mm glue tolerance less the outline's scatter) before one camera may move it.
+NOTCH_MIN_DEPTH_MM = MAX_EDGE_OFFSET_MM
 EDGE_MOVE_MIN_MM = 0.5  # a sharp edge's offsets scatter by ~0.2 mm in the images: smaller is no evidence
 EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a texture line fools one mask)
 EDGE_MOVE_SMOOTHING_MM = 1.5
@@ -268,6 +284,100 @@ def edge_shift(
     return np.where(inward, moved_in, shift)
 
 
+def notch_fill(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    inner: tuple[np.ndarray, np.ndarray],
+    outer: tuple[np.ndarray, np.ndarray],
+    silent: Callable[[np.ndarray], np.ndarray],
+    raised: Footprint,
+) -> np.ndarray:
+    """How far to move each outline point out (0 where not) to fill a notch one camera's change mask left.
+
+    The depth outline keeps only the sole's points that the left camera's change mask marks
+    (sole_region.change_split). Where that mask misses edge pixels, because the table behind them in the left
+    view looks like the sole (held-out 3029: the sole at 57-61 DN, the taught table behind its edge at 54-55,
+    beside 50 further in), the outline has a notch 1-2 mm deep and 3-5 mm wide. The right camera looks at other
+    table pixels behind the sole's top edge and shows the edge where it is; the two cameras disagree and
+    `edge_shift` leaves the point. A notch sharper than a sole's edge bends (edge_checks.check_outline_notch) is
+    itself evidence against the camera that shows it, so here one camera's reading is taken where all of:
+
+    - it puts the edge beyond the outline by more than EDGE_MOVE_MIN_MM, innermost and outermost reading alike
+      (the move is by the nearer of the two), at every point of a stretch of consecutive such points; where
+      both cameras fill a point, the nearer of their edges;
+    - the outline across the stretch is a notch: it lies inside the course of the outline on either side
+      (`_rim`: a quadratic through the points beyond the notch's flanks, so a convex or concave edge's own
+      curvature is no notch) by more than NOTCH_MIN_DEPTH_MM somewhere, and the moved points stay within
+      EDGE_MOVE_AGREE_MM of that course (the camera fills the notch; it makes no bulge: a shadow or a
+      reflection that one camera's mask takes for the sole is not followed beyond the sole's course);
+    - depth measured the sole's height over the band crossed (`raised` cells up to SILENT_SHORT_OF_EDGE_MM
+      short of the new edge: the points were dropped by the mask, not missing from depth) and no point at the
+      table's height (`silent`: a contact shadow on a textured table is measured there).
+
+    The checks then judge the moved outline against both masks as before; the edge-offset check reads the other
+    camera's miss as an error of half its depth (a mean of both cameras), so a notch much deeper than twice its
+    0.8 mm limit over its 5 mm window stays refused."""
+    n = len(ring)
+    move = np.zeros(n)
+    with warnings.catch_warnings():  # NaN readings compare False
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for this in (0, 1):
+            reading = np.minimum(inner[this], outer[this])
+            beyond = reading > EDGE_MOVE_MIN_MM
+            if not beyond.any() or beyond.all():
+                continue
+            alone = beyond & silent(np.where(beyond, reading, 0.0))
+            fill = np.zeros(n)
+            start = int(np.flatnonzero(~beyond)[0])
+            label = np.cumsum(~np.roll(beyond, -start))
+            for lab in np.unique(label[np.roll(beyond, -start)]):
+                idx = (np.flatnonzero((label == lab) & np.roll(beyond, -start)) + start) % n
+                if not alone[idx].all():
+                    continue
+                rim = _rim(ring, idx)
+                if rim is None:
+                    continue
+                depth = rim(ring[idx])  # + inside the rim's curve
+                if depth.max() <= NOTCH_MIN_DEPTH_MM:
+                    continue  # not a notch a sole cannot have
+                if rim(ring[idx] + reading[idx, None] * outward[idx]).min() < -EDGE_MOVE_AGREE_MM:
+                    continue  # a bulge beyond the notch's rim
+                steps = np.arange(0.0, float(reading[idx].max()) + 1e-9, SILENT_STEP_MM)
+                xy = ring[idx, None] + steps[None, :, None] * outward[idx, None]
+                want = steps[None, :] <= reading[idx, None] - SILENT_SHORT_OF_EDGE_MM
+                if not np.all(raised.contains(xy.reshape(-1, 2)).reshape(want.shape) | ~want):
+                    continue
+                fill[idx] = reading[idx]
+            # Where both cameras fill, the nearer of their edges.
+            move = np.where((move > 0) & (fill > 0), np.minimum(move, fill), np.maximum(move, fill))
+    return move
+
+
+def _rim(ring: np.ndarray, idx: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The outline's course across a stretch `idx` of it, from NOTCH_RIM_POINTS points either side beyond its
+    flanks (one point skipped each side): a quadratic in the frame of the chord between them. Returns, for
+    points, how far each lies inside that curve (mm, + inward: counter-clockwise outline); None where the
+    stretch is too long to be a notch (the rim's chord longer than NOTCH_MAX_CHORD_MM)."""
+    n = len(ring)
+    side = np.arange(2, 2 + NOTCH_RIM_POINTS)
+    before, after = ring[(idx[0] - side) % n], ring[(idx[-1] + side) % n]
+    a, b = before[0], after[0]
+    chord = b - a
+    length = float(np.linalg.norm(chord))
+    if length < 1e-9 or length > NOTCH_MAX_CHORD_MM:
+        return None
+    along = chord / length
+    left = np.array([-along[1], along[0]])  # inward of a counter-clockwise outline
+    rim = np.vstack([before, after]) - a
+    coeff = np.polyfit(rim @ along, rim @ left, 2)
+
+    def inside(points: np.ndarray) -> np.ndarray:
+        rel = points - a
+        return rel @ left - np.polyval(coeff, rel @ along)
+
+    return inside
+
+
 def _stretch_lengths(flags: np.ndarray) -> np.ndarray:
     """Per point of the closed outline (1 mm apart), the length of the run of consecutive flagged points it is in
     (0 where not flagged)."""
@@ -360,6 +470,9 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)
     silent = depth_silent(ring, outward, reconstruction.table_points)
     shift = edge_shift(inner[0], inner[1], silent, outer, PLACE_EDGE_INWARD, blob_length_mm(reconstruction))
+    if FILL_NOTCHES and reconstruction.raised is not None:
+        fill = notch_fill(ring, outward, inner, outer, silent, reconstruction.raised)
+        shift = np.where((shift == 0) & (fill > 0), fill, shift)
     if not np.any(shift):
         return outline
     return ring + shift[:, None] * outward

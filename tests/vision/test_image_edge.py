@@ -11,10 +11,12 @@ from cellctl.vision.edge_checks import check_edge_offsets
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
     EDGE_MOVE_MAX_MM,
+    EDGE_MOVE_MIN_MM,
     _paired,
     _stretch_lengths,
     depth_silent,
     edge_shift,
+    notch_fill,
     stereo_offsets,
 )
 
@@ -237,3 +239,60 @@ def test_a_single_table_point_in_the_gap_stops_the_move() -> None:
     # A move that would end short of the measured table is allowed; none is proposed where there is no move.
     assert np.all(depth_silent(ring, outward, table_depth(RADIUS + 0.6))(proposed))
     assert not np.any(depth_silent(ring, outward, table_depth(RADIUS + 0.6))(np.zeros(len(ring))))
+
+
+def disc_depth(radius: float) -> Footprint:
+    """Raised cells (0.25 mm): the disc of `radius` round the centre, where depth measured the sole's height."""
+    cell = 0.25
+    n = int(2 * (RADIUS + 10) / cell)
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) * cell - (RADIUS + 10)
+    return Footprint((np.hypot(x, y) <= radius).astype(np.uint8), (-(RADIUS + 10), -(RADIUS + 10)), cell)
+
+
+def notched(depth: float, at: int = 100, half_width: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The circle's outline (1 mm apart) with a notch `depth` deep, 2 * half_width + 1 points wide, at point `at`
+    (a cosine profile: one camera's mask missed the edge pixels there); its outward normals (the true circle's)
+    and the notch's depth per point."""
+    ring, outward = circle(RADIUS)
+    k = np.arange(len(ring)) - at
+    dent = np.where(np.abs(k) <= half_width, depth * 0.5 * (1 + np.cos(np.pi * k / (half_width + 1))), 0.0)
+    return ring - dent[:, None] * outward, outward, dent
+
+
+def always(proposed: np.ndarray) -> np.ndarray:
+    return np.ones(len(proposed), bool)
+
+
+def test_one_camera_fills_a_notch_the_other_cameras_mask_left() -> None:
+    """A notch 1.5 mm deep over 5 mm: the right camera reads the edge where the circle is, the left one on the
+    notch (its mask missed the same pixels the outline did). Depth is raised to the circle and silent: the notch
+    is filled to the right camera's edge, nothing else moves. Where the left camera sees it too, the nearer
+    reading is taken."""
+    ring, outward, dent = notched(1.5)
+    right, left = dent.copy(), np.zeros(len(ring))
+    move = notch_fill(ring, outward, (left, right), (left, right), always, disc_depth(RADIUS))
+    inside = dent > EDGE_MOVE_MIN_MM
+    assert np.allclose(move[inside], dent[inside]) and np.all(move[~inside] == 0.0)
+    both = notch_fill(ring, outward, (right - 0.2, right), (right - 0.2, right), always, disc_depth(RADIUS))
+    assert np.allclose(both[inside], dent[inside] - 0.2)
+
+
+@pytest.mark.parametrize("case", ["no notch", "shallow", "overshoot", "no depth", "table in the gap", "ambiguous"])
+def test_no_fill_without_a_notch_depth_and_one_clear_edge(case: str) -> None:
+    """The notch is filled only where the outline has one (deeper than the edge-offset check's limit below its
+    course either side), the camera's edge stays on that course (a bulge beyond it is a shadow or a reflection
+    in one mask), depth measured the sole's height across the gap and no table point in it, and both of the
+    camera's readings put the edge beyond."""
+    depth = {"shallow": 0.7}.get(case, 1.5)
+    ring, outward, dent = notched(depth)
+    right = dent + (1.5 if case == "overshoot" else 0.0)
+    if case == "no notch":
+        ring, outward = circle(RADIUS)
+    inner, outer = right.copy(), right.copy()
+    if case == "ambiguous":
+        inner[100] = 0.0  # the innermost of equally good steps on the outline
+    raised = disc_depth(RADIUS - (depth if case == "no depth" else 0.0))
+    silent = (lambda p: np.zeros(len(p), bool)) if case == "table in the gap" else always
+    zero = np.zeros(len(ring))
+    move = notch_fill(ring, outward, (zero, inner), (zero, outer), silent, raised)
+    assert np.all(move == 0.0)
