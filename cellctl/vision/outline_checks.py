@@ -29,7 +29,10 @@ from cellctl.vision.edge_checks import (
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import edge_heights, projections, stereo_offsets, table_level
 from cellctl.vision.reconstruction import Reconstruction
+from cellctl.vision.shadow import shadow_cleared
 from cellctl.vision.surface import SoleSurface
+
+SHADOW_CLEARED = True  # the edge-offset check reads the masks without detached shadow slivers (vision.shadow)
 
 
 def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> CheckFailure | None:
@@ -86,8 +89,15 @@ def _check_outline_images(
     # where the wall is lit so that it hardly differs from the table, whichever the other camera confirms.
     # Read twice: the innermost of equally good steps, then the outermost (edge_checks.edge_offset_pair): where
     # evidence is missing (changed pixels excused on table-level cells) neither reading may clear the outline.
+    changed_left = reconstruction.changed_left
+    if SHADOW_CLEARED and reconstruction.rectified is not None and reconstruction.taught is not None:
+        # Slivers of a cast shadow beside the sole, detached from its silhouette (cellctl.vision.shadow).
+        levels = [np.zeros(len(ring)), np.maximum(edge_height, 0.0)]
+        (cur_left, cur_right), taught = reconstruction.rectified, reconstruction.taught
+        changed_left = shadow_cleared(changed_left, cur_left, taught.left, ring, outward, levels, left_pixel)
+        changed_right = shadow_cleared(changed_right, cur_right, taught.right, ring, outward, levels, right_pixel)
     cameras = (
-        (reconstruction.changed_left, left_pixel, left_centre),
+        (changed_left, left_pixel, left_centre),
         (changed_right, right_pixel, right_centre),
     )
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
