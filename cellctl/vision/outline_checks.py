@@ -29,7 +29,7 @@ from cellctl.vision.edge_checks import (
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import edge_heights, projections, stereo_offsets, table_level
 from cellctl.vision.reconstruction import Reconstruction
-from cellctl.vision.shadow import shadow_cleared
+from cellctl.vision.shadow import one_camera_shadows, shadow_cleared
 from cellctl.vision.surface import SoleSurface
 
 SHADOW_CLEARED = True  # the edge-offset check reads the masks without detached shadow slivers (vision.shadow)
@@ -89,18 +89,26 @@ def _check_outline_images(
     # where the wall is lit so that it hardly differs from the table, whichever the other camera confirms.
     # Read twice: the innermost of equally good steps, then the outermost (edge_checks.edge_offset_pair): where
     # evidence is missing (changed pixels excused on table-level cells) neither reading may clear the outline.
-    changed_left = reconstruction.changed_left
-    if SHADOW_CLEARED and reconstruction.rectified is not None and reconstruction.taught is not None:
-        # Slivers of a cast shadow beside the sole, detached from its silhouette (cellctl.vision.shadow).
-        levels = [np.zeros(len(ring)), np.maximum(edge_height, 0.0)]
-        (cur_left, cur_right), taught = reconstruction.rectified, reconstruction.taught
-        changed_left = shadow_cleared(changed_left, cur_left, taught.left, ring, outward, levels, left_pixel)
-        changed_right = shadow_cleared(changed_right, cur_right, taught.right, ring, outward, levels, right_pixel)
     cameras = (
-        (changed_left, left_pixel, left_centre),
+        (reconstruction.changed_left, left_pixel, left_centre),
         (changed_right, right_pixel, right_centre),
     )
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
+    if SHADOW_CLEARED and reconstruction.rectified is not None and reconstruction.taught is not None:
+        # A cast shadow's slivers beside the sole that one camera's mask shows and the other's does not
+        # (cellctl.vision.shadow): read that camera without them.
+        levels = [np.zeros(len(ring)), np.maximum(edge_height, 0.0)]
+        cleared = tuple(
+            (shadow_cleared(changed, current, reference, ring, outward, levels, pixel), pixel, centre)
+            for (changed, pixel, centre), current, reference in zip(
+                cameras,
+                reconstruction.rectified,
+                (reconstruction.taught.left, reconstruction.taught.right),
+                strict=True,
+            )
+        )
+        inner_cleared, outer_cleared = stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
+        inner, outer = one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared)
     problem = check_edge_offsets(list(inner))
     if problem is not None:
         return problem

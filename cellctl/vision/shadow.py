@@ -31,7 +31,7 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.vision.change import MAX_SHADOW_FACTOR, NOISE_FLOOR_DN, PIXEL_SIGMAS
-from cellctl.vision.edge_checks import EDGE_SEARCH_MM, EDGE_SEARCH_STEP_MM
+from cellctl.vision.edge_checks import EDGE_SEARCH_MM, EDGE_SEARCH_STEP_MM, MAX_EDGE_OFFSET_MM
 
 # The unchanged run that separates a shadow's sliver from the silhouette: two pixels or more (0.39 mm per pixel
 # on the table at the default rig; the change mask's 3 x 3 majority removes a single missed pixel, so a run of
@@ -41,6 +41,14 @@ DETACHED_GAP_MM = 0.75
 # blur): they say nothing about the table's brightness there.
 EDGE_BLEND_MM = 0.5
 PHOTOMETRY_STRIDE = 4  # every 4th pixel in each direction for the exposure gain and noise (robust statistics)
+# The table's own texture, darkened: per sample, the current image against the reference over the samples at
+# the same offset of the outline points within TEXTURE_REACH_POINTS either side (a shadow's band runs along the
+# sole's edge, 15 mm of it at one level), each detrended by a line (the lamps' falloff along the outline is
+# shared by a sole lit by the same lamps). 15 independent samples correlate by chance with a spread of about
+# 1 / sqrt(15 - 3) = 0.29: above SHADOW_TEXTURE_NCC (two spreads) the table's texture is there; a dark rim on the
+# sole, which a ratio to the taught table cannot tell from a shadow, reads -0.5..0.5 on the matrix soles.
+TEXTURE_REACH_POINTS = 10
+SHADOW_TEXTURE_NCC = 0.6
 
 
 def photometry(current: np.ndarray, reference: np.ndarray, changed: np.ndarray) -> tuple[float, float]:
@@ -105,9 +113,15 @@ def shadow_cleared(
         dark_gap = ~np.any(settled & ~shadowed, axis=1)  # the table next to the sole is in shadow
         like_table = (ratio >= low[:, None]) & (ratio <= high[:, None]) & shadowed & dark_gap[:, None]
         clear = on & beyond & like_table
-        if np.any(clear):
-            flat = clear.ravel()
-            cleared[row[flat], col[flat]] = False
+        if not np.any(clear):
+            continue
+        # The table's texture in the band and in the gap (a rim of the sole the change test missed in part is
+        # as dark beside its changed part as a shadow, but it has no table texture).
+        textured = _along_outline_ncc(cur_img[row, col].reshape(n, k), ref, known) > SHADOW_TEXTURE_NCC
+        gap_textured = 2 * np.sum(settled & textured, axis=1) > np.sum(settled, axis=1)
+        clear &= textured & gap_textured[:, None]
+        flat = clear.ravel()
+        cleared[row[flat], col[flat]] = False
     return cleared
 
 
@@ -136,3 +150,50 @@ def _detached(on: np.ndarray, off: np.ndarray, gap: int) -> tuple[np.ndarray, np
     gap_run = (index >= start[:, None]) & (index < end[:, None]) & has[:, None]
     beyond = (index >= end[:, None]) & has[:, None]
     return beyond, gap_run
+
+
+def _along_outline_ncc(current: np.ndarray, reference: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Per sample (outline points x offsets, closed outline): the correlation of current and reference over the
+    samples at the same offset of the outline points within TEXTURE_REACH_POINTS either side, each less its
+    least-squares line along the outline; 0 where any of them is unknown."""
+    w = TEXTURE_REACH_POINTS
+    shifts = range(-w, w + 1)
+    t = np.arange(-w, w + 1, dtype=np.float64)
+    count, tt = float(len(t)), float(np.dot(t, t))
+    cur, ref = current.astype(np.float64), reference.astype(np.float64)
+    sums = {name: np.zeros_like(cur) for name in ("c", "r", "tc", "tr", "cc", "rr", "cr")}
+    complete = np.ones(known.shape, bool)
+    for j, shift in zip(t, shifts, strict=True):
+        c, r = np.roll(cur, -shift, axis=0), np.roll(ref, -shift, axis=0)
+        complete &= np.roll(known, -shift, axis=0)
+        sums["c"] += c
+        sums["r"] += r
+        sums["tc"] += j * c
+        sums["tr"] += j * r
+        sums["cc"] += c * c
+        sums["rr"] += r * r
+        sums["cr"] += c * r
+    # Sums of products of the residuals after the line (t centred: the line's slope is S_tx / S_tt).
+    cr = sums["cr"] - sums["c"] * sums["r"] / count - sums["tc"] * sums["tr"] / tt
+    cc = sums["cc"] - sums["c"] ** 2 / count - sums["tc"] ** 2 / tt
+    rr = sums["rr"] - sums["r"] ** 2 / count - sums["tr"] ** 2 / tt
+    ncc = cr / np.sqrt(np.maximum(cc * rr, 1e-12))
+    return np.where(complete, ncc, 0.0)
+
+
+def one_camera_shadows(
+    raw: tuple[np.ndarray, np.ndarray], cleared: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per camera (left, right) its edge offsets (cellctl.vision.image_edge.stereo_offsets) read without the shadow
+    samples where the other camera's own reading, as read from its whole mask, finds the edge within
+    MAX_EDGE_OFFSET_MM of the outline or inside it; elsewhere as read from the whole mask. The sole's edge
+    beyond the outline is in both cameras' silhouettes (each at its own height); a cast shadow's sliver, left
+    changed where the change test's windows met two shadow levels, lies where each image's windows happen to
+    fail, and a dark band of the sole that the photometry alone cannot tell from a shadow (a rim on a weakly
+    textured table) is seen by both."""
+    result = []
+    for own, own_cleared, other in ((raw[0], cleared[0], raw[1]), (raw[1], cleared[1], raw[0])):
+        with np.errstate(invalid="ignore"):
+            confirmed = np.isfinite(other) & (np.abs(other) <= MAX_EDGE_OFFSET_MM)
+        result.append(np.where(confirmed, own_cleared, own))
+    return result[0], result[1]
