@@ -177,9 +177,8 @@ def _along_outline_ncc(current: np.ndarray, reference: np.ndarray, known: np.nda
     cr = sums["cr"] - sums["c"] * sums["r"] / count - sums["tc"] * sums["tr"] / tt
     cc = sums["cc"] - sums["c"] ** 2 / count - sums["tc"] ** 2 / tt
     rr = sums["rr"] - sums["r"] ** 2 / count - sums["tr"] ** 2 / tt
-    ncc = np.where(complete, cr / np.sqrt(np.maximum(cc * rr, 1e-12)), 0.0)
-    # A band ends somewhere along the outline: a sample near its end is judged by the window on its side of it.
-    return np.maximum(ncc, np.maximum(np.roll(ncc, w, axis=0), np.roll(ncc, -w, axis=0)))
+    ncc = cr / np.sqrt(np.maximum(cc * rr, 1e-12))
+    return np.where(complete, ncc, 0.0)
 
 
 def one_camera_shadows(

@@ -43,7 +43,8 @@ def scene(rim: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r, angle = _radius_and_angle()
     reference = 100.0 + _texture(1, 6.0)
     light = np.ones_like(r)
-    side = np.sin(angle) > 0.3
+    side = np.sin(angle) > 0.2  # the shadow's side; its two levels meet (the slivers) away from its ends
+    middle = np.sin(angle) > 0.6
     if not rim:
         light[side & (r < 48.0)] = 0.55
         light[side & (r >= 48.0) & (r < 60.0)] = 0.8
@@ -56,7 +57,7 @@ def scene(rim: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         current[band] = 55.0 + _texture(3, 3.0)[band]
         changed &= ~(side & (r >= RADIUS - 2.0) & (r < RADIUS - 1.0))  # the rim's inner mm missed
     else:
-        changed |= side & (r >= RADIUS + 1.5) & (r < RADIUS + 3.0)
+        changed |= middle & (r >= RADIUS + 1.5) & (r < RADIUS + 3.0)
     current = current + np.random.default_rng(4).normal(0.0, 1.0, current.shape)
     return current.astype(np.float32), reference.astype(np.float32), changed
 
@@ -91,8 +92,7 @@ def test_the_slivers_of_a_shadow_are_cleared_and_the_true_outline_passes() -> No
     r, _ = _radius_and_angle()
     assert not np.any((images[2] & ~cleared)[r < RADIUS])  # nothing of the sole
     found = _offsets(outline, outward, cleared)
-    # At the shadow's ends the texture's windows along the outline straddle its border: a point or two stays.
-    assert np.count_nonzero(np.abs(found) > 0.5) <= 4
+    assert np.nanmax(np.abs(found)) <= 0.5
     assert check_edge_offsets([found]) is None
 
 
