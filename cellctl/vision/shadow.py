@@ -1,5 +1,5 @@
 """Cast shadows beside the sole in a camera's change mask, as the edge-offset check reads it
-(cellctl.vision.edge_checks.edge_offset_pair; docs/measurements.md, Validity).
+(cellctl.vision.edge_checks.edge_offset_pair, cellctl.vision.outline_checks; docs/measurements.md, Validity).
 
 A lamp low beside the cell throws the sole's shadow onto the table, and where two lamps' shadows overlap a
 darker band lies next to the sole. The change test (cellctl.vision.change) takes most of the shadowed table
@@ -11,17 +11,26 @@ soles of sets 2000-4000).
 
 Here such samples are told from the sole along each profile the check reads, on evidence of the images
 themselves, not of depth (a shadow too dark for the matcher has no depth, and a black edge band dragged to
-the table's height by the matcher reads table-level as a shadow does):
+the table's height by the matcher reads table-level as a shadow does). A changed sample is shadow where
+all of these hold (`shadow_cleared`):
 
-- detached: beyond a run of at least DETACHED_GAP_MM of unchanged samples that itself lies beyond changed
-  ones (the sole's silhouette is one run from the inside out; a missed pixel inside it is one pixel wide);
-- the table darkened: the sample's brightness over the taught table's lies within the range the unchanged
-  table on the same profile beyond the silhouette shows (between the shadow levels there, up to the sensor
-  noise), and below MAX_SHADOW_FACTOR of the camera's exposure, as the unchanged run next to the sole also is.
+- detached: it lies beyond a run of at least DETACHED_GAP_MM of unchanged samples that itself lies beyond
+  changed ones (the sole's silhouette is one run from the inside out; a missed pixel inside it is one pixel
+  wide);
+- the table darkened: its brightness over the taught table's lies within the range the unchanged table on the
+  same profile beyond the silhouette shows (up to the sensor noise), below MAX_SHADOW_FACTOR of the camera's
+  exposure, and the unchanged run next to the sole is that dark too;
+- the table's texture: it and most of the unchanged run correlate with the taught picture along the outline
+  (SHADOW_TEXTURE_NCC). A dark rim of the sole whose inner part the change test missed passes the two tests
+  above exactly as a shadow does (matrix sole 2042, no shadow: 178 rim pixels without this test, 13 with it).
+
+And the check reads a camera without its shadow samples only where the other camera's own reading finds the
+edge within MAX_EDGE_OFFSET_MM of the outline (`one_camera_shadows`): the sole's edge beyond the outline is in
+both cameras' silhouettes, a sliver lies where one image's windows failed.
 
 A sole's own edge band is changed from the inside out without such a gap, so an outline short of the edge is
-read as before (and refused); a band beyond a gap that is brighter than the table around it, or not darker
-than taught, stays changed.
+read as before and refused. Not handled: a shadow band the change test left changed right up to the sole's
+edge (no gap), which the check still reads as the sole (2059, 3039, 3064).
 """
 
 from __future__ import annotations
@@ -43,10 +52,11 @@ EDGE_BLEND_MM = 0.5
 PHOTOMETRY_STRIDE = 4  # every 4th pixel in each direction for the exposure gain and noise (robust statistics)
 # The table's own texture, darkened: per sample, the current image against the reference over the samples at
 # the same offset of the outline points within TEXTURE_REACH_POINTS either side (a shadow's band runs along the
-# sole's edge, 15 mm of it at one level), each detrended by a line (the lamps' falloff along the outline is
-# shared by a sole lit by the same lamps). 15 independent samples correlate by chance with a spread of about
-# 1 / sqrt(15 - 3) = 0.29: above SHADOW_TEXTURE_NCC (two spreads) the table's texture is there; a dark rim on the
-# sole, which a ratio to the taught table cannot tell from a shadow, reads -0.5..0.5 on the matrix soles.
+# sole's edge: 21 mm of it at one level), each less its line along the outline (the lamps' falloff is shared
+# by a sole lit by the same lamps). 21 independent samples correlate by chance with a spread of about
+# 1 / sqrt(21 - 3) = 0.24; SHADOW_TEXTURE_NCC is 2.5 of those. The samples 1 mm apart are 2.6 pixels apart, and
+# a smooth table texture or a sole's own shading makes neighbours alike, so chance runs higher than that: a
+# dark rim read 0.6-0.7 at a few of its samples on one matrix sole (2042); the shadow bands 0.5-0.95.
 TEXTURE_REACH_POINTS = 10
 SHADOW_TEXTURE_NCC = 0.6
 
@@ -103,8 +113,9 @@ def shadow_cleared(
         if band is None:
             continue
         beyond, gap_run = band
-        # The unchanged table on the profile beyond the silhouette (the gap, less the samples that may blend with
-        # the sole's edge, EDGE_BLEND_MM; and the table past the band): its brightness range, noise included.
+        # The unchanged table on the profile beyond the silhouette (the gap, less the samples that may blend
+        # with the sole's edge, EDGE_BLEND_MM; and the table past the band): its brightness range, noise
+        # included.
         settled = gap_run & (np.cumsum(gap_run, axis=1) > blend)  # the gap less its first samples
         table = settled | (off & beyond)
         inf = np.float32(np.inf)
