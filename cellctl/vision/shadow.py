@@ -150,7 +150,7 @@ def _detached(on: np.ndarray, off: np.ndarray, gap: int) -> tuple[np.ndarray, np
     start_ok = np.zeros((n, k - gap + 1), bool)
     start_ok[:, 1:] = seen_on[:, : k - gap]  # a changed sample before the run's start
     starts = run & start_ok
-    has = starts.any(axis=1)
+    has: np.ndarray = np.asarray(starts.any(axis=1))
     if not np.any(has):
         return None
     start = np.where(has, np.argmax(starts, axis=1), k)
