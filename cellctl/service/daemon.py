@@ -141,10 +141,10 @@ class Daemon:
                 self._set_idle(journal, True)
                 checkpoints.idle()
                 trigger = self.link.wait_trigger(timeout_s=TICK_S)
-                self._set_idle(journal, False)
-                if trigger is None:
+                if trigger is None:  # still idle: the artifact writer's settling time runs on across ticks
                     self._probe_cameras()
                     continue
+                self._set_idle(journal, False)
                 self._answer(journal, trigger)
             self._stop.linger(self.link, lambda late: self._answer(journal, late))
         finally:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -77,6 +78,19 @@ def test_a_step_starts_only_once_the_service_has_waited_for_a_trigger_for_the_se
     assert writer.flush(timeout_s=10.0)
     writer.close()
     assert writer.ran == [1]
+
+
+def test_idle_told_again_and_again_does_not_restart_the_settling_time(journal: Journal) -> None:
+    """The daemon says idle at every tick of its wait for a trigger (0.25 s): only a cycle restarts the clock."""
+    writer = StepWriter(keep=3)
+    submit(writer, journal, 1)
+    deadline = time.monotonic() + 10.0
+    while not writer.step_started.is_set() and time.monotonic() < deadline:
+        writer.set_idle(True)  # more often than IDLE_SETTLE_S
+        writer.step_started.wait(IDLE_SETTLE_S / 4)
+    assert writer.step_started.is_set()
+    assert writer.flush(timeout_s=10.0)
+    writer.close()
 
 
 def test_a_busy_line_keeps_the_newest_jobs_and_drops_the_oldest(journal: Journal) -> None:
