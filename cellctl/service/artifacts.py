@@ -4,11 +4,13 @@ and PLY polyline (table frame, cellctl.vision.export), and the left image with t
 Written after the PLC has its answer, and only while the service is idle: the PLC may trigger again as
 soon as it has read a result, and on 2 cores artifacts written beside a cycle slowed its match by as much
 as they saved (docs/sole-benchmark.md). So `ArtifactWriter` keeps the newest few cycles' jobs and a
-writer thread writes them step by step, each step started only while no cycle runs; jobs that a
-busy line never leaves time for are dropped, oldest first (counted and logged). At stop the daemon's own
+writer thread writes them step by step, each step started only once the service has waited IDLE_SETTLE_S
+for a trigger (a PLC triggering back to back does so sooner); jobs that a busy line never leaves time for are
+dropped, oldest first (counted and logged). At stop the daemon's own
 thread writes what is still pending. Files go to a staging folder renamed into state_dir/cycles/<row> when
 complete, so a job given up at stop leaves nothing behind. The journal is only touched from the daemon's
-thread (`attach_finished`), as SQLite connections belong to one thread. A failure here is logged and never
+thread (`attach_finished`, commits without an fsync of their own: cellctl.service.journal), as SQLite
+connections belong to one thread. A failure here is logged and never
 fails a cycle.
 """
 
@@ -16,8 +18,10 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import shutil
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +40,14 @@ from cellctl.vision.reconstruction import Reconstruction
 log = logging.getLogger(__name__)
 
 MAX_PENDING = 4  # jobs kept waiting for idle time (each holds a frame pair and the sole's points, ~10 MB)
+#: How long the service must have been waiting for a trigger before a step starts. A step runs whole (the PLY
+#: with its normals, the overlay's drawing: 25-120 ms), so one begun just before a trigger runs beside the next
+#: cycle's first stages and takes a core from its match. A PLC whose next shoe is already waiting triggers
+#: within a few of its scans after reading the answer (10-40 ms measured in the back-to-back demo, median
+#: 25-35), and then 40 of 120 cycles had a step beside them (their match +50 %, docs/benchmarks.md); a line whose
+#: robot glues the shoe before the next trigger leaves seconds. 0.2 s lies between, with ~5x margin either way;
+#: back-to-back, the jobs wait (the newest MAX_PENDING are written at stop).
+IDLE_SETTLE_S = 0.2
 # The writer thread keeps normal priority: a niced thread that holds the GIL (Open3D's PLY writer, numpy)
 # and is then starved by the scheduler blocks the daemon's thread behind it (seen at load 20: cycles over
 # the PLC link's 5 s liveness). Starting steps only while idle is what keeps it out of the cycles.
@@ -88,7 +100,8 @@ class ArtifactWriter:
         self._finished: collections.deque[WrittenArtifacts] = collections.deque()
         self._lock = threading.Lock()
         self._work = threading.Condition(self._lock)
-        self._idle = False  # the service waits for a trigger: the writer may work
+        self._idle = False  # the service waits for a trigger: the writer may work once it has for IDLE_SETTLE_S
+        self._idle_since = 0.0  # time.monotonic() when the service began waiting (-inf at stop: no settling)
         self._closing = False
         self._writing = False
         self._abandon = False  # the thread's job in progress was given up at stop: discard it
@@ -121,6 +134,8 @@ class ArtifactWriter:
     def set_idle(self, idle: bool) -> None:
         """Whether the service waits for a trigger (the writer works) or runs a cycle (the writer waits)."""
         with self._work:
+            if idle and not self._idle:
+                self._idle_since = time.monotonic()
             self._idle = idle
             self._work.notify_all()
 
@@ -143,7 +158,7 @@ class ArtifactWriter:
         with self._work:
             jobs = list(self._pending)
             self._pending.clear()
-            self._idle = True
+            self._idle, self._idle_since = True, -math.inf
             self._work.notify_all()
         for job in jobs:
             self._finish(job, self._write(job, wait_idle=False))
@@ -169,7 +184,7 @@ class ArtifactWriter:
     def _run(self) -> None:
         while True:
             with self._work:
-                self._work.wait_for(lambda: (self._pending and self._idle) or self._closing)
+                self._wait_settled(lambda: bool(self._pending))
                 if self._closing:
                     return
                 job = self._pending.popleft()
@@ -194,7 +209,7 @@ class ArtifactWriter:
             for step in self._steps(job):
                 if wait_idle:
                     with self._work:
-                        self._work.wait_for(lambda: self._idle or self._closing)
+                        self._wait_settled()
                 step()
         except Exception as exc:
             log.warning("cycle %d: artifacts not kept: %s", job.cycle, exc)
@@ -210,7 +225,18 @@ class ArtifactWriter:
         writing at stop, does not)."""
         if threading.current_thread() is self._thread:
             with self._work:
-                self._work.wait_for(lambda: self._idle or self._closing)
+                self._wait_settled()
+
+    def _wait_settled(self, ready: Callable[[], bool] = lambda: True) -> None:
+        """Until `ready()` and the service has waited for a trigger for IDLE_SETTLE_S, or closing (lock held)."""
+        while not self._closing:
+            if self._idle and ready():
+                left = self._idle_since + IDLE_SETTLE_S - time.monotonic()
+                if left <= 0:
+                    return
+                self._work.wait(left)
+            else:
+                self._work.wait()
 
 
 def artifact_steps(

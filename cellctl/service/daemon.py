@@ -7,7 +7,8 @@ One cycle, in this order (docs/modbus.md, handshake):
   1. wait for a trigger (PlcLink sets BUSY before it acknowledges the PLC's write);
   2. grab a synchronised pair; a CameraError clears CAMERAS_OK and answers with its error code;
   3. reconstruct and measure; an invalid measurement answers with the matching scene error code;
-  4. journal the outcome durably (SQLite commit) - only then
+  4. journal the outcome durably (SQLite commit; its WAL checkpoints run on a thread of their own between
+     cycles, journal.WalCheckpointer) - only then
   5. publish it to the PLC (result or error, one atomic update);
   6. hand the PLY and overlay PNG to the artifact writer, which writes them while the service waits for
      the next trigger (never during a cycle: cellctl.service.artifacts).
@@ -43,7 +44,7 @@ from cellctl.service.codes import CycleFailed
 from cellctl.service.config import CellConfig
 from cellctl.service.events import CycleDone
 from cellctl.service.glue_output import GlueOutput
-from cellctl.service.journal import Journal
+from cellctl.service.journal import Journal, WalCheckpointer
 from cellctl.service.measuring import CellMeasurer
 from cellctl.service.outcome import OutcomeListener
 from cellctl.service.recipes import Recipe, RecipeBook
@@ -108,6 +109,7 @@ class Daemon:
         """Serve until request_stop(); raises if the journal or the Modbus port cannot be opened."""
         _check_watchdog(self.config)
         journal = Journal.open(self.config.journal.state_dir)
+        checkpoints = WalCheckpointer(journal)
         try:
             _resume(journal, self.link)
             # Cameras first: preparing them may take long (the simulator renders its scenes), and the
@@ -116,7 +118,7 @@ class Daemon:
             self._warm_up()
             opcua = self._start_opcua()  # before the link too: asyncua loads its address space for seconds
             try:
-                self._serve_link(journal)
+                self._serve_link(journal, checkpoints)
             finally:
                 if opcua is not None:
                     opcua.stop()
@@ -124,10 +126,11 @@ class Daemon:
             self.source.close()
             if self._artifacts is not None:
                 finish_artifacts(self._artifacts, journal)
-            journal.close()
+            checkpoints.close()
+            journal.close()  # checkpoints what is left
             log.info("stopped after %d cycles", self.status.cycles_done)
 
-    def _serve_link(self, journal: Journal) -> None:
+    def _serve_link(self, journal: Journal, checkpoints: WalCheckpointer) -> None:
         self.link.start()
         try:
             self.status.ready()
@@ -136,11 +139,12 @@ class Daemon:
             while not self._stop.requested:
                 self.status.notifier.notify(WATCHDOG=1)
                 self._set_idle(journal, True)
+                checkpoints.idle()
                 trigger = self.link.wait_trigger(timeout_s=TICK_S)
-                self._set_idle(journal, False)
-                if trigger is None:
+                if trigger is None:  # still idle: the artifact writer's settling time runs on across ticks
                     self._probe_cameras()
                     continue
+                self._set_idle(journal, False)
                 self._answer(journal, trigger)
             self._stop.linger(self.link, lambda late: self._answer(journal, late))
         finally:

@@ -29,15 +29,24 @@ def project_to_left(calib: Calibration, camera_to_table: np.ndarray, points: np.
 
 
 def draw_overlay(
-    left: np.ndarray, calib: Calibration, reconstruction: ReconstructionResult, measurement: MeasurementResult
+    left: np.ndarray,
+    calib: Calibration,
+    reconstruction: ReconstructionResult,
+    measurement: MeasurementResult,
+    pause: Callable[[], None] = lambda: None,
 ) -> np.ndarray:
-    """Left image with edge, glue path and heel/toe points, next to a top view of the cloud (BGR)."""
+    """Left image with edge, glue path and heel/toe points, next to a top view of the cloud (BGR).
+
+    `pause()` is called between the parts (the left image, the top view, ~40-80 ms each): a writer drawing
+    between the cell's cycles waits there while a cycle runs (cellctl.service.imagelog)."""
     image = draw_on_left(left, calib, measurement)
     _caption(image, measurement)
     _legend(image)
+    pause()
     top = top_view(reconstruction, measurement)
     if top is None:
         return image
+    pause()
     scale = image.shape[0] / top.shape[0]
     top = cv2.resize(top, (max(1, int(round(top.shape[1] * scale))), image.shape[0]), interpolation=cv2.INTER_AREA)
     z = reconstruction.sole_points[:, 2]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from cellctl.cameras.base import StereoFrame
-from cellctl.service.artifacts import MAX_PENDING, ArtifactJob, ArtifactWriter
+from cellctl.service.artifacts import IDLE_SETTLE_S, MAX_PENDING, ArtifactJob, ArtifactWriter
 from cellctl.service.journal import CycleRecord, Journal
 from cellctl.sim.rig import default_rig
 
@@ -57,6 +58,39 @@ def test_nothing_is_written_while_a_cycle_runs_and_all_of_it_once_idle(journal: 
     writer.close()
     assert writer.ran == [1]
     assert [r.ply_path is not None for r in journal.last()] == [True]
+
+
+def test_a_step_starts_only_once_the_service_has_waited_for_a_trigger_for_the_settling_time(
+    journal: Journal,
+) -> None:
+    """A PLC triggering back to back comes within IDLE_SETTLE_S of the answer: no step starts in such a gap."""
+    gap_s = 0.05  # a back-to-back PLC's gap between answer and trigger (10-40 ms measured in the demo)
+    assert IDLE_SETTLE_S >= 2 * gap_s
+    writer = StepWriter(keep=3)
+    submit(writer, journal, 1)
+    for _ in range(3):  # three short gaps between back-to-back cycles
+        writer.set_idle(True)
+        assert not writer.step_started.wait(gap_s)
+        writer.set_idle(False)
+    assert not writer.step_started.wait(0.4)  # busy: nothing starts however long it takes
+    writer.set_idle(True)  # a gap longer than the settling time: the job is written
+    assert writer.step_started.wait(10.0)
+    assert writer.flush(timeout_s=10.0)
+    writer.close()
+    assert writer.ran == [1]
+
+
+def test_idle_told_again_and_again_does_not_restart_the_settling_time(journal: Journal) -> None:
+    """The daemon says idle at every tick of its wait for a trigger (0.25 s): only a cycle restarts the clock."""
+    writer = StepWriter(keep=3)
+    submit(writer, journal, 1)
+    deadline = time.monotonic() + 10.0
+    while not writer.step_started.is_set() and time.monotonic() < deadline:
+        writer.set_idle(True)  # more often than IDLE_SETTLE_S
+        writer.step_started.wait(IDLE_SETTLE_S / 4)
+    assert writer.step_started.is_set()
+    assert writer.flush(timeout_s=10.0)
+    writer.close()
 
 
 def test_a_busy_line_keeps_the_newest_jobs_and_drops_the_oldest(journal: Journal) -> None:

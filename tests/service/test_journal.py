@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from cellctl.cli import main
-from cellctl.service.journal import CycleRecord, Journal
+from cellctl.service.journal import CycleRecord, Journal, WalCheckpointer
 
 
 def ok(cycle: int) -> CycleRecord:
@@ -123,3 +123,61 @@ def test_results_command_text_json_csv(tmp_path: Path, capsys: pytest.CaptureFix
 def test_results_without_a_journal_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["results", "--state-dir", str(tmp_path / "none")]) == 2
     assert "no journal at" in capsys.readouterr().err
+
+
+def big(cycle: int) -> CycleRecord:
+    """A row of ~60 KB (a 2000-point glue path, the PLC's maximum): ~15 WAL pages."""
+    record = ok(cycle)
+    record.glue_path = [[100.0 + i / 7, 50.0 - i / 3, 20.0 + i / 11] for i in range(2000)]
+    return record
+
+
+def test_with_a_checkpointer_no_commit_checkpoints_the_wal_and_the_thread_does_between_cycles(tmp_path: Path) -> None:
+    journal = Journal.open(tmp_path)
+    database = tmp_path / "journal.sqlite3"
+    checkpoints = WalCheckpointer(journal, every=1000)  # none due while the WAL grows past SQLite's 1000 pages
+    start = database.stat().st_size
+    for cycle in range(1, 91):  # ~1350 WAL pages: SQLite's own checkpoint would have copied them into the file
+        journal.record(big(cycle))
+        checkpoints.idle()
+    assert database.stat().st_size == start  # no commit checkpointed
+    assert checkpoints.done == 0
+    checkpoints._every = 32
+    checkpoints.idle()  # the service waits for a trigger: the thread checkpoints
+    assert checkpoints.wait_done(1, timeout_s=10.0)
+    assert database.stat().st_size > start + 90 * 50_000
+    reader = Journal.open(tmp_path, readonly=True)
+    assert [r.cycle for r in reader.last(2)] == [89, 90] and len(reader.last()[0].glue_path) == 2000
+    reader.close()
+    checkpoints.close()
+    assert journal._db.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 1000  # SQLite's own again
+    journal.close()
+
+
+def test_a_checkpoint_is_requested_once_every_so_many_commits(tmp_path: Path) -> None:
+    journal = Journal.open(tmp_path)
+    checkpoints = WalCheckpointer(journal, every=3)
+    for cycle in range(1, 8):
+        journal.record(ok(cycle))
+        checkpoints.idle()
+        if cycle in (3, 6):
+            assert checkpoints.wait_done(cycle // 3, timeout_s=10.0)
+    assert checkpoints.done == 2
+    row = journal.record(ok(8))
+    journal.attach_artifacts(row, None, None)  # artifact updates count too
+    checkpoints.idle()
+    assert checkpoints.wait_done(3, timeout_s=10.0)
+    checkpoints.close()
+    journal.close()
+
+
+def test_artifact_updates_commit_and_leave_the_journal_synced_at_commit(tmp_path: Path) -> None:
+    journal = Journal.open(tmp_path)
+    row = journal.record(ok(1))
+    journal.attach_artifacts(row, tmp_path / "sole.ply", None)
+    assert journal._db.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL again for the next cycle's row
+    assert not journal._db.in_transaction
+    reader = Journal.open(tmp_path, readonly=True)
+    assert reader.get(row).ply_path == str(tmp_path / "sole.ply")  # committed: another connection sees it
+    reader.close()
+    journal.close()

@@ -273,3 +273,25 @@ def test_a_png_writers_held_buffers_stay_out_of_mallocs_heap() -> None:
     assert np.array_equal(held, picture)
     # malloc hands out none of the 3.9 MB: neither from its heap (uordblks) nor as a mapping of its own (hblkhd).
     assert (after.uordblks + after.hblkhd) - (before.uordblks + before.hblkhd) < 1 << 20
+
+
+def test_the_image_logs_overlay_waits_between_its_parts_while_a_cycle_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The overlay's two drawings (left image, top view) each start only between cycles, like the PNG bands."""
+    import types
+
+    import cellctl.vision.overlay as overlay
+
+    calls: list[str] = []
+    left = np.zeros((200, 80, 3), np.uint8)  # tall enough for the height scale beside it
+    monkeypatch.setattr(overlay, "draw_on_left", lambda image, calib, measurement: calls.append("left") or left.copy())
+    monkeypatch.setattr(overlay, "_caption", lambda image, measurement: None)
+    monkeypatch.setattr(overlay, "_legend", lambda image: None)
+    monkeypatch.setattr(overlay, "top_view", lambda rec, measurement: calls.append("top") or left[:, :40].copy())
+    log = ImageLog(Path("unused"), object(), ImageLogConfig())  # type: ignore[arg-type]  # the calib is not read
+    monkeypatch.setattr(log, "_wait_between_cycles", lambda: calls.append("wait"))
+    measured = types.SimpleNamespace(
+        reconstruction=types.SimpleNamespace(sole_points=np.array([[0.0, 0.0, 1.0], [1.0, 1.0, 9.0]])), measurement=None
+    )
+    picture = log._overlay(record(1, True), frame(1), measured)  # type: ignore[arg-type]
+    assert calls == ["left", "wait", "top", "wait"]
+    assert picture.shape[0] == 200
