@@ -6,10 +6,12 @@
  * 1280x1024x192).  Pass 1 runs the paths that come from above (S is
  * written), pass 2 the paths from below (S is added to), and pass 3 the two
  * horizontal paths per row, which completes S for the row while it is still in
- * cache and hands it to the disparity selection.  Passes 1 and 2 split each
- * row between the threads and wait for each other at the end of the row;
- * pass 3 splits rows.  Every cell is computed by the same integer code
- * whatever the thread count, so the result does not depend on it. */
+ * cache and hands it to the disparity selection.  With 4 paths (the default)
+ * passes 1 and 2 give each thread whole column stripes, which need no
+ * synchronisation; with 8 paths the diagonals read the neighbouring columns,
+ * so the threads split each row and meet at a barrier before the next
+ * (passes.c).  Pass 3 splits rows.  Every cell is computed by the same integer
+ * code whatever the thread count, so the result does not depend on it. */
 #include <string.h>
 
 #include "aggregate.h"
