@@ -117,11 +117,9 @@ class ChangeTest:
         gives the same pixels as the whole image).
 
         `raised` (bool image, optional): pixels where depth puts no table within reach (the caller's depth).
-        There the half-contrast rule takes the contrast of the change of the pixel's own sign, and the local
-        shadow fit needs a majority (RAISED_LOCAL_FIT_SHARE): a dark rim on a white sole departs from the
-        table the other way from the sole inside it, and half the sole's contrast (ten times the rim's) cut
-        the rim off; a black sole on a grey table passed as the table in a shadow. Off the raised pixels (a
-        shadow band beside the sole lies on the table and is matched there) the rules are as without it.
+        There the local shadow fit needs a majority of the windows that could fit (RAISED_LOCAL_FIT_SHARE):
+        a black sole on a grey table passed as the table in a shadow. Off the raised pixels (a shadow band
+        beside the sole lies on the table and is matched there) the rule is as without it.
 
         A pixel is changed when its residual exceeds half the local contrast of the change around it (the
         mean residual of the clearly changed pixels within CONTRAST_WINDOW_PX), and at least PIXEL_SIGMAS
@@ -155,14 +153,6 @@ class ChangeTest:
         contrast = cv2.blur(magnitude * clear, window)
         contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
         half_contrast = np.multiply(contrast, 0.5, out=clear)
-        if raised is not None and raised.any():
-            # On the raised sole, half the contrast of the change of the pixel's own sign (see above).
-            for sign in (residual > 0, residual < 0):
-                sign &= raised
-                own_clear = (sign & (magnitude > floor)).astype(np.float32)
-                own = cv2.blur(magnitude * own_clear, window)
-                own /= np.maximum(cv2.blur(own_clear, window), 1e-6)
-                half_contrast[sign] = 0.5 * own[sign]
         raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
         faint = contrast < FAINT_CONTRAST_SIGMAS * self.sigma
         # Next to a strong step every window covering a table pixel also covers the step and correlates

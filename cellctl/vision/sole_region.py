@@ -31,9 +31,8 @@ UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches 
 CHANGE_MARGIN_PX = 100
 # A pixel is on the raised sole for the change test (`ChangeTest.changed(raised=...)`) where no point measured
 # at the table's level (within WALL_FOOT_MM) lies within this many pixels (~2 mm). The matcher drags the
-# sole's disparity onto the table beside its edge by up to about its census window's half width (4 px); a
-# shadow band there still has table-level readings within this reach, a dark rim on the sole (raised over its
-# whole width, its unmatched pixels are not table readings) does not.
+# sole's disparity onto the table beside its edge by up to about its census window's half width (4 px): a
+# shadow band there still has table-level readings within this reach, the sole's inside has none.
 TABLE_DEPTH_REACH_PX = 5
 MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
