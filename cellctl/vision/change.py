@@ -62,6 +62,11 @@ ILLUMINATION_WINDOW_PX = 31
 # into it left it changed (the right-image and edge checks then refused soles whose outline was right).
 LOCAL_SHADOW_FIT = True
 MIN_LOCAL_FIT_SHARE = 0.1  # of the NCC windows covering a pixel (5 of 49)
+# On the raised sole (pixels the caller's depth puts away from the table, `raised`) the local fit speaks only
+# with a majority of the windows that could fit: a black sole on a grey table is 0.5 times the table's
+# brightness, and its own texture fits the table's at that factor in 10-30 % of the windows by chance (the
+# shadow bands beside a sole: 10-40 %, so the rule is not used there: they lie on the table).
+RAISED_LOCAL_FIT_SHARE = 0.5  # of the fit-eligible windows (reference texture above STILL_TEXTURE_SIGMAS)
 
 
 @dataclass(frozen=True)
@@ -100,10 +105,21 @@ class ChangeTest:
         predicted += self.offset
         return predicted
 
-    def changed(self, current: np.ndarray, reference: np.ndarray, box: tuple[slice, slice] | None = None) -> np.ndarray:
+    def changed(
+        self,
+        current: np.ndarray,
+        reference: np.ndarray,
+        box: tuple[slice, slice] | None = None,
+        raised: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Bool image: pixels that no longer show the taught table (only within `box`, rows and columns, if
         given: False elsewhere; the windows reach a few pixels, so a box a few mm larger than what is read
         gives the same pixels as the whole image).
+
+        `raised` (bool image, optional): pixels where depth puts no table within reach (the caller's depth).
+        There the local shadow fit needs a majority of the windows that could fit (RAISED_LOCAL_FIT_SHARE):
+        a black sole on a grey table passed as the table in a shadow. Off the raised pixels (a shadow band
+        beside the sole lies on the table and is matched there) the rule is as without it.
 
         A pixel is changed when its residual exceeds half the local contrast of the change around it (the
         mean residual of the clearly changed pixels within CONTRAST_WINDOW_PX), and at least PIXEL_SIGMAS
@@ -114,10 +130,12 @@ class ChangeTest:
         """
         if box is not None:
             changed = np.zeros(np.shape(current), bool)
-            changed[box] = self.changed(np.asarray(current)[box], np.asarray(reference)[box])
+            changed[box] = self.changed(
+                np.asarray(current)[box], np.asarray(reference)[box], raised=None if raised is None else raised[box]
+            )
             return changed
         # The texture votes on a worker thread beside the residual (numpy and OpenCV release the GIL).
-        texture = worker("change-texture").submit(self._texture, current, reference)
+        texture = worker("change-texture").submit(self._texture, current, reference, raised)
         try:
             predicted = self.predicted(reference)
             residual = np.subtract(np.asarray(current, np.float32), predicted)
@@ -152,7 +170,9 @@ class ChangeTest:
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         return cv2.medianBlur(mask, 3) > 0
 
-    def _texture(self, current: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _texture(
+        self, current: np.ndarray, reference: np.ndarray, raised: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(still table, texture gone, illumination): the table's own texture is still there, only darker or
         lighter (a shadow), or it is gone (covered by something of whatever brightness).
 
@@ -245,6 +265,9 @@ class ChangeTest:
             confident &= fitted
             weight_fit = cv2.blur(confident.astype(np.float32), window)
             local = weight_fit >= MIN_LOCAL_FIT_SHARE
+            if raised is not None:
+                eligible = cv2.blur((var_r > (STILL_TEXTURE_SIGMAS * self.sigma) ** 2).astype(np.float32), window)
+                local &= ~raised | (weight_fit >= RAISED_LOCAL_FIT_SHARE * eligible)
             factor = cv2.blur(np.multiply(brightness, confident, dtype=np.float32), window)
             np.divide(factor, weight_fit, out=illumination, where=local)
         return still, gone, illumination

@@ -29,6 +29,11 @@ UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches 
 # The change masks are computed this far round the sole's high points (~40 mm: past fattening, a leaning
 # wall's foot, the outline checks' 7 mm and the unmeasured-pixel closing's 24 mm).
 CHANGE_MARGIN_PX = 100
+# A pixel is on the raised sole for the change test (`ChangeTest.changed(raised=...)`) where no point measured
+# at the table's level (within WALL_FOOT_MM) lies within this many pixels (~2 mm). The matcher drags the
+# sole's disparity onto the table beside its edge by up to about its census window's half width (4 px): a
+# shadow band there still has table-level readings within this reach, the sole's inside has none.
+TABLE_DEPTH_REACH_PX = 5
 MIN_SOLE_AREA_MM2 = 5000.0  # smaller regions are not a sole (the smallest soles are ~ 15000 mm^2)
 MIN_COLOUR_SEPARATION = 4.0  # sole and table colours this many standard deviations apart: filter by colour
 # Noise of the rectified left grey image (DN of 8 bits, `image_noise_dn`) above which the surface is not
@@ -117,11 +122,14 @@ def change_split(
     # The masks are read near the sole only (its points, the outline's checks, the image edge): computed in
     # the box of the high points and CHANGE_MARGIN_PX round it, the rest of the image is left unchanged.
     left_box, right_box = _change_boxes(cloud, high, current.shape)
-    changed = test.changed(current, reference, left_box)
+    raised_left, raised_right = _raised(cloud, points, current.shape)
+    changed = test.changed(current, reference, left_box, raised_left)
     # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
     right_table = outside_pixels - np.column_stack([cloud.disparity[outside], np.zeros(len(outside))])
     right_test = ChangeTest.fit(cloud.rectified[1], taught.right, np.round(right_table).astype(np.int64))
-    changed_right = None if right_test is None else right_test.changed(cloud.rectified[1], taught.right, right_box)
+    changed_right = (
+        None if right_test is None else right_test.changed(cloud.rectified[1], taught.right, right_box, raised_right)
+    )
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
     near = near[footprint.dilated(EDGE_BAND_MM).contains(np.take(points, near, axis=0))]
@@ -132,6 +140,23 @@ def change_split(
     chosen = np.zeros(len(points), bool)
     chosen[candidates[changed[y, x]]] = True
     return ChangeSplit(np.flatnonzero(chosen), changed, changed_right)
+
+
+def _raised(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right rectified pixels with no point measured at the table's level within
+    TABLE_DEPTH_REACH_PX (the right ones at x - disparity)."""
+    height, width = shape[:2]
+    level = np.flatnonzero(np.abs(points[:, 2]) < WALL_FOOT_MM)
+    x, y = np.round(np.take(cloud.pixels, level, axis=0)).astype(np.int64).T
+    xr = np.round(np.take(cloud.pixels[:, 0], level) - cloud.disparity[level]).astype(np.int64)
+    reach = np.ones((2 * TABLE_DEPTH_REACH_PX + 1,) * 2, np.uint8)
+    raised = []
+    for columns in (x, xr):
+        inside = (columns >= 0) & (columns < width) & (y >= 0) & (y < height)
+        seen = np.zeros((height, width), np.uint8)
+        seen[y[inside], columns[inside]] = 1
+        raised.append(cv2.dilate(seen, reach) == 0)
+    return raised[0], raised[1]
 
 
 def _change_boxes(
