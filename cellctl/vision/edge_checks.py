@@ -103,8 +103,8 @@ def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
             FailureKind.OUTLINE_INCONSISTENT,
             f"the outline has a notch at outline point {at} ({x:.1f}, {y:.1f}) mm: {worst:.1f} mm deeper than a "
             f"sole's edge can curve inward over a {chord_mm:.0f} mm chord (a radius of {MIN_CONCAVE_RADIUS_MM:g} mm "
-            f"at the tightest; limit {MAX_EDGE_OFFSET_MM:g} mm): both cameras' masks missed the same edge there, "
-            "the outline is not the sole's edge",
+            f"at the tightest; limit {MAX_EDGE_OFFSET_MM:g} mm): the outline there is not the "
+            "sole's edge",
         )
     return None
 
