@@ -7,7 +7,6 @@ rectified images.
 from __future__ import annotations
 
 import warnings
-
 from collections.abc import Callable
 
 import numpy as np
