@@ -6,6 +6,7 @@ rectified images.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -27,7 +28,15 @@ from cellctl.vision.edge_checks import (
     check_steep_wall,
 )
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.image_edge import edge_heights, projections, stereo_offsets, table_level
+from cellctl.vision.image_edge import (
+    SMEARED_EDGE_MM,
+    _stretch_lengths,
+    blob_length_mm,
+    edge_heights,
+    projections,
+    stereo_offsets,
+    table_level,
+)
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.shadow import one_camera_shadows, shadow_cleared
 from cellctl.vision.surface import SoleSurface
@@ -94,7 +103,13 @@ def _check_outline_images(
         (changed_right, right_pixel, right_centre),
     )
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
-    problem = _edge_offsets_problem(inner, outer)
+    # The stretches beyond both silhouettes too long for the placement to move in (image_edge.edge_shift's rule):
+    # there the cameras' agreed readings count point by point too (edge_checks.agreed_offsets).
+    with warnings.catch_warnings():  # NaN readings compare False
+        warnings.simplefilter("ignore", RuntimeWarning)
+        beyond = np.nan_to_num(0.5 * (inner[0] + inner[1]), nan=0.0) < -SMEARED_EDGE_MM
+    smeared = _stretch_lengths(beyond) > blob_length_mm(reconstruction)
+    problem = _edge_offsets_problem(inner, outer, smeared)
     if problem is None or not SHADOW_CLEARED or reconstruction.rectified is None or reconstruction.taught is None:
         return problem
     # Refused: a cast shadow's slivers beside the sole that one camera's mask shows and the other's does not
@@ -108,17 +123,19 @@ def _check_outline_images(
         )
     )
     inner_cleared, outer_cleared = stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
-    return _edge_offsets_problem(one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared))
+    return _edge_offsets_problem(
+        one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared), smeared
+    )
 
 
 def _edge_offsets_problem(
-    inner: tuple[np.ndarray, np.ndarray], outer: tuple[np.ndarray, np.ndarray]
+    inner: tuple[np.ndarray, np.ndarray], outer: tuple[np.ndarray, np.ndarray], smeared: np.ndarray | None = None
 ) -> CheckFailure | None:
     """The edge-offset check on both readings (stereo_offsets): the innermost, then the outermost."""
-    problem = check_edge_offsets(list(inner))
+    problem = check_edge_offsets(list(inner), smeared)
     if problem is not None:
         return problem
-    return check_edge_offsets(list(outer))
+    return check_edge_offsets(list(outer), smeared)
 
 
 HEIGHT_MAP_CELL_MM = 1.0
