@@ -278,10 +278,20 @@ def edge_shift(
         inward &= (point >= -EDGE_MOVE_MAX_MM) & (outer_left < -EDGE_MOVE_MIN_MM) & (outer_right < -EDGE_MOVE_MIN_MM)
         either = (point < -EDGE_MOVE_MIN_MM) | (left < -EDGE_MOVE_MIN_MM) | (right < -EDGE_MOVE_MIN_MM)
         inward = _whole_stretches(inward & ~out, either)
-        beyond = np.nan_to_num(point, nan=0.0) < -SMEARED_EDGE_MM
-    inward &= (_stretch_lengths(beyond) <= longest_blob_mm) & (_stretch_lengths(inward) >= MIN_BLOB_POINTS)
+    inward &= ~smeared_stretches(left, right, longest_blob_mm) & (_stretch_lengths(inward) >= MIN_BLOB_POINTS)
     moved_in = np.where(inward, smooth_along(np.where(inward, point, 0.0), INWARD_SMOOTHING_MM), 0.0)
     return np.where(inward, moved_in, shift)
+
+
+def smeared_stretches(left: np.ndarray, right: np.ndarray, longest_blob_mm: float) -> np.ndarray:
+    """Per outline point (closed, 1 mm apart): on a stretch where the outline lies beyond both silhouettes (the
+    cameras' mean reading more than SMEARED_EDGE_MM inside it) for longer than `longest_blob_mm`: the matcher's
+    disparity smeared outward along the edge, which `edge_shift` does not move in and the edge-offset check
+    judges point by point (edge_checks.agreed_offsets)."""
+    with warnings.catch_warnings():  # NaN readings compare False
+        warnings.simplefilter("ignore", RuntimeWarning)
+        beyond = np.nan_to_num(0.5 * (left + right), nan=0.0) < -SMEARED_EDGE_MM
+    return _stretch_lengths(beyond) > longest_blob_mm
 
 
 def notch_fill(

@@ -6,7 +6,6 @@ rectified images.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -29,11 +28,10 @@ from cellctl.vision.edge_checks import (
 )
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
-    SMEARED_EDGE_MM,
-    _stretch_lengths,
     blob_length_mm,
     edge_heights,
     projections,
+    smeared_stretches,
     stereo_offsets,
     table_level,
 )
@@ -105,10 +103,7 @@ def _check_outline_images(
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
     # The stretches beyond both silhouettes too long for the placement to move in (image_edge.edge_shift's rule):
     # there the cameras' agreed readings count point by point too (edge_checks.agreed_offsets).
-    with warnings.catch_warnings():  # NaN readings compare False
-        warnings.simplefilter("ignore", RuntimeWarning)
-        beyond = np.nan_to_num(0.5 * (inner[0] + inner[1]), nan=0.0) < -SMEARED_EDGE_MM
-    smeared = _stretch_lengths(beyond) > blob_length_mm(reconstruction)
+    smeared = smeared_stretches(inner[0], inner[1], blob_length_mm(reconstruction))
     problem = _edge_offsets_problem(inner, outer, smeared)
     if problem is None or not SHADOW_CLEARED or reconstruction.rectified is None or reconstruction.taught is None:
         return problem
