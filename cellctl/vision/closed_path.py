@@ -49,3 +49,26 @@ def outward_normals(poly: np.ndarray) -> np.ndarray:
     tangent = np.roll(poly, -1, axis=0) - np.roll(poly, 1, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
     return np.column_stack([tangent[:, 1], -tangent[:, 0]])
+
+
+def closed_runs(flags: np.ndarray) -> list[np.ndarray]:
+    """The runs of consecutive flagged points of a closed path: per run its indices in order along the path (a run
+    across the path's end wraps, ..., n - 1, 0, 1, ...); the whole path as one run if every point is flagged."""
+    n = len(flags)
+    if not flags.any():
+        return []
+    if flags.all():
+        return [np.arange(n)]
+    start = int(np.flatnonzero(~flags)[0])  # roll so that no run wraps around the end
+    rolled = np.flatnonzero(np.roll(flags, -start))
+    breaks = np.flatnonzero(np.diff(rolled) > 1) + 1
+    return [(run + start) % n for run in np.split(rolled, breaks)]
+
+
+def run_lengths(flags: np.ndarray) -> np.ndarray:
+    """Per point of a closed path, the length (points) of the run of consecutive flagged points it is in, 0 where
+    not flagged."""
+    lengths = np.zeros(len(flags))
+    for run in closed_runs(flags):
+        lengths[run] = len(run)
+    return lengths

@@ -14,6 +14,7 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import MIN_TESTABLE, CheckFailure
+from cellctl.vision.closed_path import run_lengths
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.footprint import Footprint
 
@@ -283,12 +284,7 @@ def agreed_offsets(offsets: list[np.ndarray], smeared: np.ndarray) -> np.ndarray
     known = np.all(np.isfinite(readings), axis=0)
     filled = np.where(known[None, :], readings, 0.0)
     nearest = np.where(known & smeared, np.max(filled, axis=0), 0.0)  # the least far inside; >= 0 if one is not
-    beyond = nearest < -MAX_EDGE_OFFSET_MM
-    run = np.zeros(len(beyond), bool)
-    for start in np.flatnonzero(beyond):  # windows of AGREED_RUN_POINTS consecutive points, all beyond
-        window = (start + np.arange(AGREED_RUN_POINTS)) % len(beyond)
-        if beyond[window].all():
-            run[window] = True
+    run = run_lengths(nearest < -MAX_EDGE_OFFSET_MM) >= AGREED_RUN_POINTS
     return np.where(run, nearest, 0.0)
 
 

@@ -35,7 +35,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
+from cellctl.vision.closed_path import closed_runs, outward_normals, resample_closed, run_lengths, smooth_along
 from cellctl.vision.edge_checks import (
     MAX_EDGE_OFFSET_MM,
     NOTCH_MAX_HALF_CHORD_MM,
@@ -278,7 +278,7 @@ def edge_shift(
         inward &= (point >= -EDGE_MOVE_MAX_MM) & (outer_left < -EDGE_MOVE_MIN_MM) & (outer_right < -EDGE_MOVE_MIN_MM)
         either = (point < -EDGE_MOVE_MIN_MM) | (left < -EDGE_MOVE_MIN_MM) | (right < -EDGE_MOVE_MIN_MM)
         inward = _whole_stretches(inward & ~out, either)
-    inward &= ~smeared_stretches(left, right, longest_blob_mm) & (_stretch_lengths(inward) >= MIN_BLOB_POINTS)
+    inward &= ~smeared_stretches(left, right, longest_blob_mm) & (run_lengths(inward) >= MIN_BLOB_POINTS)
     moved_in = np.where(inward, smooth_along(np.where(inward, point, 0.0), INWARD_SMOOTHING_MM), 0.0)
     return np.where(inward, moved_in, shift)
 
@@ -291,7 +291,7 @@ def smeared_stretches(left: np.ndarray, right: np.ndarray, longest_blob_mm: floa
     with warnings.catch_warnings():  # NaN readings compare False
         warnings.simplefilter("ignore", RuntimeWarning)
         beyond = np.nan_to_num(0.5 * (left + right), nan=0.0) < -SMEARED_EDGE_MM
-    return _stretch_lengths(beyond) > longest_blob_mm
+    return run_lengths(beyond) > longest_blob_mm
 
 
 def notch_fill(
@@ -338,10 +338,7 @@ def notch_fill(
                 continue
             alone = beyond & silent(np.where(beyond, reading, 0.0))
             fill = np.zeros(n)
-            start = int(np.flatnonzero(~beyond)[0])
-            label = np.cumsum(~np.roll(beyond, -start))
-            for lab in np.unique(label[np.roll(beyond, -start)]):
-                idx = (np.flatnonzero((label == lab) & np.roll(beyond, -start)) + start) % n
+            for idx in closed_runs(beyond):
                 if not alone[idx].all():
                     continue
                 rim = _rim(ring, idx)
@@ -388,32 +385,14 @@ def _rim(ring: np.ndarray, idx: np.ndarray) -> Callable[[np.ndarray], np.ndarray
     return inside
 
 
-def _stretch_lengths(flags: np.ndarray) -> np.ndarray:
-    """Per point of the closed outline (1 mm apart), the length of the run of consecutive flagged points it is in
-    (0 where not flagged)."""
-    if flags.all():
-        return np.full(len(flags), float(len(flags)))
-    if not flags.any():
-        return np.zeros(len(flags))
-    start = int(np.flatnonzero(~flags)[0])
-    rolled = np.roll(flags, -start)
-    label = np.cumsum(~rolled)
-    counts = np.bincount(label[rolled], minlength=int(label.max()) + 1)
-    return np.roll(np.where(rolled, counts[label], 0), start).astype(float)
-
-
 def _whole_stretches(allowed: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     """`allowed` kept only on stretches of the closed outline where every point `wanted` is allowed: a stretch is
     a run of consecutive wanted points (the outline beyond the edge both cameras show, on average)."""
     keep = allowed & wanted
-    if wanted.all():
-        return keep if keep.all() else np.zeros_like(keep)
-    start = int(np.flatnonzero(~wanted)[0])  # roll so that no stretch wraps around the end
-    rolled_wanted, rolled_keep = np.roll(wanted, -start), np.roll(keep, -start)
-    label = np.cumsum(~rolled_wanted)  # one label per stretch (and the unwanted point before it)
-    broken = np.zeros(int(label.max()) + 1, bool)
-    np.logical_or.at(broken, label[rolled_wanted], ~rolled_keep[rolled_wanted])
-    return np.roll(rolled_keep & ~broken[label], start)
+    whole = np.zeros_like(keep)
+    for run in closed_runs(wanted):
+        whole[run] = keep[run].all()
+    return whole
 
 
 def depth_silent(ring: np.ndarray, outward: np.ndarray, table_points: Footprint) -> Callable[[np.ndarray], np.ndarray]:

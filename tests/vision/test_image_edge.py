@@ -7,13 +7,13 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from cellctl.vision.closed_path import closed_runs, run_lengths
 from cellctl.vision.edge_checks import check_edge_offsets
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
     EDGE_MOVE_MAX_MM,
     EDGE_MOVE_MIN_MM,
     _paired,
-    _stretch_lengths,
     depth_silent,
     edge_shift,
     notch_fill,
@@ -150,11 +150,13 @@ def test_inward_moves_take_a_narrow_blob_point_by_point_but_not_a_smeared_edge()
     assert np.all(edge_shift(left, right)[105:125] < -0.9)
 
 
-def test_stretch_lengths_run_around_the_closed_outline() -> None:
+def test_runs_and_their_lengths_go_around_the_closed_outline() -> None:
     flags = np.array([1, 1, 0, 1, 1, 1, 0, 0, 1], bool)
-    assert _stretch_lengths(flags).tolist() == [3, 3, 0, 3, 3, 3, 0, 0, 3]
-    assert _stretch_lengths(np.ones(4, bool)).tolist() == [4, 4, 4, 4]
-    assert _stretch_lengths(np.zeros(4, bool)).tolist() == [0, 0, 0, 0]
+    # In order along the path: the run across the end starts at its last point (notch_fill's flanks read its ends).
+    assert [run.tolist() for run in closed_runs(flags)] == [[3, 4, 5], [8, 0, 1]]
+    assert run_lengths(flags).tolist() == [3, 3, 0, 3, 3, 3, 0, 0, 3]
+    assert run_lengths(np.ones(4, bool)).tolist() == [4, 4, 4, 4]
+    assert run_lengths(np.zeros(4, bool)).tolist() == [0, 0, 0, 0]
 
 
 def test_where_both_cameras_see_the_wall_the_readings_that_agree_are_taken() -> None:
