@@ -197,7 +197,7 @@ def one_camera_shadows(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per camera (left, right) its edge offsets (cellctl.vision.image_edge.stereo_offsets) read without the shadow
     samples where the other camera's own reading, as read from its whole mask, finds the edge within
-    MAX_EDGE_OFFSET_MM of the outline or inside it; elsewhere as read from the whole mask. The sole's edge
+    MAX_EDGE_OFFSET_MM of the outline (either side); elsewhere as read from the whole mask. The sole's edge
     beyond the outline is in both cameras' silhouettes (each at its own height); a cast shadow's sliver, left
     changed where the change test's windows met two shadow levels, lies where each image's windows happen to
     fail, and a dark band of the sole that the photometry alone cannot tell from a shadow (a rim on a weakly
