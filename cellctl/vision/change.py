@@ -323,12 +323,22 @@ def _rim_ring(
     their own sign (RIM_RING; a 3 x 3 majority as for the mask itself)."""
     holes = _holes(changed)
     holes &= raised
-    if not holes.any():
-        return holes
+    found = np.zeros_like(holes)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(holes.view(np.uint8), connectivity=8)
+    if count <= 1:
+        return found
     window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
-    found = magnitude > np.maximum(floor, 0.5 * _own_sign_contrast(residual, magnitude, floor, window))
-    found |= raw
-    found &= ~still_table
-    found = cv2.medianBlur(found.view(np.uint8), 3) > 0
-    found &= holes
+    reach = CONTRAST_WINDOW_PX  # past the contrast window's half and the majority's pixel: the same result
+    height, width = holes.shape
+    # Per hole, in its bounding box and `reach` round it (most holes are a few pixels inside the sole).
+    for label, (x, y, w, h, _) in enumerate(stats[1:], start=1):
+        rows = slice(max(y - reach, 0), min(y + h + reach, height))
+        cols = slice(max(x - reach, 0), min(x + w + reach, width))
+        magnitude_box = magnitude[rows, cols]
+        own = _own_sign_contrast(residual[rows, cols], magnitude_box, floor, window)
+        box = magnitude_box > np.maximum(floor, 0.5 * own)
+        box |= raw[rows, cols]
+        box &= ~still_table[rows, cols]
+        box = cv2.medianBlur(box.view(np.uint8), 3) > 0
+        found[rows, cols] |= box & (labels[rows, cols] == label)
     return found

@@ -8,6 +8,9 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+import pytest
+
+from cellctl.vision import change
 from cellctl.vision.change import ChangeTest
 
 
@@ -193,3 +196,60 @@ def test_a_black_sole_on_a_grey_table_is_not_a_shadow_where_depth_raises_it() ->
     changed = test.changed(current, reference, raised=sole)
     assert changed[inner].mean() > 0.99
     assert not changed[outside].any()
+
+
+
+def _rim_scene(seed: int) -> tuple[ChangeTest, np.ndarray, np.ndarray, np.ndarray]:
+    """A white sole (190 DN) with a dark rim 10 px wide (22 DN, darker than the 40 DN table: the other sign
+    from the sole) on a weakly textured dark table; returns the test, current, reference and the sole's pixels."""
+    rng = np.random.default_rng(seed)
+    shape = (160, 200)
+    reference = _dark_table(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current = _dark_table(np.random.default_rng(seed), shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    sole = np.zeros(shape, bool)
+    sole[30:130, 40:160] = True
+    current[sole] = 22.0 + rng.normal(0.0, 0.5, int(sole.sum())).astype(np.float32)
+    current[40:120, 50:150] = 190.0 + rng.normal(0.0, 1.0, (80, 100)).astype(np.float32)
+    current = cv2.GaussianBlur(current, (0, 0), 0.7)  # the optics: edges a pixel wide
+    table = ~cv2.dilate(sole.astype(np.uint8), np.ones((21, 21), np.uint8)).astype(bool)
+    test = ChangeTest.fit(current, reference, table)
+    assert test is not None
+    return test, current, reference, sole
+
+
+def test_a_dark_rim_round_a_white_sole_is_changed_to_its_inner_edge_where_depth_raises_it() -> None:
+    test, current, reference, sole = _rim_scene(21)
+    rim = sole.copy()
+    rim[40:120, 50:150] = False
+    # Without depth the half-contrast rule holds the rim (-18 DN) against the white sole's +150: its inner
+    # pixels are missed (72 % of the rim found), an unchanged ring between the rim and the sole.
+    assert test.changed(current, reference)[rim].mean() < 0.9
+    # On the raised sole (no table-level point near) the ring is a hole of the mask, held against its own sign.
+    changed = test.changed(current, reference, raised=sole)
+    inner = cv2.erode(sole.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    assert changed[inner].all()
+    outside = ~cv2.dilate(sole.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    assert not changed[outside].any()
+
+
+def test_a_dark_contact_shadow_band_beside_a_white_sole_is_not_taken_for_a_rim(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A cast shadow's contact band: 4 px of the table beside the sole at half its brightness (darker than the
+    # table, the other sign from the white sole). The matcher fattens the sole's depth over it, so `raised`
+    # covers it too. Held against its own sign it would be changed (all of it, checked); it lies on the mask's
+    # outer border, open to the table, no hole: the rule leaves the mask as it is without it.
+    rng = np.random.default_rng(23)
+    shape = (160, 200)
+    reference = _dark_table(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current = _dark_table(np.random.default_rng(23), shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current[130:134, 40:160] *= 0.5
+    current[30:130, 40:160] = 190.0 + rng.normal(0.0, 1.0, (100, 120)).astype(np.float32)
+    table = np.ones(shape, bool)
+    table[20:145, 30:170] = False
+    test = ChangeTest.fit(current, reference, table)
+    assert test is not None
+    raised = np.zeros(shape, bool)
+    raised[25:136, 35:165] = True
+    with_rule = test.changed(current, reference, raised=raised)
+    assert not with_rule[130:134, 42:158].any()
+    monkeypatch.setattr(change, "RIM_RING", False)
+    assert np.array_equal(with_rule, test.changed(current, reference, raised=raised))
