@@ -7,7 +7,6 @@ from collections.abc import Callable
 
 import cv2
 import numpy as np
-
 import pytest
 
 from cellctl.vision import change
@@ -196,7 +195,6 @@ def test_a_black_sole_on_a_grey_table_is_not_a_shadow_where_depth_raises_it() ->
     changed = test.changed(current, reference, raised=sole)
     assert changed[inner].mean() > 0.99
     assert not changed[outside].any()
-
 
 
 def _rim_scene(seed: int) -> tuple[ChangeTest, np.ndarray, np.ndarray, np.ndarray]:
