@@ -67,6 +67,17 @@ MIN_LOCAL_FIT_SHARE = 0.1  # of the NCC windows covering a pixel (5 of 49)
 # brightness, and its own texture fits the table's at that factor in 10-30 % of the windows by chance (the
 # shadow bands beside a sole: 10-40 %, so the rule is not used there: they lie on the table).
 RAISED_LOCAL_FIT_SHARE = 0.5  # of the fit-eligible windows (reference texture above STILL_TEXTURE_SIGMAS)
+# Where the caller's depth lifts a pixel onto the sole (`lifted`: a high point on it, no table-level point within
+# reach), the pixel is changed unless the table's own texture still votes near it. A grey sole on a grey table
+# (or on a cutting mat) differs from the taught table by 1.5-3 sigma at many of its pixels: no per-pixel test
+# decides them, but the still-table vote (the taught texture present, NCC ~1) is absent on all of them and
+# present on 94 % of the table beside the sole. The still vote needs nearly all 7 px windows covering a pixel to
+# correlate, so it stops about a window's reach (6 px) before the sole's edge; a fattened table pixel (the
+# sole's depth dragged 1-4 px past its edge) lies within this many pixels of a still vote, a sole pixel farther.
+LIFTED_STILL_REACH_PX = 5
+# The vote's absence is evidence only where the reference has texture to vote with: most windows covering the
+# pixel (a dark table's faint texture gives 30-50 % textured windows, a grey or patterned table's ~95 %).
+LIFTED_VOTE_SHARE = 0.7
 
 
 @dataclass(frozen=True)
@@ -111,6 +122,7 @@ class ChangeTest:
         reference: np.ndarray,
         box: tuple[slice, slice] | None = None,
         raised: np.ndarray | None = None,
+        lifted: np.ndarray | None = None,
     ) -> np.ndarray:
         """Bool image: pixels that no longer show the taught table (only within `box`, rows and columns, if
         given: False elsewhere; the windows reach a few pixels, so a box a few mm larger than what is read
@@ -120,6 +132,12 @@ class ChangeTest:
         There the local shadow fit needs a majority of the windows that could fit (RAISED_LOCAL_FIT_SHARE):
         a black sole on a grey table passed as the table in a shadow. Off the raised pixels (a shadow band
         beside the sole lies on the table and is matched there) the rule is as without it.
+
+        `lifted` (bool image, optional): pixels the caller's depth puts on the sole (a high point there, no
+        table-level point within reach). There a pixel is changed unless the taught texture still votes table
+        within LIFTED_STILL_REACH_PX, where the reference is textured enough for that vote (LIFTED_VOTE_SHARE)
+        and no shadow is carried (a shadowed table's weakened texture need not vote): a sole that matches the
+        table's brightness is found from depth and the texture, and its edge stays where the change test puts it.
 
         A pixel is changed when its residual exceeds half the local contrast of the change around it (the
         mean residual of the clearly changed pixels within CONTRAST_WINDOW_PX), and at least PIXEL_SIGMAS
@@ -131,7 +149,10 @@ class ChangeTest:
         if box is not None:
             changed = np.zeros(np.shape(current), bool)
             changed[box] = self.changed(
-                np.asarray(current)[box], np.asarray(reference)[box], raised=None if raised is None else raised[box]
+                np.asarray(current)[box],
+                np.asarray(reference)[box],
+                raised=None if raised is None else raised[box],
+                lifted=None if lifted is None else lifted[box],
             )
             return changed
         # The texture votes on a worker thread beside the residual (numpy and OpenCV release the GIL).
@@ -141,7 +162,7 @@ class ChangeTest:
             residual = np.subtract(np.asarray(current, np.float32), predicted)
         finally:
             futures.wait([texture])
-        still_table, texture_gone, illumination = texture.result()
+        still_table, texture_gone, illumination, textured_share = texture.result()
         # Against the table as lit now: where the still table is darker or lighter than taught (a shadow), its
         # factor is carried to the pixels beside it, so a shadowed table pixel next to the sole is not changed.
         predicted *= illumination - 1.0
@@ -167,13 +188,17 @@ class ChangeTest:
         texture_gone &= faint
         raw |= texture_gone
         raw |= inside
+        if lifted is not None:
+            reach = 2 * LIFTED_STILL_REACH_PX + 1
+            near_table = cv2.dilate(still_table.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach)))
+            raw |= lifted & (near_table == 0) & (textured_share > LIFTED_VOTE_SHARE) & (illumination > MAX_SHADOW_FACTOR)
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         return cv2.medianBlur(mask, 3) > 0
 
     def _texture(
         self, current: np.ndarray, reference: np.ndarray, raised: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(still table, texture gone, illumination): the table's own texture is still there, only darker or
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(still table, texture gone, illumination, textured share): the table's own texture is still there, only darker or
         lighter (a shadow), or it is gone (covered by something of whatever brightness).
 
         Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
@@ -187,7 +212,8 @@ class ChangeTest:
         correlation's threshold but not for this fit.
 
         Also the illumination factor (current over the taught prediction, float32, 1 where unknown) averaged
-        over the still table within ILLUMINATION_WINDOW_PX.
+        over the still table within ILLUMINATION_WINDOW_PX, and the share of the windows covering each pixel
+        where the reference has texture to vote with.
         """
         # The same float32 operations in the same order as the plain formulas in the comments, in place on
         # few buffers and without copies of float32 inputs (a quarter of the time went to allocation).
@@ -270,4 +296,4 @@ class ChangeTest:
                 local &= ~raised | (weight_fit >= RAISED_LOCAL_FIT_SHARE * eligible)
             factor = cv2.blur(np.multiply(brightness, confident, dtype=np.float32), window)
             np.divide(factor, weight_fit, out=illumination, where=local)
-        return still, gone, illumination
+        return still, gone, illumination, share
