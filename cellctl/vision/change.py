@@ -190,8 +190,12 @@ class ChangeTest:
         raw |= inside
         if lifted is not None:
             reach = 2 * LIFTED_STILL_REACH_PX + 1
-            near_table = cv2.dilate(still_table.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach)))
-            fill = lifted & (near_table == 0) & (textured_share > LIFTED_VOTE_SHARE) & (illumination > MAX_SHADOW_FACTOR)
+            near_table = cv2.dilate(
+                still_table.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach))
+            )
+            fill = (
+                lifted & (near_table == 0) & (textured_share > LIFTED_VOTE_SHARE) & (illumination > MAX_SHADOW_FACTOR)
+            )
             # Not the outermost pixel of what is changed with it: a pixel partly covered by a strong step (a white
             # sole's edge) is placed by the half-contrast test, not by depth (fattened, it lifts that pixel too).
             fill &= cv2.erode((raw | fill).view(np.uint8), np.ones((3, 3), np.uint8)) > 0

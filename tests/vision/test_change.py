@@ -238,5 +238,7 @@ def test_depth_alone_does_not_change_a_dark_tables_faintly_textured_pixels() -> 
     assert test is not None
     beyond = ~(cv2.dilate(sole.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
     lifted = cv2.dilate(sole.astype(np.uint8), np.ones((17, 17), np.uint8)) > 0
-    assert np.array_equal(test.changed(current, reference, lifted=lifted)[beyond], test.changed(current, reference)[beyond])
+    assert np.array_equal(
+        test.changed(current, reference, lifted=lifted)[beyond], test.changed(current, reference)[beyond]
+    )
     assert not test.changed(current, reference, lifted=lifted)[beyond].any()
