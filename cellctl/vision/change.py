@@ -70,10 +70,12 @@ RAISED_LOCAL_FIT_SHARE = 0.5  # of the fit-eligible windows (reference texture a
 # Where the caller's depth lifts a pixel onto the sole (`lifted`: a high point on it, no table-level point within
 # reach), the pixel is changed unless the table's own texture still votes near it. A grey sole on a grey table
 # (or on a cutting mat) differs from the taught table by 1.5-3 sigma at many of its pixels: no per-pixel test
-# decides them, but the still-table vote (the taught texture present, NCC ~1) is absent on all of them and
-# present on 94 % of the table beside the sole. The still vote needs nearly all 7 px windows covering a pixel to
-# correlate, so it stops about a window's reach (6 px) before the sole's edge; a fattened table pixel (the
-# sole's depth dragged 1-4 px past its edge) lies within this many pixels of a still vote, a sole pixel farther.
+# decides them, but the still-table vote (the taught texture present, NCC ~1) is absent on 98-99.8 % of them
+# and present on 94 % of the table 3-30 px beside the sole. Beside a white sole the vote stops a few pixels
+# short of the edge (its windows see the step), and a fattened table pixel there (the sole's depth dragged past
+# the edge) lies within this many pixels of a vote (on 13 grey/patterned/white soles none > 1.5 px outside was
+# taken). On a grey sole the vote reaches 2-5 px in (a window half on the sole correlates through its table
+# half), so the fill stops that much plus this reach inside the edge: the last 2-4 mm are the pixel test's.
 LIFTED_STILL_REACH_PX = 5
 # The vote's absence is evidence only where the reference has texture to vote with: most windows covering the
 # pixel (a dark table's faint texture gives 30-50 % textured windows, a grey or patterned table's ~95 %).
@@ -206,8 +208,8 @@ class ChangeTest:
     def _texture(
         self, current: np.ndarray, reference: np.ndarray, raised: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(still table, texture gone, illumination, textured share): the table's own texture is still there, only darker or
-        lighter (a shadow), or it is gone (covered by something of whatever brightness).
+        """(still table, texture gone, illumination, textured share): the table's own texture is still there,
+        only darker or lighter (a shadow), or it is gone (covered by something of whatever brightness).
 
         Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
         brightness; a window only counts as table if its texture is also scaled by a shadow's or a lamp's
