@@ -78,6 +78,19 @@ RAISED_LOCAL_FIT_SHARE = 0.5  # of the fit-eligible windows (reference texture a
 # than the table with the other sign from a white sole, but it lies on the mask's outer border, open to the
 # table: the own-sign rule found it too and moved four shadow soles' outlines 1.5-3.5 mm out (session 8).
 RIM_RING = True
+# Where the caller's depth lifts a pixel onto the sole (`lifted`: a high point on it, no table-level point within
+# reach), the pixel is changed unless the table's own texture still votes near it. A grey sole on a grey table
+# (or on a cutting mat) differs from the taught table by 1.5-3 sigma at many of its pixels: no per-pixel test
+# decides them, but the still-table vote (the taught texture present, NCC ~1) is absent on 98-99.8 % of them
+# and present on 94 % of the table 3-30 px beside the sole. Beside a white sole the vote stops a few pixels
+# short of the edge (its windows see the step), and a fattened table pixel there (the sole's depth dragged past
+# the edge) lies within this many pixels of a vote (on 13 grey/patterned/white soles none > 1.5 px outside was
+# taken). On a grey sole the vote reaches 2-5 px in (a window half on the sole correlates through its table
+# half), so the fill stops that much plus this reach inside the edge: the last 2-4 mm are the pixel test's.
+LIFTED_STILL_REACH_PX = 5
+# The vote's absence is evidence only where the reference has texture to vote with: most windows covering the
+# pixel (a dark table's faint texture gives 30-50 % textured windows, a grey or patterned table's ~95 %).
+LIFTED_VOTE_SHARE = 0.7
 
 
 @dataclass(frozen=True)
@@ -122,6 +135,7 @@ class ChangeTest:
         reference: np.ndarray,
         box: tuple[slice, slice] | None = None,
         raised: np.ndarray | None = None,
+        lifted: np.ndarray | None = None,
     ) -> np.ndarray:
         """Bool image: pixels that no longer show the taught table (only within `box`, rows and columns, if
         given: False elsewhere; the windows reach a few pixels, so a box a few mm larger than what is read
@@ -131,6 +145,12 @@ class ChangeTest:
         There the local shadow fit needs a majority of the windows that could fit (RAISED_LOCAL_FIT_SHARE):
         a black sole on a grey table passed as the table in a shadow. Off the raised pixels (a shadow band
         beside the sole lies on the table and is matched there) the rule is as without it.
+
+        `lifted` (bool image, optional): pixels the caller's depth puts on the sole (a high point there, no
+        table-level point within reach). There a pixel is changed unless the taught texture still votes table
+        within LIFTED_STILL_REACH_PX, where the reference is textured enough for that vote (LIFTED_VOTE_SHARE)
+        and no shadow is carried (a shadowed table's weakened texture need not vote): a sole that matches the
+        table's brightness is found from depth and the texture, and its edge stays where the change test puts it.
 
         A pixel is changed when its residual exceeds half the local contrast of the change around it (the
         mean residual of the clearly changed pixels within CONTRAST_WINDOW_PX), and at least PIXEL_SIGMAS
@@ -142,7 +162,10 @@ class ChangeTest:
         if box is not None:
             changed = np.zeros(np.shape(current), bool)
             changed[box] = self.changed(
-                np.asarray(current)[box], np.asarray(reference)[box], raised=None if raised is None else raised[box]
+                np.asarray(current)[box],
+                np.asarray(reference)[box],
+                raised=None if raised is None else raised[box],
+                lifted=None if lifted is None else lifted[box],
             )
             return changed
         # The texture votes on a worker thread beside the residual (numpy and OpenCV release the GIL).
@@ -152,7 +175,7 @@ class ChangeTest:
             residual = np.subtract(np.asarray(current, np.float32), predicted)
         finally:
             futures.wait([texture])
-        still_table, texture_gone, illumination = texture.result()
+        still_table, texture_gone, illumination, textured_share = texture.result()
         # Against the table as lit now: where the still table is darker or lighter than taught (a shadow), its
         # factor is carried to the pixels beside it, so a shadowed table pixel next to the sole is not changed.
         predicted *= illumination - 1.0
@@ -178,6 +201,18 @@ class ChangeTest:
         texture_gone &= faint
         raw |= texture_gone
         raw |= inside
+        if lifted is not None:
+            reach = 2 * LIFTED_STILL_REACH_PX + 1
+            near_table = cv2.dilate(
+                still_table.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach))
+            )
+            fill = (
+                lifted & (near_table == 0) & (textured_share > LIFTED_VOTE_SHARE) & (illumination > MAX_SHADOW_FACTOR)
+            )
+            # Not the outermost pixel of what is changed with it: a pixel partly covered by a strong step (a white
+            # sole's edge) is placed by the half-contrast test, not by depth (fattened, it lifts that pixel too).
+            fill &= cv2.erode((raw | fill).view(np.uint8), np.ones((3, 3), np.uint8)) > 0
+            raw |= fill
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         changed = cv2.medianBlur(mask, 3) > 0
         if raised is not None and RIM_RING:
@@ -186,9 +221,9 @@ class ChangeTest:
 
     def _texture(
         self, current: np.ndarray, reference: np.ndarray, raised: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(still table, texture gone, illumination): the table's own texture is still there, only darker or
-        lighter (a shadow), or it is gone (covered by something of whatever brightness).
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(still table, texture gone, illumination, textured share): the table's own texture is still there,
+        only darker or lighter (a shadow), or it is gone (covered by something of whatever brightness).
 
         Normalised cross-correlation with the reference over NCC_WINDOW_PX windows is blind to a change of
         brightness; a window only counts as table if its texture is also scaled by a shadow's or a lamp's
@@ -201,7 +236,8 @@ class ChangeTest:
         correlation's threshold but not for this fit.
 
         Also the illumination factor (current over the taught prediction, float32, 1 where unknown) averaged
-        over the still table within ILLUMINATION_WINDOW_PX.
+        over the still table within ILLUMINATION_WINDOW_PX, and the share of the windows covering each pixel
+        where the reference has texture to vote with.
         """
         # The same float32 operations in the same order as the plain formulas in the comments, in place on
         # few buffers and without copies of float32 inputs (a quarter of the time went to allocation).
@@ -284,7 +320,7 @@ class ChangeTest:
                 local &= ~raised | (weight_fit >= RAISED_LOCAL_FIT_SHARE * eligible)
             factor = cv2.blur(np.multiply(brightness, confident, dtype=np.float32), window)
             np.divide(factor, weight_fit, out=illumination, where=local)
-        return still, gone, illumination
+        return still, gone, illumination, share
 
 
 def _own_sign_contrast(

@@ -123,12 +123,15 @@ def change_split(
     # the box of the high points and CHANGE_MARGIN_PX round it, the rest of the image is left unchanged.
     left_box, right_box = _change_boxes(cloud, high, current.shape)
     raised_left, raised_right = _raised(cloud, points, current.shape)
-    changed = test.changed(current, reference, left_box, raised_left)
+    lifted_left, lifted_right = _lifted(cloud, high, (raised_left, raised_right))
+    changed = test.changed(current, reference, left_box, raised_left, lifted_left)
     # The right image against its own reference, for the outline's left/right check (cellctl.vision.checks).
     right_table = outside_pixels - np.column_stack([cloud.disparity[outside], np.zeros(len(outside))])
     right_test = ChangeTest.fit(cloud.rectified[1], taught.right, np.round(right_table).astype(np.int64))
     changed_right = (
-        None if right_test is None else right_test.changed(cloud.rectified[1], taught.right, right_box, raised_right)
+        None
+        if right_test is None
+        else right_test.changed(cloud.rectified[1], taught.right, right_box, raised_right, lifted_right)
     )
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
@@ -157,6 +160,24 @@ def _raised(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> t
         seen[y[inside], columns[inside]] = 1
         raised.append(cv2.dilate(seen, reach) == 0)
     return raised[0], raised[1]
+
+
+def _lifted(
+    cloud: StereoCloud, high: np.ndarray, raised: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right rectified pixels depth puts on the sole (`ChangeTest.changed(lifted=...)`): raised (no
+    table-level point within reach) and a high point (`high`, indices) on the pixel or next to it (the right
+    ones at x - disparity); the neighbours close the gaps between the points' rounded pixels."""
+    height, width = raised[0].shape
+    x, y = np.round(np.take(cloud.pixels, high, axis=0)).astype(np.int64).T
+    xr = np.round(np.take(cloud.pixels[:, 0], high) - cloud.disparity[high]).astype(np.int64)
+    lifted = []
+    for columns, raised_pixels in zip((x, xr), raised, strict=True):
+        inside = (columns >= 0) & (columns < width) & (y >= 0) & (y < height)
+        on = np.zeros((height, width), np.uint8)
+        on[y[inside], columns[inside]] = 1
+        lifted.append((cv2.dilate(on, np.ones((3, 3), np.uint8)) > 0) & raised_pixels)
+    return lifted[0], lifted[1]
 
 
 def _change_boxes(
