@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from concurrent import futures
+
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
@@ -9,6 +11,7 @@ from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.local_fit import disc_overlap, slope_gradients
 from cellctl.vision.sole_result import GluePath
 from cellctl.vision.surface import PATH_NOISE_LAG, PATH_SMOOTHING_MM, SoleSurface, path_heights, path_noise
+from cellctl.vision.workers import worker
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
@@ -66,7 +69,29 @@ def glue_path(
     raw = without_single_outliers(samples.z[: len(path_xy)])
     inner = without_single_outliers(samples.z[len(path_xy) :])
     path_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(path_xy, raw, spacing_mm)
-    z = path_heights(path_xy, raw, path_variance)
+    # The normals' fits (below) on a second thread beside the heights' (each computed as on one thread: the same
+    # values); numpy releases the GIL in both.
+    slopes = worker("patch-fits").submit(_slopes, path_xy, path_inward, inner_xy, raw, inner, path_variance, spacing_mm)
+    try:
+        z = path_heights(path_xy, raw, path_variance)
+    finally:
+        futures.wait([slopes])
+    normals = slopes.result()
+    patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
+    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
+    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+
+
+def _slopes(
+    path_xy: np.ndarray,
+    path_inward: np.ndarray,
+    inner_xy: np.ndarray,
+    raw: np.ndarray,
+    inner: np.ndarray,
+    path_variance: np.ndarray,
+    spacing_mm: float,
+) -> np.ndarray:
+    """The glue path's unit normals from its samples' heights (raw, on path_xy) and the inner ring's (inner)."""
     # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
     # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).
     # The slope across is a difference of heights over that base: on the weak texture of black soles 10 mm
@@ -88,9 +113,7 @@ def glue_path(
     )
     normals = np.column_stack([-gradient, np.ones(len(path_xy))])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
-    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+    return normals
 
 
 def sample_variance(xy: np.ndarray, z: np.ndarray, spacing_mm: float) -> np.ndarray:
