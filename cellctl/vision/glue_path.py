@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from concurrent import futures
-
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
@@ -11,7 +9,6 @@ from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.local_fit import disc_overlap, slope_gradients
 from cellctl.vision.sole_result import GluePath
 from cellctl.vision.surface import PATH_NOISE_LAG, PATH_SMOOTHING_MM, SoleSurface, path_heights, path_noise
-from cellctl.vision.workers import worker
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
@@ -69,14 +66,11 @@ def glue_path(
     raw = without_single_outliers(samples.z[: len(path_xy)])
     inner = without_single_outliers(samples.z[len(path_xy) :])
     path_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(path_xy, raw, spacing_mm)
-    # The normals' fits (below) on a second thread beside the heights' (each computed as on one thread: the same
-    # values); numpy releases the GIL in both.
-    slopes = worker("patch-fits").submit(_slopes, path_xy, path_inward, inner_xy, raw, inner, path_variance, spacing_mm)
-    try:
-        z = path_heights(path_xy, raw, path_variance)
-    finally:
-        futures.wait([slopes])
-    normals = slopes.result()
+    # One after the other on this thread: beside each other on two threads (tried) they are two Python threads
+    # making hundreds of short numpy calls each, handing the GIL back and forth, and the demo's glue path then
+    # stalled for 200-350 ms in some cycles (max / median worse in 9 of 10 A/B pairs, docs/benchmarks.md).
+    z = path_heights(path_xy, raw, path_variance)
+    normals = _slopes(path_xy, path_inward, inner_xy, raw, inner, path_variance, spacing_mm)
     patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
