@@ -124,11 +124,12 @@ int ck_points_in_polygon(const float *polygon, int64_t n, const float *points, i
  * INTER_CUBIC weights, here from the exact fraction of x in float32), border columns replicated
  * (BORDER_REPLICATE). It agrees with cv2.remap at an integer y to ~2e-6 of the value: OpenCV quantises and
  * orders its arithmetic differently. A NaN position samples column 0. image: height x width x 2 float32
- * (value, x gradient); rows[i] in 0..height-1; out: pixels x 2.
+ * (value, x gradient); rows[i] in 0..height-1; out: pixels x 2. simd: 1 to use the AVX2 kernel where the CPU
+ * has it (the same bits: the same operations in the same order, no fused multiply-adds), 0 for the scalar one.
  */
 int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params, const float *x, const double *dx,
                     const double *dy, const int32_t *rows, const float *image, int height, int width, float *out,
-                    int threads);
+                    int simd, int threads);
 
 /*
  * Points on a raster of the table plane (cellctl.vision.footprint.Footprint): point i at (xy[i * stride],

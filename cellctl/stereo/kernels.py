@@ -206,10 +206,12 @@ def patch_sample(
     rows: np.ndarray,
     image: np.ndarray,
     threads: int = ALL_THREADS,
+    simd: bool = True,
 ) -> np.ndarray:
     """A two-channel image (H x W x 2 float32) sampled bicubically where each pixel's patch plane puts it
     (`patch_shift`'s x, on the pixel's row `rows`): pixels x 2 float32, to ~2e-6 of what cv2.remap (INTER_CUBIC,
-    BORDER_REPLICATE) gives there."""
+    BORDER_REPLICATE) gives there. simd: the AVX2 kernel where the CPU has it (the same bits as the scalar one,
+    False)."""
     starts, count, pixels = _starts(starts)
     params = np.ascontiguousarray(params, np.float64)
     if params.shape != (count, 3):
@@ -235,6 +237,7 @@ def patch_sample(
         image.shape[0],
         image.shape[1],
         _ptr("float *", out),
+        int(simd),
         _threads(threads),
     )
     _check(rc, "patch sample")

@@ -66,7 +66,26 @@ def glue_path(
     raw = without_single_outliers(samples.z[: len(path_xy)])
     inner = without_single_outliers(samples.z[len(path_xy) :])
     path_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(path_xy, raw, spacing_mm)
+    # One after the other on this thread: beside each other on two threads (tried) they are two Python threads
+    # making hundreds of short numpy calls each, handing the GIL back and forth, and the demo's glue path then
+    # stalled for 200-350 ms in some cycles (max / median worse in 9 of 10 A/B pairs, docs/benchmarks.md).
     z = path_heights(path_xy, raw, path_variance)
+    normals = _slopes(path_xy, path_inward, inner_xy, raw, inner, path_variance, spacing_mm)
+    patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
+    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
+    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+
+
+def _slopes(
+    path_xy: np.ndarray,
+    path_inward: np.ndarray,
+    inner_xy: np.ndarray,
+    raw: np.ndarray,
+    inner: np.ndarray,
+    path_variance: np.ndarray,
+    spacing_mm: float,
+) -> np.ndarray:
+    """The glue path's unit normals from its samples' heights (raw, on path_xy) and the inner ring's (inner)."""
     # The normal turns slowly along a sole's edge but slopes are differences of noisy heights: the plane for
     # it is fitted wider, over the path's samples and the ring GLUE_NORMAL_BASE_MM further in (the slope across).
     # The slope across is a difference of heights over that base: on the weak texture of black soles 10 mm
@@ -88,9 +107,7 @@ def glue_path(
     )
     normals = np.column_stack([-gradient, np.ones(len(path_xy))])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
-    patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+    return normals
 
 
 def sample_variance(xy: np.ndarray, z: np.ndarray, spacing_mm: float) -> np.ndarray:

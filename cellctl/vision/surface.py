@@ -8,13 +8,15 @@ the same plane is fitted to the cloud's points near the query.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent import futures
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
 from cellctl.stereo.pointgrid import PointGrid
-from cellctl.vision.local_fit import GRADIENT_RIDGE_MM2, known_variance, unfolded
+from cellctl.vision.local_fit import GRADIENT_RIDGE_MM2, known_variance, query_chunks, unfolded
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import PatchSums, refine_patches
 from cellctl.vision.workers import worker
@@ -23,6 +25,8 @@ MIN_CLOUD_POINTS = 12
 MAX_REFINE_SHIFT_MM = 3.0  # an image fit never moves a height this far from the cloud's median (~1 px disparity)
 TRIM = 0.2  # fraction of points dropped at each end of the height distribution in the cloud fallback
 GRID_CELL_MM = 2.0  # the neighbour grid's cells: a 4 mm query reads 5 x 5 of them
+
+T = TypeVar("T")
 
 
 @dataclass
@@ -48,14 +52,16 @@ class SoleSurface:
     def sample(self, xy: np.ndarray, radius_mm: float, parallel: bool = False) -> SurfaceSamples:
         """Surface height and normal at table points xy (K x 2), from a patch of `radius_mm` around each.
 
-        parallel: the image fits of the first and second half of the queries on two threads (the same
-        result: every patch is fitted on its own, with the patch radius of all the queries)."""
+        parallel: the cloud's medians and the image fits of half the queries each on two threads (the same
+        result: every query's median and patch is its own, fitted with the patch radius of all the queries)."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
         refined = np.zeros(len(xy), bool)
         if self.rec.rectified is None:
             z, normals = self._from_cloud(xy, radius_mm)
             return SurfaceSamples(z, normals, refined)
-        z = self.coarse_heights(xy, radius_mm)
+        half = len(xy) // 2
+        parts = (np.arange(half), np.arange(half, len(xy))) if parallel and half > 0 else (np.arange(len(xy)),)
+        z = np.concatenate(_on_threads(lambda part: self.coarse_heights(xy[part], radius_mm), parts))
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
         if np.any(np.isfinite(z)):
             self._refine(xy, z, normals, refined, radius_mm, parallel)
@@ -117,20 +123,30 @@ class SoleSurface:
             done = patches.ok & np.isfinite(patch_z) & (np.abs(patch_z - z[known[part]]) < MAX_REFINE_SHIFT_MM)
             return part[done], patch_z[done], patch_normals[done]
 
-        # parallel: the second half of the queries on a worker thread (numpy, OpenCV and the C kernels release
-        # the GIL). Every query is fitted on its own with the radius of all of them: the same result.
+        # parallel: the patches of the upper and the lower half of the image rows on two threads (numpy, OpenCV
+        # and the C kernels release the GIL), so that each thread filters only the rows of its own patches
+        # (subpixel.fit_disparity_planes). Every query is fitted on its own with the radius of all of them: the
+        # same result.
         half = len(known) // 2
         if parallel and half > 0:
-            second = worker("patch-fits").submit(fit, np.arange(half, len(known)))
-            try:
-                results = [fit(np.arange(half))]
-            finally:
-                futures.wait([second])
-            results.append(second.result())
+            by_row = np.argsort(centres[:, 1], kind="stable")
+            parts: tuple[np.ndarray, ...] = (np.sort(by_row[:half]), np.sort(by_row[half:]))
         else:
-            results = [fit(np.arange(len(known)))]
-        for part, part_z, part_normals in results:
+            parts = (np.arange(len(known)),)
+        for part, part_z, part_normals in _on_threads(fit, parts):
             z[known[part]], normals[known[part]], refined[known[part]] = part_z, part_normals, True
+
+
+def _on_threads(function: Callable[[np.ndarray], T], parts: tuple[np.ndarray, ...]) -> list[T]:
+    """function(part) for each of one or two parts, the second on a worker thread beside the first."""
+    if len(parts) == 1:
+        return [function(parts[0])]
+    second = worker("patch-fits").submit(function, parts[1])
+    try:
+        first = function(parts[0])
+    finally:
+        futures.wait([second])
+    return [first, second.result()]
 
 
 def _planes_at(points: np.ndarray, ids: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -217,13 +233,23 @@ def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> np.ndar
     known = known_variance(variance)
     tangent = np.roll(xy, -1, axis=0) - np.roll(xy, 1, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
-    geometry = _RowGeometry(xy, xy[finite], tangent)
+    samples, noise = z[finite], known[finite]
+    straight = unfolded(tangent, PATH_SMOOTHING_STEPS_MM[-1], _median_spacing(xy))
+    for part in query_chunks(len(z)):  # a few queries at a time: the same values (local_fit.QUERY_CHUNK)
+        result[part] = _least_error_heights(
+            _RowGeometry(xy[part], xy[finite], tangent[part]), samples, noise, straight[part]
+        )
+    return result
+
+
+def _least_error_heights(
+    geometry: _RowGeometry, samples: np.ndarray, noise: np.ndarray, straight: np.ndarray
+) -> np.ndarray:
+    """path_heights at the queries of `geometry` (whose fits along the path are unfolded where `straight`)."""
     # planes narrow to wide, then the curved fits narrow to wide
     rows = [geometry.rows(width, curved) for curved in (False, True) for width in PATH_SMOOTHING_STEPS_MM]
-    samples, noise = z[finite], known[finite]
     estimates = np.array([r @ samples for r in rows])
     variances = np.array([(r * r) @ noise for r in rows])
-    straight = unfolded(tangent, PATH_SMOOTHING_STEPS_MM[-1], _median_spacing(xy))
     planes = len(PATH_SMOOTHING_STEPS_MM)
     reference = np.where(straight[:, None], rows[-1], rows[0])
     reference_estimate = np.where(straight, estimates[-1], estimates[0])
@@ -234,7 +260,7 @@ def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> np.ndar
         error[i] = np.maximum((estimates[i] - reference_estimate) ** 2 - difference @ noise, 0.0) + variances[i]
     error[planes:, ~straight] = np.inf
     best = np.argmin(error, axis=0)
-    return estimates[best, np.arange(len(z))]
+    return estimates[best, np.arange(len(straight))]
 
 
 def height_rows(at: np.ndarray, xy: np.ndarray, sigma_mm: float, tangent: np.ndarray | None = None) -> np.ndarray:
@@ -250,21 +276,26 @@ class _RowGeometry:
     def __init__(self, at: np.ndarray, xy: np.ndarray, tangent: np.ndarray | None) -> None:
         self.dx = xy[None, :, 0] - at[:, None, 0]
         self.dy = xy[None, :, 1] - at[:, None, 1]
-        self.squared = self.dx * self.dx + self.dy * self.dy
         # the weighted sums' terms: the plane's, then the curve's (u^2 and its products)
         terms = [self.dx, self.dy, self.dx * self.dx, self.dx * self.dy, self.dy * self.dy]
+        self.squared = terms[2] + terms[4]
         self.u2 = None
         if tangent is not None:
             u = self.dx * tangent[:, 0:1] + self.dy * tangent[:, 1:2]
             self.u2 = u * u
             terms += [self.u2, self.dx * self.u2, self.dy * self.u2, self.u2 * self.u2]
         self.terms = terms
+        # Per width: the weights, their sums and the weighted sums of the terms so far (the plane's and the
+        # curved fit's of one width share the weights and the plane's sums).
+        self._sums: dict[float, tuple[np.ndarray, np.ndarray, list[np.ndarray]]] = {}
 
     def rows(self, sigma_mm: float, curved: bool) -> np.ndarray:
-        w = np.exp(self.squared / (-2.0 * sigma_mm**2))
         count = 9 if curved else 5
-        s = w.sum(axis=1)
-        m = [np.einsum("km,km->k", w, term) for term in self.terms[:count]]
+        if sigma_mm not in self._sums:
+            w = np.exp(self.squared / (-2.0 * sigma_mm**2))
+            self._sums[sigma_mm] = (w, w.sum(axis=1), [])
+        w, s, m = self._sums[sigma_mm]
+        m += [np.einsum("km,km->k", w, term) for term in self.terms[len(m) : count]]
         ridge = GRADIENT_RIDGE_MM2 * s
         size = 4 if curved else 3
         normal = np.empty((len(s), size, size))

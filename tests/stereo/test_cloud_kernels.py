@@ -406,6 +406,27 @@ def test_patch_sample_is_remap_of_patch_shift() -> None:
         patch_sample(*args[:-2], np.full(pixels, 50), image)
 
 
+def test_patch_sample_vector_kernel_gives_the_scalar_kernels_bits() -> None:
+    """The AVX2 kernel (where the CPU has it) computes every sample with the scalar rule's operations in its order:
+    the same bits, also for patches of 0-3 pixels (no whole vector), columns past either side of the image, a NaN
+    or infinite plane, whole-pixel positions and images narrower than the four columns."""
+    rng = np.random.default_rng(11)
+    for trial in range(60):
+        height, width = int(rng.integers(1, 30)), int(rng.integers(1, 200))
+        sizes = rng.integers(0, 30, int(rng.integers(1, 20)))
+        starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        pixels = int(starts[-1])
+        params = rng.normal(0.0, 20.0, (len(sizes), 3)) * [1.0, 0.05, 0.05]
+        params[0, trial % 3] = (np.nan, np.inf, -np.inf)[trial % 3]
+        x = rng.uniform(-20, width + 20, pixels).astype(np.float32)
+        x[::3] = np.round(x[::3])
+        args = (starts, params, x, rng.normal(0, 8, pixels), rng.normal(0, 8, pixels))
+        rows = rng.integers(0, height, pixels)
+        image = rng.normal(100, 40, (height, width, 2)).astype(np.float32)
+        vector = patch_sample(*args, rows, image, threads=1)
+        np.testing.assert_array_equal(vector, patch_sample(*args, rows, image, threads=1, simd=False))
+
+
 def test_patch_fits_in_row_groups_are_the_fits_of_one_call() -> None:
     """refine_patches fits patches whose rows lie far apart (a heel and a toe) group by group, each filtering
     only its own rows: the same parameters, flags and pixels, bit for bit, as one call over all patches."""

@@ -108,3 +108,22 @@ def test_sample_variance_counts_the_patches_overlap() -> None:
     ratio = (sample_variance(near, z, 2.0) / path_noise(z) ** 2)[10:-10]  # the open ends have fewer neighbours
     np.testing.assert_allclose(ratio, ratio[0])
     assert 6.5 < ratio[0] < 7.5  # 3.44 / (1 - 4/3 x 0.39)
+
+
+def test_gradients_in_passes_of_a_few_queries_are_those_of_one_pass(monkeypatch) -> None:  # noqa: ANN001
+    """slope_gradients works through the queries QUERY_CHUNK at a time: bit for bit the gradients and choices of
+    one pass over all of them."""
+    import cellctl.vision.local_fit as local_fit
+
+    path, ring, tangent = _straight_path_with_ring()
+    xy = np.vstack([path, ring])
+    z = _seat_into_ramp(xy) + np.random.default_rng(3).normal(0.0, 0.2, len(xy))
+    z[5] = np.nan
+    variance = np.full(len(xy), 0.2**2)
+    assert len(path) > 2 * local_fit.QUERY_CHUNK and len(path) % local_fit.QUERY_CHUNK
+    in_passes = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
+    monkeypatch.setattr(local_fit, "QUERY_CHUNK", len(path))
+    one_pass = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
+    for a, b in zip(in_passes, one_pass, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert in_passes[1].any() and not in_passes[1].all()

@@ -102,3 +102,17 @@ def test_unknown_heights_are_left_out() -> None:
     result = heights(xy, z)
     assert np.all(np.isfinite(result))
     assert np.max(np.abs(result - top(xy))) < 1.0
+
+
+def test_heights_in_passes_of_a_few_queries_are_those_of_one_pass(monkeypatch) -> None:  # noqa: ANN001
+    """path_heights works through the queries QUERY_CHUNK at a time (arrays that stay in the cache): every query's
+    arithmetic is its own, so the heights are bit for bit those of one pass over all of them."""
+    import cellctl.vision.local_fit as local_fit
+
+    xy = ellipse_path(301)  # not a multiple of the pass size
+    z = top(xy) + correlated_noise(len(xy), 0.3, 5, 2)
+    z[[7, 150]] = np.nan
+    in_passes = heights(xy, z)
+    assert len(xy) > 2 * local_fit.QUERY_CHUNK
+    monkeypatch.setattr(local_fit, "QUERY_CHUNK", len(xy))
+    np.testing.assert_array_equal(in_passes, heights(xy, z))
