@@ -1,7 +1,12 @@
 /* Hot loops of the measurement after the match; see cloud_kernels.h. */
 #include "cloud_kernels.h"
 
+#if defined(__x86_64__) || defined(__i386__)
+#define CK_HAVE_X86 1
 #include <immintrin.h>
+#else
+#define CK_HAVE_X86 0
+#endif
 #include <math.h>
 #include <omp.h>
 #include <stddef.h>
@@ -672,6 +677,8 @@ static inline void sample_pixel(double pa, double pb, double pc, float x, double
         out[ch] = row[2 * c0 + ch] * w0 + row[2 * c1 + ch] * w1 + row[2 * c2 + ch] * w2 + row[2 * c3 + ch] * w3;
 }
 
+/* The AVX2 kernel exists only where the compiler targets x86: elsewhere (an ARM line PC) the scalar one runs. */
+#if CK_HAVE_X86
 /* Pixels [lo, hi) of one patch, four at a time in AVX2 (the rest, and pixels whose four columns reach past the
  * image's side, by sample_pixel). The same IEEE operations in the same order as sample_pixel, without fused
  * multiply-adds (the target has none): the same bits. The positions and weights of four pixels are computed in
@@ -733,6 +740,14 @@ static int have_avx2(void) {
     __builtin_cpu_init();
     return __builtin_cpu_supports("avx2") ? 1 : 0;
 }
+#else
+static int have_avx2(void) { return 0; }
+static void sample_run_avx2(double pa, double pb, double pc, const float *x, const double *dx, const double *dy,
+                            const int32_t *rows, const float *image, int width, float *out, int64_t lo, int64_t hi) {
+    for (int64_t i = lo; i < hi; ++i)
+        sample_pixel(pa, pb, pc, x[i], dx[i], dy[i], image + (int64_t)rows[i] * width * 2, width, out + 2 * i);
+}
+#endif
 
 int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params, const float *x, const double *dx,
                     const double *dy, const int32_t *rows, const float *image, int height, int width, float *out,
