@@ -264,6 +264,13 @@ class Journal:
         finally:
             self._db.execute("PRAGMA synchronous=FULL")
 
+    def set_wal_autocheckpoint(self, pages: int) -> None:
+        """SQLite's own checkpoints inside the commits: every `pages` pages of WAL, or none (0: WalCheckpointer
+        checkpoints between cycles instead)."""
+        if pages < 0:
+            raise ValueError(f"wal_autocheckpoint pages must be 0 or more, got {pages}")
+        self._db.execute(f"PRAGMA wal_autocheckpoint={int(pages)}")
+
     def last(self, count: int | None = None) -> list[CycleRecord]:
         """The newest `count` cycles (all when None), oldest first."""
         limit = -1 if count is None else count
@@ -305,7 +312,7 @@ class WalCheckpointer:
         self._pending = False
         self._closing = False
         self.done = 0  # checkpoints run
-        journal._db.execute("PRAGMA wal_autocheckpoint=0")
+        journal.set_wal_autocheckpoint(0)
         self._thread = threading.Thread(target=self._run, args=(journal.path,), name="journal checkpoints", daemon=True)
         self._thread.start()
 
@@ -328,7 +335,7 @@ class WalCheckpointer:
             self._closing = True
             self._due.notify_all()
         self._thread.join(10.0)
-        self._journal._db.execute(f"PRAGMA wal_autocheckpoint={SQLITE_AUTOCHECKPOINT_PAGES}")
+        self._journal.set_wal_autocheckpoint(SQLITE_AUTOCHECKPOINT_PAGES)
 
     def _run(self, path: Path) -> None:
         try:

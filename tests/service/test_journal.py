@@ -154,6 +154,16 @@ def test_with_a_checkpointer_no_commit_checkpoints_the_wal_and_the_thread_does_b
     journal.close()
 
 
+def test_the_wal_autocheckpoint_is_set_through_the_journal_and_a_negative_one_is_refused(tmp_path: Path) -> None:
+    journal = Journal.open(tmp_path)
+    journal.set_wal_autocheckpoint(0)
+    assert journal._db.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 0
+    with pytest.raises(ValueError, match="0 or more"):
+        journal.set_wal_autocheckpoint(-1)
+    assert journal._db.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 0
+    journal.close()
+
+
 def test_a_checkpoint_is_requested_once_every_so_many_commits(tmp_path: Path) -> None:
     journal = Journal.open(tmp_path)
     checkpoints = WalCheckpointer(journal, every=3)
