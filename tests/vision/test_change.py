@@ -55,11 +55,18 @@ def _dark_table(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
     return np.asarray(40.0 + 2.0 * _smooth_noise(rng, shape), np.float32)
 
 
-def test_a_shadow_on_a_weakly_textured_dark_table_stays_table_up_to_the_soles_edge() -> None:
-    rng = np.random.default_rng(5)
-    shape = (160, 200)
+def _dark_pair(seed: int, shape: tuple[int, int]) -> tuple[np.random.Generator, np.ndarray, np.ndarray]:
+    """The dark table taught (reference) and seen again (current): the same texture from `seed`, each with its
+    own sensor noise; and the generator the scene draws the rest from."""
+    rng = np.random.default_rng(seed)
     reference = _dark_table(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current = _dark_table(np.random.default_rng(5), shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current = _dark_table(np.random.default_rng(seed), shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    return rng, reference, current
+
+
+def test_a_shadow_on_a_weakly_textured_dark_table_stays_table_up_to_the_soles_edge() -> None:
+    shape = (160, 200)
+    rng, reference, current = _dark_pair(5, shape)
     current[60:140, 40:160] *= 0.75  # the sole's cast shadow, below and beside it
     current[20:80, 60:140] = 120.0 + rng.normal(0.0, 2.0, (60, 80)).astype(np.float32)  # the sole, edge at row 80
     table = np.ones(shape, bool)
@@ -200,10 +207,8 @@ def test_a_black_sole_on_a_grey_table_is_not_a_shadow_where_depth_raises_it() ->
 def _rim_scene(seed: int) -> tuple[ChangeTest, np.ndarray, np.ndarray, np.ndarray]:
     """A white sole (190 DN) with a dark rim 10 px wide (22 DN, darker than the 40 DN table: the other sign
     from the sole) on a weakly textured dark table; returns the test, current, reference and the sole's pixels."""
-    rng = np.random.default_rng(seed)
     shape = (160, 200)
-    reference = _dark_table(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current = _dark_table(np.random.default_rng(seed), shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    rng, reference, current = _dark_pair(seed, shape)
     sole = np.zeros(shape, bool)
     sole[30:130, 40:160] = True
     current[sole] = 22.0 + rng.normal(0.0, 0.5, int(sole.sum())).astype(np.float32)
@@ -235,10 +240,8 @@ def test_a_dark_contact_shadow_band_beside_a_white_sole_is_not_taken_for_a_rim(m
     # table, the other sign from the white sole). The matcher fattens the sole's depth over it, so `raised`
     # covers it too. Held against its own sign it would be changed (all of it, checked); it lies on the mask's
     # outer border, open to the table, no hole: the rule leaves the mask as it is without it.
-    rng = np.random.default_rng(23)
     shape = (160, 200)
-    reference = _dark_table(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current = _dark_table(np.random.default_rng(23), shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    rng, reference, current = _dark_pair(23, shape)
     current[130:134, 40:160] *= 0.5
     current[30:130, 40:160] = 190.0 + rng.normal(0.0, 1.0, (100, 120)).astype(np.float32)
     table = np.ones(shape, bool)
@@ -286,10 +289,8 @@ def test_a_grey_sole_on_a_grey_table_is_changed_where_depth_lifts_it_and_the_tab
 def test_depth_alone_does_not_change_a_dark_tables_faintly_textured_pixels() -> None:
     # On the dark table a pixel's windows are mostly too faint for the texture vote: its absence says nothing,
     # so a lifted band of table (fattening, 8 px) beside a black sole stays table.
-    rng = np.random.default_rng(7)
     shape = (160, 200)
-    reference = _dark_table(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current = _dark_table(np.random.default_rng(7), shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    rng, reference, current = _dark_pair(7, shape)
     sole, table = _sole_with(shape)
     current[sole] = 20.0 + rng.normal(0.0, 1.0, int(sole.sum())).astype(np.float32)
     test = ChangeTest.fit(current, reference, table)
