@@ -148,18 +148,10 @@ def change_split(
 def _raised(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     """Left and right rectified pixels with no point measured at the table's level within
     TABLE_DEPTH_REACH_PX (the right ones at x - disparity)."""
-    height, width = shape[:2]
     level = np.flatnonzero(np.abs(points[:, 2]) < WALL_FOOT_MM)
-    x, y = np.round(np.take(cloud.pixels, level, axis=0)).astype(np.int64).T
-    xr = np.round(np.take(cloud.pixels[:, 0], level) - cloud.disparity[level]).astype(np.int64)
     reach = np.ones((2 * TABLE_DEPTH_REACH_PX + 1,) * 2, np.uint8)
-    raised = []
-    for columns in (x, xr):
-        inside = (columns >= 0) & (columns < width) & (y >= 0) & (y < height)
-        seen = np.zeros((height, width), np.uint8)
-        seen[y[inside], columns[inside]] = 1
-        raised.append(cv2.dilate(seen, reach) == 0)
-    return raised[0], raised[1]
+    left, right = (cv2.dilate(seen, reach) == 0 for seen in _marked(cloud, level, shape))
+    return left, right
 
 
 def _lifted(
@@ -168,16 +160,27 @@ def _lifted(
     """Left and right rectified pixels depth puts on the sole (`ChangeTest.changed(lifted=...)`): raised (no
     table-level point within reach) and a high point (`high`, indices) on the pixel or next to it (the right
     ones at x - disparity); the neighbours close the gaps between the points' rounded pixels."""
-    height, width = raised[0].shape
-    x, y = np.round(np.take(cloud.pixels, high, axis=0)).astype(np.int64).T
-    xr = np.round(np.take(cloud.pixels[:, 0], high) - cloud.disparity[high]).astype(np.int64)
-    lifted = []
-    for columns, raised_pixels in zip((x, xr), raised, strict=True):
+    near = np.ones((3, 3), np.uint8)
+    left, right = (
+        (cv2.dilate(on, near) > 0) & raised_pixels
+        for on, raised_pixels in zip(_marked(cloud, high, raised[0].shape), raised, strict=True)
+    )
+    return left, right
+
+
+def _marked(cloud: StereoCloud, index: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The left and right rectified images (uint8) with 1 at the pixels of the points `index` (the right ones
+    at x - disparity), 0 elsewhere; points off an image are left out of it."""
+    height, width = shape[:2]
+    x, y = np.round(np.take(cloud.pixels, index, axis=0)).astype(np.int64).T
+    xr = np.round(np.take(cloud.pixels[:, 0], index) - cloud.disparity[index]).astype(np.int64)
+    marked = []
+    for columns in (x, xr):
         inside = (columns >= 0) & (columns < width) & (y >= 0) & (y < height)
-        on = np.zeros((height, width), np.uint8)
-        on[y[inside], columns[inside]] = 1
-        lifted.append((cv2.dilate(on, np.ones((3, 3), np.uint8)) > 0) & raised_pixels)
-    return lifted[0], lifted[1]
+        image = np.zeros((height, width), np.uint8)
+        image[y[inside], columns[inside]] = 1
+        marked.append(image)
+    return marked[0], marked[1]
 
 
 def _change_boxes(
