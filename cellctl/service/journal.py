@@ -45,6 +45,7 @@ log = logging.getLogger(__name__)
 CHECKPOINT_COMMITS = 32
 #: SQLite's own checkpoint threshold (pages), restored when a `WalCheckpointer` stops.
 SQLITE_AUTOCHECKPOINT_PAGES = 1000
+JOURNAL_FILE = "journal.sqlite3"  # in the state directory
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS cycles (
@@ -142,12 +143,12 @@ class Journal:
 
     @property
     def path(self) -> Path:
-        return self.state_dir / "journal.sqlite3"
+        return self.state_dir / JOURNAL_FILE
 
     @classmethod
     def open(cls, state_dir: str | Path, *, readonly: bool = False) -> Journal:
         state = Path(state_dir)
-        path = state / "journal.sqlite3"
+        path = state / JOURNAL_FILE
         if path.exists() and not path.is_file():
             raise ValueError(f"journal {path} is not a file (a directory?): move it away")
         if readonly and not path.is_file():
@@ -170,9 +171,8 @@ class Journal:
             values[name] = json.dumps(values[name], allow_nan=False)
         names = ", ".join(values)
         marks = ", ".join(f":{name}" for name in values)
-        with self._db:
+        with self._transaction():
             cursor = self._db.execute(f"INSERT INTO cycles ({names}) VALUES ({marks})", values)
-        self.commits += 1
         if cursor.lastrowid is None:  # sqlite3 sets it after every INSERT; None would be a driver fault
             raise sqlite3.DatabaseError("the journal's INSERT returned no row id")
         record.id = cursor.lastrowid
@@ -185,13 +185,12 @@ class Journal:
 
     def amend_error(self, row_id: int, error_code: int, reason: str) -> None:
         """Turn a journaled cycle into an error after the fact (the link answered it with a timeout)."""
-        with self._db:
+        with self._transaction():
             self._db.execute(
                 "UPDATE cycles SET status = 'error', error_code = ?, reason = ?, length_mm = NULL, "
                 "heel_height_mm = NULL, toe_height_mm = NULL, glue_path = '[]' WHERE id = ?",
                 (error_code, reason, row_id),
             )
-        self.commits += 1
 
     def artifact_dir(self, row_id: int) -> Path:
         return self.state_dir / "cycles" / f"{row_id:08d}"
@@ -202,7 +201,7 @@ class Journal:
         A crash between that rename and this commit leaves a folder no row refers to; prune_orphans()
         removes it (and staging leftovers) at the next start.
         """
-        with self._unsynced():
+        with self._transaction(synced=False):
             self._db.execute(
                 "UPDATE cycles SET ply_path = ?, overlay_path = ? WHERE id = ?",
                 (
@@ -246,23 +245,26 @@ class Journal:
             return 0
         for row in rows:
             shutil.rmtree(self.artifact_dir(row["id"]), ignore_errors=True)
-        with self._unsynced():
+        with self._transaction(synced=False):
             self._db.executemany(
                 "UPDATE cycles SET ply_path = NULL, overlay_path = NULL WHERE id = ?", [(row["id"],) for row in rows]
             )
         return len(rows)
 
     @contextlib.contextmanager
-    def _unsynced(self) -> Iterator[None]:
-        """One transaction committed without an fsync (synchronous=NORMAL under WAL): durable with the next
-        synced commit or checkpoint, which fsync the whole WAL, in order. For what the PLC is not told."""
-        self._db.execute("PRAGMA synchronous=NORMAL")
+    def _transaction(self, synced: bool = True) -> Iterator[None]:
+        """One transaction, committed (and counted in `commits`) or rolled back. Not synced: committed without
+        an fsync (synchronous=NORMAL under WAL), durable with the next synced commit or checkpoint, which fsync
+        the whole WAL, in order; for what the PLC is not told."""
+        if not synced:
+            self._db.execute("PRAGMA synchronous=NORMAL")
         try:
             with self._db:
                 yield
             self.commits += 1
         finally:
-            self._db.execute("PRAGMA synchronous=FULL")
+            if not synced:
+                self._db.execute("PRAGMA synchronous=FULL")
 
     def set_wal_autocheckpoint(self, pages: int) -> None:
         """SQLite's own checkpoints inside the commits: every `pages` pages of WAL, or none (0: WalCheckpointer
