@@ -677,6 +677,13 @@ static inline void sample_pixel(double pa, double pb, double pc, float x, double
         out[ch] = row[2 * c0 + ch] * w0 + row[2 * c1 + ch] * w1 + row[2 * c2 + ch] * w2 + row[2 * c3 + ch] * w3;
 }
 
+/* Pixels [lo, hi) of one patch by the scalar rule. */
+static void sample_run_scalar(double pa, double pb, double pc, const float *x, const double *dx, const double *dy,
+                              const int32_t *rows, const float *image, int width, float *out, int64_t lo, int64_t hi) {
+    for (int64_t i = lo; i < hi; ++i)
+        sample_pixel(pa, pb, pc, x[i], dx[i], dy[i], image + (int64_t)rows[i] * width * 2, width, out + 2 * i);
+}
+
 /* The AVX2 kernel exists only where the compiler targets x86: elsewhere (an ARM line PC) the scalar one runs. */
 #if CK_HAVE_X86
 /* Pixels [lo, hi) of one patch, four at a time in AVX2 (the rest, and pixels whose four columns reach past the
@@ -732,8 +739,7 @@ __attribute__((target("avx2"))) static void sample_run_avx2(double pa, double pb
             _mm_storel_pi((__m64 *)(out + 2 * k), sum);
         }
     }
-    for (; i < hi; ++i)
-        sample_pixel(pa, pb, pc, x[i], dx[i], dy[i], image + (int64_t)rows[i] * width * 2, width, out + 2 * i);
+    sample_run_scalar(pa, pb, pc, x, dx, dy, rows, image, width, out, i, hi);
 }
 
 static int have_avx2(void) {
@@ -742,11 +748,7 @@ static int have_avx2(void) {
 }
 #else
 static int have_avx2(void) { return 0; }
-static void sample_run_avx2(double pa, double pb, double pc, const float *x, const double *dx, const double *dy,
-                            const int32_t *rows, const float *image, int width, float *out, int64_t lo, int64_t hi) {
-    for (int64_t i = lo; i < hi; ++i)
-        sample_pixel(pa, pb, pc, x[i], dx[i], dy[i], image + (int64_t)rows[i] * width * 2, width, out + 2 * i);
-}
+#define sample_run_avx2 sample_run_scalar /* never called there: have_avx2() is 0 */
 #endif
 
 int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params, const float *x, const double *dx,
@@ -767,12 +769,10 @@ int ck_patch_sample(int64_t patches, const int64_t *starts, const double *params
     if (starts[patches] >= CK_PARALLEL_MIN)
     for (int64_t k = 0; k < patches; ++k) {
         const double pa = params[3 * k], pb = params[3 * k + 1], pc = params[3 * k + 2];
-        if (vector) {
+        if (vector)
             sample_run_avx2(pa, pb, pc, x, dx, dy, rows, image, width, out, starts[k], starts[k + 1]);
-            continue;
-        }
-        for (int64_t i = starts[k]; i < starts[k + 1]; ++i)
-            sample_pixel(pa, pb, pc, x[i], dx[i], dy[i], image + (int64_t)rows[i] * width * 2, width, out + 2 * i);
+        else
+            sample_run_scalar(pa, pb, pc, x, dx, dy, rows, image, width, out, starts[k], starts[k + 1]);
     }
     return CK_OK;
 }
