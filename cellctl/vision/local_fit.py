@@ -142,12 +142,12 @@ def slope_gradients(
     xy, z = xy[finite], z[finite]
     known = known_variance(variance[finite])
     gradient, better = np.empty((len(at), 2)), unfolded(tangent, sigma_mm, spacing_mm)
+
+    def fit_variance(rows: np.ndarray) -> np.ndarray:
+        return np.sum(rows * rows * known, axis=(1, 2))
+
     for part in query_chunks(len(at)):
         plane, plane_rows, cubic, cubic_rows = _plane_and_cubic(at[part], xy, z, sigma_mm, tangent[part])
-
-        def fit_variance(rows: np.ndarray) -> np.ndarray:
-            return np.sum(rows * rows * known, axis=(1, 2))
-
         plane_var, cubic_var = fit_variance(plane_rows), fit_variance(cubic_rows)
         difference_var = fit_variance(cubic_rows - plane_rows)
         bias_and_noise = np.sum((cubic - plane) ** 2, axis=1)
