@@ -23,7 +23,6 @@ from cellctl.service.config import CellConfig
 from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
 from cellctl.service.recipes import Recipe
 from cellctl.vision.calibration import Calibration
-from cellctl.vision.overlay import draw_overlay, draw_refused
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.runtime import keep_freed_memory, one_blas_thread, settle_garbage_collector, warm_heap
 from cellctl.vision.teach import TaughtTable, TeachError, load_taught
@@ -71,7 +70,6 @@ class CellMeasurer:
         settings = MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
         result = measure_frame(frame, self.reconstructor, settings)
         outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
-        warm_drawing(frame, self.calib, result)
         log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
         for depth_range in sorted({r.depth_range_mm for r in recipes} - {measure.depth_range_mm}):
             start = time.monotonic()
@@ -132,16 +130,6 @@ class CellMeasurer:
             taught=None if own is None else own.taught,
         )
         return self._recipe_reconstructor
-
-
-def warm_drawing(frame: StereoFrame, calib: Calibration | None, result: Measured | Refused) -> None:
-    """Draw the warm-up cycle's overlay once and drop it: OpenCV sets up its fonts at the first cv2.putText of
-    the process (~21 ms of CPU). Otherwise the image log's or the artifact writer's first overlay pays that,
-    between cycles, in one piece that runs beside the next cycle on a line triggering back to back."""
-    if isinstance(result, Measured) and calib is not None:
-        draw_overlay(frame.left, calib, result.reconstruction, result.measurement)
-    else:
-        draw_refused(frame.left, "warm-up")
 
 
 def load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None]:
