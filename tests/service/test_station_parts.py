@@ -226,6 +226,24 @@ def test_image_log_writes_between_cycles_only(tmp_path: Path) -> None:
     writer.join()
 
 
+def test_the_image_logs_writer_sets_up_its_text_when_the_log_is_made_not_at_its_first_picture(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """OpenCV sets up its fonts per thread at the first cv2.putText (~22 ms): the writer's thread does that while
+    the service starts, not in its first overlay, which it draws between cycles. No writer without a log."""
+    import time
+
+    writers: list[str] = []
+    monkeypatch.setattr(cv2, "putText", lambda *args, **kwargs: writers.append(threading.current_thread().name))
+    ImageLog(tmp_path / "none", None, ImageLogConfig(keep_cycles=0))
+    ImageLog(tmp_path / "images", None, ImageLogConfig())
+    deadline = time.monotonic() + 10.0
+    while not writers and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.1)  # time enough for a second writer, if one had started
+    assert writers == ["image-log"]
+
+
 @pytest.mark.parametrize("shape", [(70, 50), (130, 40, 3), (64, 9, 4), (1, 1)])
 def test_png_in_bands_reads_back_the_same_pixels_and_pauses_before_every_band(tmp_path: Path, shape: tuple) -> None:
     """The image log's PNG writer: any reader gets the pixels back, and it pauses before each band of rows."""
