@@ -40,6 +40,7 @@ log = logging.getLogger(__name__)
 
 QUEUE_LIMIT = 8  # cycles waiting to be written; beyond, pictures are dropped (with a warning)
 BUSY_WAIT_S = 5.0  # longest a step waits for the daemon to finish a cycle
+SET_UP_WAIT_S = 5.0  # longest the log's creation waits for its writer's set-up (~25 ms; a loaded host, far more)
 _ENTRY = re.compile(r"(left|right|overlay|meta)_(\d{8})\.(png|json)")
 # Lossless and fast (see service.artifacts); the log is written after the PLC has its answer.
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
@@ -76,8 +77,13 @@ class ImageLog:
         self._pending = 0  # queued and not yet written
         self._written = threading.Condition()
         self._busy = False  # the daemon is measuring (its CellState): the writer starts no step meanwhile
+        self._set_up = threading.Event()
         if config.keep_cycles > 0:
-            self._start_writer()  # now, while the service starts: the thread sets up its drawing first
+            self._start_writer()
+            # Returned only once the thread has set up its drawing (set_up_text, ~25 ms while the service starts):
+            # a process that ends meanwhile (e.g. a journal it cannot open) would end inside OpenCV's set-up on
+            # that thread, and C++ aborts the process (seen: "terminate called without an active exception").
+            self._set_up.wait(SET_UP_WAIT_S)
 
     def _start_writer(self) -> None:
         self._writer = threading.Thread(target=self._write_queued, name="image-log", daemon=True)
@@ -108,7 +114,10 @@ class ImageLog:
             return self._written.wait_for(lambda: self._pending == 0, timeout_s)
 
     def _write_queued(self) -> None:
-        set_up_text()
+        try:
+            set_up_text()
+        finally:
+            self._set_up.set()
         while True:
             event = self._queue.get()
             try:
