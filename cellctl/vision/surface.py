@@ -198,17 +198,8 @@ def _robust_plane(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray
 # each candidate's expected squared error is its noise variance (the samples' own, propagated exactly through its
 # linear rows) plus its squared bias, estimated as the squared difference from the least biased candidate less
 # that difference's noise variance (path_heights).
-# The widest width bounds how far along the path the noise is averaged: the error left on black soles is the
-# patches' noise correlated over 10-20 mm of path (the cloud's medians carry the same stretches, correlation
-# 0.7-0.8 after a 12 mm fit: the images' noise, not the patch fit), which a 12 mm fit still passes on at
-# 0.3-0.4 mm sd. A 16 mm fit (weights reaching ~30 mm either side) averages more of it, and its curved version,
-# the reference for every candidate's bias, still follows a top's slope changing along the path (a heel seat
-# running into the waist, 20-40 mm long); wider (20 mm) the reference itself bends there (held-out 3002 0.52 ->
-# 0.87 mm). Over the 135 valid results of the three matrix sets (offline, the same patch heights; issue 11,
-# /work/notes/issue-11-glue10.md) adding 16 mm lowered the worst glue height per sole, mean 0.50 -> 0.46 mm,
-# grey 0.79 -> 0.69, white 0.84 -> 0.64 at worst, and the soles above 0.75 mm from 17 to 7.
 PATH_SMOOTHING_MM = 6.0
-PATH_SMOOTHING_STEPS_MM = (6.0, 8.0, 10.0, 12.0, 16.0)  # candidate widths (Gaussian sigma of the fits' weights)
+PATH_SMOOTHING_STEPS_MM = (6.0, 8.0, 10.0, 12.0)  # candidate widths (Gaussian sigma of the fits' weights)
 PATH_NOISE_LAG = 2  # samples: the noise from second differences at this lag (a smooth top's curve drops out)
 PATH_NOISE_WINDOW = 8  # samples either side over which the local noise is taken
 
@@ -257,8 +248,9 @@ def _least_error_heights(
 ) -> np.ndarray:
     """path_heights at the queries of `geometry` (whose fits along the path are unfolded where `straight`)."""
     # The planes narrow to wide, then the curved fit at the widest width: the reference where the path is straight.
-    # A narrower curved fit never wins there (its expected error is at least its variance, which exceeds the
-    # reference's own: over the 135 valid results of sets 2000-4000 none was chosen), so it is not computed.
+    # A narrower curved fit cannot win there but by a rounding: its expected error is at least its variance, which
+    # exceeds the reference's own (the fit of the same shape over more samples). Over the 135 valid results of the
+    # matrix sets 2000-4000 none was chosen, so it is not computed (issue 11, session 10, glue10).
     rows = [geometry.rows(width, False) for width in PATH_SMOOTHING_STEPS_MM]
     rows.append(geometry.rows(PATH_SMOOTHING_STEPS_MM[-1], True))
     estimates = np.array([r @ samples for r in rows])
