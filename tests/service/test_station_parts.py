@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import socket
 import threading
+import time
 from pathlib import Path
 
 import cv2
@@ -230,17 +231,18 @@ def test_the_image_logs_writer_sets_up_its_text_when_the_log_is_made_not_at_its_
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     """OpenCV sets up its fonts per thread at the first cv2.putText (~22 ms): the writer's thread does that while
-    the service starts, not in its first overlay, which it draws between cycles. No writer without a log."""
-    import time
-
+    the service starts, not in its first overlay, which it draws between cycles; the log is returned only once
+    that is done. No writer without a log."""
     writers: list[str] = []
-    monkeypatch.setattr(cv2, "putText", lambda *args, **kwargs: writers.append(threading.current_thread().name))
+
+    def slow_put_text(*args: object, **kwargs: object) -> None:
+        time.sleep(0.2)  # a set-up that takes a while: the log must not be returned before it is done
+        writers.append(threading.current_thread().name)
+
+    monkeypatch.setattr(cv2, "putText", slow_put_text)
     ImageLog(tmp_path / "none", None, ImageLogConfig(keep_cycles=0))
+    assert writers == []
     ImageLog(tmp_path / "images", None, ImageLogConfig())
-    deadline = time.monotonic() + 10.0
-    while not writers and time.monotonic() < deadline:
-        time.sleep(0.01)
-    time.sleep(0.1)  # time enough for a second writer, if one had started
     assert writers == ["image-log"]
 
 
