@@ -21,10 +21,7 @@ def test_a_bright_sole_edge_along_a_step_of_the_tables_texture_is_changed_up_to_
     reference += rng.normal(0.0, 1.0, shape).astype(np.float32)
     current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
     current[:60, 40:120] = 190.0 + rng.normal(0.0, 1.0, (60, 80)).astype(np.float32)  # a white sole, edge at 60
-    table = np.ones(shape, bool)
-    table[:70, 30:130] = False
-    test = ChangeTest.fit(current, reference, table)
-    assert test is not None
+    test = _fitted_outside(current, reference, (slice(None, 70), slice(30, 130)))
     changed = test.changed(current, reference)
     assert changed[:59, 42:118].all()  # up to the row next to the edge: the step does not veto it
     assert not changed[61:, :].any() and not changed[:, :38].any()
@@ -37,11 +34,17 @@ def test_a_shadow_along_the_same_step_stays_table() -> None:
     reference += rng.normal(0.0, 1.0, shape).astype(np.float32)
     current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
     current[:60, 40:120] *= 0.6  # a cast shadow: the same stripes, darker
-    table = np.ones(shape, bool)
-    table[:70, 30:130] = False
+    test = _fitted_outside(current, reference, (slice(None, 70), slice(30, 130)))
+    assert test.changed(current, reference)[:60, 40:120].mean() < 0.1
+
+
+def _fitted_outside(current: np.ndarray, reference: np.ndarray, sole: tuple[slice, slice]) -> ChangeTest:
+    """The change test fitted on the table: every pixel outside the box `sole` (rows, columns) round the sole."""
+    table = np.ones(current.shape, bool)
+    table[sole] = False
     test = ChangeTest.fit(current, reference, table)
     assert test is not None
-    assert test.changed(current, reference)[:60, 40:120].mean() < 0.1
+    return test
 
 
 def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
@@ -69,10 +72,7 @@ def test_a_shadow_on_a_weakly_textured_dark_table_stays_table_up_to_the_soles_ed
     rng, reference, current = _dark_pair(5, shape)
     current[60:140, 40:160] *= 0.75  # the sole's cast shadow, below and beside it
     current[20:80, 60:140] = 120.0 + rng.normal(0.0, 2.0, (60, 80)).astype(np.float32)  # the sole, edge at row 80
-    table = np.ones(shape, bool)
-    table[10:150, 30:170] = False
-    test = ChangeTest.fit(current, reference, table)
-    assert test is not None
+    test = _fitted_outside(current, reference, (slice(10, 150), slice(30, 170)))
     changed = test.changed(current, reference)
     assert changed[22:78, 62:138].all()
     # The shadow's own sharp edge may be flagged (its windows see two factors); it lies on the table (depth
@@ -90,10 +90,7 @@ def test_a_box_gives_the_whole_images_pixels_inside_it_and_none_outside() -> Non
     reference = _dark_table(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
     current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
     current[50:110, 60:140] = 150.0
-    table = np.ones(shape, bool)
-    table[40:120, 50:150] = False
-    test = ChangeTest.fit(current, reference, table)
-    assert test is not None
+    test = _fitted_outside(current, reference, (slice(40, 120), slice(50, 150)))
     box = (slice(20, 140), slice(30, 170))
     whole, boxed = test.changed(current, reference), test.changed(current, reference, box)
     assert not boxed[:20].any() and not boxed[:, 170:].any()
@@ -119,10 +116,7 @@ def test_two_shadows_overlapping_in_a_narrow_band_beside_the_sole_stay_table() -
         current[60:140, 40:160] *= 0.8
         current[80:90, 50:150] *= 0.55 / 0.8
         current[20:80, 60:140] = sole + rng.normal(0.0, 2.0, (60, 80)).astype(np.float32)  # edge at row 80
-        table = np.ones(shape, bool)
-        table[10:150, 30:170] = False
-        test = ChangeTest.fit(current, reference, table)
-        assert test is not None
+        test = _fitted_outside(current, reference, (slice(10, 150), slice(30, 170)))
         # The same with depth: the sole raised, the band (on the table, matched there) not.
         raised = np.zeros(shape, bool)
         raised[20:80, 60:140] = True
@@ -157,10 +151,7 @@ def _changed_on_grey_table(seed: int, sole: Callable[[np.random.Generator, np.nd
     reference = 110.0 + 6.0 * _smooth_noise(rng, shape)
     current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
     current[40:120, 40:160] = sole(rng, reference)
-    table = np.ones(shape, bool)
-    table[30:130, 30:170] = False
-    test = ChangeTest.fit(current, reference, table)
-    assert test is not None
+    test = _fitted_outside(current, reference, (slice(30, 130), slice(30, 170)))
     changed = test.changed(current, reference)
     outside = np.ones(shape, bool)
     outside[39:121, 39:161] = False
@@ -244,10 +235,7 @@ def test_a_dark_contact_shadow_band_beside_a_white_sole_is_not_taken_for_a_rim(m
     rng, reference, current = _dark_pair(23, shape)
     current[130:134, 40:160] *= 0.5
     current[30:130, 40:160] = 190.0 + rng.normal(0.0, 1.0, (100, 120)).astype(np.float32)
-    table = np.ones(shape, bool)
-    table[20:145, 30:170] = False
-    test = ChangeTest.fit(current, reference, table)
-    assert test is not None
+    test = _fitted_outside(current, reference, (slice(20, 145), slice(30, 170)))
     raised = np.zeros(shape, bool)
     raised[25:136, 35:165] = True
     with_rule = test.changed(current, reference, raised=raised)
