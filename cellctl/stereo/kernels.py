@@ -346,3 +346,45 @@ def disc_dilate(mask: np.ndarray, half_widths: np.ndarray, of_zero: bool = False
     )
     _check(rc, "disc dilation")
     return out
+
+
+def mark_pixels(
+    pixels: np.ndarray,
+    disparity: np.ndarray | None,
+    index: np.ndarray | None,
+    shape: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The left (and right) rectified images (uint8 0/1, `shape` rows x columns) with 1 at the pixels of the
+    points `index` (all points if None): left at (rint(x), rint(y)) of `pixels` (N x 2 x y), right at
+    (rint(x - disparity), rint(y)) (no right image without `disparity`); rint rounds halves to even, as np.round.
+    Points whose pixel is off an image are left out of it (csrc/pixel_marks.h)."""
+    pixels = np.ascontiguousarray(pixels, np.float64)
+    if pixels.ndim != 2 or pixels.shape[1] != 2:
+        raise ValueError(f"pixels must be N x 2, got shape {pixels.shape}")
+    n = len(pixels)
+    rows, cols = shape
+    if rows < 1 or cols < 1:
+        raise ValueError(f"the images must have pixels, got shape {shape}")
+    if disparity is not None:
+        disparity = np.ascontiguousarray(disparity, np.float64)
+        if disparity.shape != (n,):
+            raise ValueError(f"disparity must have the {n} points' values, got shape {disparity.shape}")
+    if index is not None:
+        index = np.ascontiguousarray(index, np.int64)
+        if index.ndim != 1:
+            raise ValueError(f"index must be 1-D, got shape {index.shape}")
+    left = np.zeros((rows, cols), np.uint8)
+    right = None if disparity is None else np.zeros((rows, cols), np.uint8)
+    rc = lib.pm_mark_pixels(
+        _ptr("const double *", pixels),
+        ffi.NULL if disparity is None else _ptr("const double *", disparity),
+        n,
+        ffi.NULL if index is None else _ptr("const int64_t *", index),
+        0 if index is None else len(index),
+        rows,
+        cols,
+        _ptr("uint8_t *", left),
+        ffi.NULL if right is None else _ptr("uint8_t *", right),
+    )
+    _check(rc, "pixel marks")
+    return left, right

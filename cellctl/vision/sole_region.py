@@ -13,7 +13,7 @@ import numpy as np
 import open3d as o3d
 
 from cellctl.errors import FailureKind
-from cellctl.stereo.kernels import disc_dilate
+from cellctl.stereo.kernels import disc_dilate, mark_pixels
 from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
@@ -171,16 +171,11 @@ def _lifted(
 def _marked(cloud: StereoCloud, index: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The left and right rectified images (uint8) with 1 at the pixels of the points `index` (the right ones
     at x - disparity), 0 elsewhere; points off an image are left out of it."""
-    height, width = shape[:2]
-    x, y = np.round(np.take(cloud.pixels, index, axis=0)).astype(np.int64).T
-    xr = np.round(np.take(cloud.pixels[:, 0], index) - cloud.disparity[index]).astype(np.int64)
-    marked = []
-    for columns in (x, xr):
-        inside = (columns >= 0) & (columns < width) & (y >= 0) & (y < height)
-        image = np.zeros((height, width), np.uint8)
-        image[y[inside], columns[inside]] = 1
-        marked.append(image)
-    return marked[0], marked[1]
+    # In C (cellctl.stereo.kernels.mark_pixels): one pass over the ~3 10^5 points instead of numpy's ~15 (gather,
+    # round, bounds and scatter per image), the same pixels (np.round's halves to even).
+    left, right = mark_pixels(cloud.pixels, cloud.disparity, index, (shape[0], shape[1]))
+    assert right is not None  # given the disparities
+    return left, right
 
 
 def _change_boxes(
