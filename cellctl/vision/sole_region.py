@@ -298,7 +298,10 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
     if changed_left is None or index.size == 0:
         return 0.0
     width, height = cloud.image_size
-    x, y = np.round(np.take(cloud.pixels, index, axis=0)).astype(int).T
+    # The sole's measured pixels and every measured pixel, marked on the left image (in C, one pass each).
+    sole_pixels, _ = mark_pixels(cloud.pixels, None, index, (height, width))
+    measured_pixels, _ = mark_pixels(cloud.pixels, None, None, (height, width))
+    sole_rows, sole_columns = np.flatnonzero(np.any(sole_pixels, axis=1)), np.flatnonzero(np.any(sole_pixels, axis=0))
     # The changed regions the sole's measured pixels lie in (8-connected), as a mask and their box; labelled
     # within the box of the changed pixels only (the change masks are computed round the sole).
     changed_rows = np.flatnonzero(np.any(changed_left, axis=1))
@@ -308,8 +311,7 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
         box = (slice(changed_rows[0], changed_rows[-1] + 1), slice(changed_columns[0], changed_columns[-1] + 1))
         count, labels = cv2.connectedComponents(changed_left[box].view(np.uint8), connectivity=8)
         touched = np.zeros(count, bool)
-        within = (y >= box[0].start) & (y < box[0].stop) & (x >= box[1].start) & (x < box[1].stop)
-        touched[labels[y[within] - box[0].start, x[within] - box[1].start]] = True
+        touched[labels[sole_pixels[box].view(bool)]] = True
         touched[0] = False  # the unchanged background
         changed_sole[box] = touched[labels]
     rows, columns = np.flatnonzero(np.any(changed_sole, axis=1)), np.flatnonzero(np.any(changed_sole, axis=0))
@@ -318,19 +320,14 @@ def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, ind
     # edge is farther than the reach from the sole, so unmarked after the dilation, and the erosion keeps it
     # unmarked).
     margin = UNMEASURED_CLOSE_PX + 1
-    top = max(min(int(y.min()), int(rows[0]) if rows.size else height) - margin, 0)
-    left = max(min(int(x.min()), int(columns[0]) if columns.size else width) - margin, 0)
-    bottom = min(max(int(y.max()), int(rows[-1]) if rows.size else 0) + margin + 1, height)
-    right = min(max(int(x.max()), int(columns[-1]) if columns.size else 0) + margin + 1, width)
-    sole = np.zeros((bottom - top, right - left), np.uint8)
-    sole[y - top, x - left] = 1
-    region = disc_closing(sole, UNMEASURED_CLOSE_PX) > 0
-    region |= changed_sole[top:bottom, left:right]
-    measured = np.zeros(region.shape, bool)
-    mx, my = np.round(cloud.pixels).astype(int).T
-    inside = (mx >= left) & (mx < right) & (my >= top) & (my < bottom)
-    measured[my[inside] - top, mx[inside] - left] = True
-    lost = region & changed_left[top:bottom, left:right] & ~measured
+    top = max(min(int(sole_rows[0]), int(rows[0]) if rows.size else height) - margin, 0)
+    left = max(min(int(sole_columns[0]), int(columns[0]) if columns.size else width) - margin, 0)
+    bottom = min(max(int(sole_rows[-1]), int(rows[-1]) if rows.size else 0) + margin + 1, height)
+    right = min(max(int(sole_columns[-1]), int(columns[-1]) if columns.size else 0) + margin + 1, width)
+    within = (slice(top, bottom), slice(left, right))
+    region = disc_closing(np.ascontiguousarray(sole_pixels[within]), UNMEASURED_CLOSE_PX) > 0
+    region |= changed_sole[within]
+    lost = region & changed_left[within] & ~measured_pixels[within].view(bool)
     return float(np.count_nonzero(lost)) / max(float(np.count_nonzero(region)), 1.0)
 
 
