@@ -55,10 +55,17 @@ class Footprint:
 
     def centres(self) -> np.ndarray:
         """Table (x, y) of the centres of the marked cells (N x 2)."""
-        rows, cols = np.nonzero(self.mask)
-        return np.column_stack(
-            [self.origin[0] + (cols + 0.5) * self.cell_mm, self.origin[1] + (rows + 0.5) * self.cell_mm]
-        )
+        # The marked cells by flat index (np.nonzero's order; its two-index form costs ~4 x as much on the ~3 10^5
+        # cells of a 0.25 mm raster), written into one N x 2 array: the same values as np.column_stack's.
+        flat = np.flatnonzero(self.mask)
+        rows = flat // self.mask.shape[1]
+        cols = flat - rows * self.mask.shape[1]
+        centres = np.empty((len(flat), 2))
+        np.multiply(cols + 0.5, self.cell_mm, out=centres[:, 0])
+        centres[:, 0] += self.origin[0]
+        np.multiply(rows + 0.5, self.cell_mm, out=centres[:, 1])
+        centres[:, 1] += self.origin[1]
+        return centres
 
     @property
     def area_mm2(self) -> float:
