@@ -1,7 +1,8 @@
-/* The rectified pixels of chosen cloud points, marked on images (pixel_marks.h). */
+/* Passes over the rectified images for the segmentation and the outline checks (pixel_marks.h). */
 #include "pixel_marks.h"
 
 #include <math.h>
+#include <stddef.h>
 
 #include "cloud_kernels.h"
 
@@ -32,6 +33,61 @@ int pm_mark_pixels(const double *pixels, const double *disparity, int64_t n, con
         mark(left, rint(px), y, rows, cols);
         if (disparity)
             mark(right, rint(px - disparity[i]), y, rows, cols);
+    }
+    return CK_OK;
+}
+
+/* Profile samples are at most this many (EDGE_SEARCH_MM / EDGE_SEARCH_STEP_MM is 33): a misfit fits an int32_t. */
+#define PM_MAX_SAMPLES ((int64_t)1 << 20)
+
+/* Sample j of a profile: 1 changed, 0 unchanged, -1 unknown (off the mask, or excused on a table-level cell). */
+static inline int sample_state(const int64_t *at, const uint8_t *changed, int64_t rows, int64_t cols,
+                               const uint8_t *level, int64_t j, int64_t first_out) {
+    const int64_t x = at[2 * j], y = at[2 * j + 1];
+    if (x < 0 || x >= cols || y < 0 || y >= rows)
+        return -1;
+    if (!changed[y * cols + x])
+        return 0;
+    return level && level[j] && j >= first_out ? -1 : 1;
+}
+
+int pm_edge_profiles(const int64_t *pixel, int64_t n, int64_t k, const uint8_t *changed, int64_t rows, int64_t cols,
+                     const uint8_t *level, int64_t first_out, int32_t *inner, int32_t *outer, int32_t *misfit,
+                     int32_t *known) {
+    if (!pixel || !changed || !inner || !outer || !misfit || !known)
+        return CK_ERR_NULL;
+    if (n < 0 || k < 1 || k > PM_MAX_SAMPLES || n > INT64_MAX / (2 * k) || rows < 1 || cols < 1 ||
+        rows > PM_MAX_SIDE || cols > PM_MAX_SIDE || first_out < 0 || first_out > k)
+        return CK_ERR_SIZE;
+    for (int64_t i = 0; i < n; ++i) {
+        const int64_t *at = pixel + 2 * i * k;
+        const uint8_t *lv = level ? level + i * k : NULL;
+        int32_t on = 0, count = 0;
+        for (int64_t j = 0; j < k; ++j) {
+            const int s = sample_state(at, changed, rows, cols, lv, j, first_out);
+            on += s == 1;
+            count += s >= 0;
+        }
+        /* The step before sample j, j = 0..k: `before` known unchanged samples in front, `after` changed from j. */
+        int32_t before = 0, after = on, best = INT32_MAX, first = 0, last = 0;
+        for (int64_t j = 0; j <= k; ++j) {
+            const int32_t m = before + after;
+            if (m < best) {
+                best = m;
+                first = (int32_t)j;
+            }
+            if (m == best)
+                last = (int32_t)j;
+            if (j < k) {
+                const int s = sample_state(at, changed, rows, cols, lv, j, first_out);
+                before += s == 0;
+                after -= s == 1;
+            }
+        }
+        inner[i] = first;
+        outer[i] = last;
+        misfit[i] = best;
+        known[i] = count;
     }
     return CK_OK;
 }

@@ -1,7 +1,8 @@
 /*
- * The rectified pixels of chosen cloud points, marked on images (cellctl.vision.sole_region): what numpy does
- * in some fifteen passes over ~3 10^5 points (gather, round, bounds, scatter, for each camera) in one.
- * Statuses are cloud_kernels.h's CK_* codes; nothing is allocated.
+ * Passes over the rectified images for the sole's segmentation and outline checks, each one pass where numpy
+ * makes many over the same elements: the rectified pixels of chosen cloud points marked on images
+ * (cellctl.vision.sole_region), and the change mask's edge read along the outline's normals
+ * (cellctl.vision.edge_checks.edge_offset_pair). Statuses are cloud_kernels.h's CK_* codes; nothing is allocated.
  */
 #ifndef CELLCTL_PIXEL_MARKS_H
 #define CELLCTL_PIXEL_MARKS_H
@@ -19,5 +20,20 @@
  */
 int pm_mark_pixels(const double *pixels, const double *disparity, int64_t n, const int64_t *index, int64_t count,
                    int64_t rows, int64_t cols, uint8_t *left, uint8_t *right);
+
+/*
+ * The change mask's step along n profiles of k samples each (cellctl.vision.edge_checks.edge_offset_pair):
+ * sample j of profile i lies at the integer pixel (x, y) = (pixel[2 (i k + j)], pixel[2 (i k + j) + 1]).
+ * A sample is known where it lies on the rows x cols mask `changed` (0/1 bytes), and its value is the mask's
+ * there (unknown samples are unchanged); where level is given (n k bytes, NULL: none), a changed sample with
+ * level[i k + j] != 0 and j >= first_out is unknown too (a changed pixel on the measured table outside the
+ * outline: no evidence). The misfit of a step before sample j (j = 0..k) is the number of known unchanged
+ * samples before j plus the known changed ones from j on. Out, per profile: inner[i] and outer[i], the first
+ * and the last j of the least misfit, misfit[i] that misfit, known[i] the number of known samples.
+ * Returns CK_OK, CK_ERR_NULL or CK_ERR_SIZE (n, k, rows, cols or first_out out of range).
+ */
+int pm_edge_profiles(const int64_t *pixel, int64_t n, int64_t k, const uint8_t *changed, int64_t rows, int64_t cols,
+                     const uint8_t *level, int64_t first_out, int32_t *inner, int32_t *outer, int32_t *misfit,
+                     int32_t *known);
 
 #endif

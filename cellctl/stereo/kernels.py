@@ -388,3 +388,45 @@ def mark_pixels(
     )
     _check(rc, "pixel marks")
     return left, right
+
+
+def edge_profiles(
+    pixel: np.ndarray, changed: np.ndarray, level: np.ndarray | None, first_out: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The change mask's step along profiles (csrc/pixel_marks.h, pm_edge_profiles): per profile (row of
+    `pixel`, n x k x 2 integer x y) the first and the last step position j (0..k) of the least misfit, that misfit
+    and the number of known samples (int32 each). Samples off `changed` (bool or 0/1 image) are unknown, and so
+    are changed ones at or after sample `first_out` where `level` (n x k bool, or None) is set."""
+    pixel = np.ascontiguousarray(pixel, np.int64)
+    if pixel.ndim != 3 or pixel.shape[2] != 2 or pixel.shape[1] < 1:
+        raise ValueError(f"pixel must be n x k x 2 (k >= 1), got shape {pixel.shape}")
+    n, k = pixel.shape[:2]
+    mask = (
+        np.ascontiguousarray(changed).view(np.uint8)
+        if changed.dtype == bool
+        else np.ascontiguousarray(changed, np.uint8)
+    )
+    if mask.ndim != 2 or mask.size == 0:
+        raise ValueError(f"changed must be a non-empty image, got shape {mask.shape}")
+    excused = None
+    if level is not None:
+        excused = np.ascontiguousarray(level, bool).view(np.uint8)
+        if excused.shape != (n, k):
+            raise ValueError(f"level must be {n} x {k}, got shape {excused.shape}")
+    inner, outer, misfit, known = (np.empty(max(n, 1), np.int32) for _ in range(4))
+    rc = lib.pm_edge_profiles(
+        _ptr("const int64_t *", pixel),
+        n,
+        k,
+        _ptr("const uint8_t *", mask),
+        mask.shape[0],
+        mask.shape[1],
+        ffi.NULL if excused is None else _ptr("const uint8_t *", excused),
+        first_out,
+        _ptr("int32_t *", inner),
+        _ptr("int32_t *", outer),
+        _ptr("int32_t *", misfit),
+        _ptr("int32_t *", known),
+    )
+    _check(rc, "edge profiles")
+    return inner[:n], outer[:n], misfit[:n], known[:n]

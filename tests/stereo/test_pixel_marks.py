@@ -1,11 +1,12 @@
-"""The pixel-marking kernel (csrc/pixel_marks.c) against its numpy formulation, and its bad input."""
+"""The image kernels of csrc/pixel_marks.c (pixel marks, edge profiles) against their numpy formulations, and
+their bad input."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cellctl.stereo.kernels import mark_pixels
+from cellctl.stereo.kernels import edge_profiles, mark_pixels
 
 
 def _numpy_marks(
@@ -82,3 +83,57 @@ def test_bad_input_is_refused() -> None:
         mark_pixels(pixels, disparity, None, (1 << 21, 2))
     with pytest.raises(ValueError, match="1-D"):
         mark_pixels(pixels, disparity, np.zeros((2, 2), np.int64), (2, 2))
+
+
+def _numpy_profiles(
+    pixel: np.ndarray, changed: np.ndarray, level: np.ndarray | None, first_out: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The step rule as numpy passes (cellctl.vision.edge_checks.edge_offset_pair before the kernel)."""
+    n, k = pixel.shape[:2]
+    px = pixel.reshape(-1, 2)
+    height, width = changed.shape
+    ok = (px[:, 0] >= 0) & (px[:, 0] < width) & (px[:, 1] >= 0) & (px[:, 1] < height)
+    flat = np.zeros(len(px), bool)
+    flat[ok] = changed[px[ok, 1], px[ok, 0]]
+    known, value = ok.reshape(n, k), flat.reshape(n, k)
+    if level is not None:
+        known &= ~(value & level & (np.arange(k) >= first_out)[None, :])
+    on, off = value & known, ~value & known
+    before = np.concatenate([np.zeros((n, 1)), np.cumsum(off, axis=1)], axis=1)
+    after = np.concatenate([np.cumsum(on[:, ::-1], axis=1)[:, ::-1], np.zeros((n, 1))], axis=1)
+    misfit = before + after
+    inner, outer = np.argmin(misfit, axis=1), k - np.argmin(misfit[:, ::-1], axis=1)
+    return inner, outer, misfit[np.arange(n), inner], known.sum(axis=1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_edge_profiles_match_numpy(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    shape, n, k = (40, 60), 300, 33
+    # Steps along the profiles with noise, some profiles partly off the mask, ties between equal misfits.
+    changed = np.zeros(shape, bool)
+    changed[:, : int(rng.integers(10, 50))] = True
+    changed ^= rng.random(shape) < rng.uniform(0.0, 0.3)
+    start = np.column_stack([rng.integers(-20, 70, n), rng.integers(-5, 45, n)])
+    pixel = start[:, None, :] + np.arange(k)[None, :, None] * np.array([-1, 0])[None, None, :]
+    level = rng.random((n, k)) < 0.3
+    for excused in (None, level):
+        expected = _numpy_profiles(pixel, changed, excused, 17)
+        got = edge_profiles(pixel, changed, excused, 17)
+        for e, g in zip(expected, got, strict=True):
+            np.testing.assert_array_equal(g, e)
+    assert np.any(got[0] != got[1])  # ties do occur: the innermost and outermost differ somewhere
+
+
+def test_edge_profiles_bad_input_is_refused() -> None:
+    pixel, changed = np.zeros((3, 5, 2), np.int64), np.zeros((4, 4), bool)
+    with pytest.raises(ValueError, match="n x k x 2"):
+        edge_profiles(np.zeros((3, 5)), changed, None, 2)
+    with pytest.raises(ValueError, match="non-empty image"):
+        edge_profiles(pixel, np.zeros((0, 4), bool), None, 2)
+    with pytest.raises(ValueError, match="level"):
+        edge_profiles(pixel, changed, np.zeros((3, 4), bool), 2)
+    with pytest.raises(ValueError, match="out of range"):
+        edge_profiles(pixel, changed, None, 6)
+    with pytest.raises(ValueError, match="out of range"):
+        edge_profiles(pixel, changed, None, -1)
