@@ -83,18 +83,23 @@ def cloud_from_disparity(
     xs = flat - ys * fixed.shape[1]
     disparity = fixed.ravel()[flat] / float(DISP_SCALE) + shift
     colours = np.take(_smoothed_colours(rect_left[rows, cols]).reshape(-1, 3), flat, axis=0)
-    xs, ys = xs + x0, ys + y0
+    # The pixels (x y, float64) written straight into their own N x 2 array (no shifted int copies, no copy out
+    # of the N x 3 array below).
+    pixels = np.empty((len(xs), 2))
+    np.add(xs, x0, out=pixels[:, 0])
+    np.add(ys, y0, out=pixels[:, 1])
     # Only the measured pixels through Q ([X Y Z W] = Q [x y d 1], cv2.reprojectImageTo3D's formula), as
     # a perspective transform of (x, y, d): no H x W x 3 map to build and gather from.
     pixel_disparity = np.empty((len(xs), 3))  # float64, filled in place (no stacked copies)
-    pixel_disparity[:, 0], pixel_disparity[:, 1], pixel_disparity[:, 2] = xs, ys, disparity
+    pixel_disparity[:, :2] = pixels
+    pixel_disparity[:, 2] = disparity
     # perspectiveTransform returns None for no points (an all-black or uniform pair: lens cap, lights off);
     # such a pair is a cloud of nothing, refused downstream as a scene error.
     points = cv2.perspectiveTransform(pixel_disparity.reshape(-1, 1, 3), calib.Q) if len(xs) else np.zeros((0, 3))
     return StereoCloud(
         points=points.reshape(-1, 3),
         colors=colours,
-        pixels=pixel_disparity[:, :2].copy(),
+        pixels=pixels,
         disparity=disparity,
         image_size=calib.image_size,
         timings=timings,
