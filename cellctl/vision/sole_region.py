@@ -279,9 +279,7 @@ def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:
     if cloud.rectified is None:
         return None
     width, height = cloud.image_size
-    mask = np.zeros((height, width), np.uint8)
-    x, y = np.round(np.take(cloud.pixels, index, axis=0)).astype(int).T
-    mask[y, x] = 1
+    mask, _ = mark_pixels(cloud.pixels, None, index, (height, width))  # in C: one pass over the points
     closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
 
