@@ -91,3 +91,59 @@ int pm_edge_profiles(const int64_t *pixel, int64_t n, int64_t k, const uint8_t *
     }
     return CK_OK;
 }
+
+/* The map's size as the matcher's (and any crop of it): within PM_MAX_SIDE a side, origin within it too. */
+static int measured_args(const int16_t *fixed, const float *texture, int64_t rows, int64_t cols) {
+    if (!fixed || !texture)
+        return CK_ERR_NULL;
+    if (rows < 1 || cols < 1 || rows > PM_MAX_SIDE || cols > PM_MAX_SIDE)
+        return CK_ERR_SIZE;
+    return CK_OK;
+}
+
+int pm_count_measured(const int16_t *fixed, const float *texture, int64_t rows, int64_t cols, int16_t invalid,
+                      float min_texture, int64_t *count) {
+    const int rc = measured_args(fixed, texture, rows, cols);
+    if (rc != CK_OK)
+        return rc;
+    if (!count)
+        return CK_ERR_NULL;
+    int64_t n = 0;
+    for (int64_t i = 0; i < rows * cols; ++i)
+        n += fixed[i] != invalid && texture[i] >= min_texture;
+    *count = n;
+    return CK_OK;
+}
+
+int pm_gather_measured(const int16_t *fixed, const float *texture, int64_t rows, int64_t cols, int16_t invalid,
+                       float min_texture, int64_t x0, int64_t y0, double scale, double shift, int64_t n,
+                       int64_t *flat, double *pixels, double *pixel_disparity, double *disparity) {
+    const int rc = measured_args(fixed, texture, rows, cols);
+    if (rc != CK_OK)
+        return rc;
+    if (!flat || !pixels || !pixel_disparity || !disparity)
+        return CK_ERR_NULL;
+    if (!(scale > 0.0) || n < 0 || x0 < -PM_MAX_SIDE || x0 > PM_MAX_SIDE || y0 < -PM_MAX_SIDE || y0 > PM_MAX_SIDE)
+        return CK_ERR_SIZE;
+    int64_t k = 0;
+    for (int64_t y = 0; y < rows; ++y) {
+        for (int64_t x = 0; x < cols; ++x) {
+            const int64_t i = y * cols + x;
+            if (fixed[i] == invalid || !(texture[i] >= min_texture))
+                continue;
+            if (k == n)
+                return CK_ERR_SIZE; /* more measured pixels than the caller counted */
+            const double px = (double)(x + x0), py = (double)(y + y0);
+            const double d = (double)fixed[i] / scale + shift;
+            flat[k] = i;
+            pixels[2 * k] = px;
+            pixels[2 * k + 1] = py;
+            pixel_disparity[3 * k] = px;
+            pixel_disparity[3 * k + 1] = py;
+            pixel_disparity[3 * k + 2] = d;
+            disparity[k] = d;
+            ++k;
+        }
+    }
+    return k == n ? CK_OK : CK_ERR_SIZE;
+}

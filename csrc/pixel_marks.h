@@ -2,7 +2,8 @@
  * Passes over the rectified images for the sole's segmentation and outline checks, each one pass where numpy
  * makes many over the same elements: the rectified pixels of chosen cloud points marked on images
  * (cellctl.vision.sole_region), and the change mask's edge read along the outline's normals
- * (cellctl.vision.edge_checks.edge_offset_pair). Statuses are cloud_kernels.h's CK_* codes; nothing is allocated.
+ * (cellctl.vision.edge_checks.edge_offset_pair), and the measured pixels of the matcher's map gathered for the
+ * cloud (cellctl.vision.cloud). Statuses are cloud_kernels.h's CK_* codes; nothing is allocated.
  */
 #ifndef CELLCTL_PIXEL_MARKS_H
 #define CELLCTL_PIXEL_MARKS_H
@@ -35,5 +36,19 @@ int pm_mark_pixels(const double *pixels, const double *disparity, int64_t n, con
 int pm_edge_profiles(const int64_t *pixel, int64_t n, int64_t k, const uint8_t *changed, int64_t rows, int64_t cols,
                      const uint8_t *level, int64_t first_out, int32_t *inner, int32_t *outer, int32_t *misfit,
                      int32_t *known);
+
+/*
+ * The measured pixels of the matcher's final map (cellctl.vision.cloud.cloud_from_disparity): fixed (rows x cols
+ * int16, `invalid` where unmeasured) where texture (rows x cols float32) >= min_texture, in raster order.
+ * pm_count_measured: their number (count). pm_gather_measured: for the n of them, flat[k] their index in the map,
+ * pixels[2 k ..] = (x + x0, y + y0) and pixel_disparity[3 k ..] = (x + x0, y + y0, d) as doubles, with
+ * disparity[k] = d = fixed / scale + shift in double (the operations and their order as numpy takes them).
+ * Returns CK_OK, CK_ERR_NULL, CK_ERR_SIZE (rows, cols or scale out of range; n not the count).
+ */
+int pm_count_measured(const int16_t *fixed, const float *texture, int64_t rows, int64_t cols, int16_t invalid,
+                      float min_texture, int64_t *count);
+int pm_gather_measured(const int16_t *fixed, const float *texture, int64_t rows, int64_t cols, int16_t invalid,
+                       float min_texture, int64_t x0, int64_t y0, double scale, double shift, int64_t n,
+                       int64_t *flat, double *pixels, double *pixel_disparity, double *disparity);
 
 #endif

@@ -430,3 +430,52 @@ def edge_profiles(
     )
     _check(rc, "edge profiles")
     return inner[:n], outer[:n], misfit[:n], known[:n]
+
+
+def measured_pixels(
+    fixed: np.ndarray,
+    texture: np.ndarray,
+    invalid: int,
+    min_texture: float,
+    origin: tuple[int, int],
+    scale: float,
+    shift: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The measured pixels of the matcher's int16 map (not `invalid`, `texture` >= min_texture, float32 compare),
+    in raster order (csrc/pixel_marks.h): their flat index in the map, their pixels (N x 2 x y, shifted by
+    `origin`), the same with the disparity (N x 3, the reprojection's input) and the disparity fixed / scale +
+    shift (N), float64."""
+    fixed = np.ascontiguousarray(fixed, np.int16)
+    texture = np.ascontiguousarray(texture, np.float32)
+    if fixed.ndim != 2 or fixed.size == 0 or texture.shape != fixed.shape:
+        raise ValueError(f"fixed and texture must be one non-empty image size, got {fixed.shape} and {texture.shape}")
+    rows, cols = fixed.shape
+    count = ffi.new("int64_t *")
+    _check(
+        lib.pm_count_measured(
+            _ptr("const int16_t *", fixed), _ptr("const float *", texture), rows, cols, invalid, min_texture, count
+        ),
+        "measured pixels",
+    )
+    n = int(count[0])
+    flat = np.empty(n, np.int64)
+    pixels, pixel_disparity, disparity = np.empty((n, 2)), np.empty((n, 3)), np.empty(n)
+    rc = lib.pm_gather_measured(
+        _ptr("const int16_t *", fixed),
+        _ptr("const float *", texture),
+        rows,
+        cols,
+        invalid,
+        min_texture,
+        int(origin[0]),
+        int(origin[1]),
+        float(scale),
+        float(shift),
+        n,
+        _ptr("int64_t *", flat),
+        _ptr("double *", pixels),
+        _ptr("double *", pixel_disparity),
+        _ptr("double *", disparity),
+    )
+    _check(rc, "measured pixels")
+    return flat, pixels, pixel_disparity, disparity

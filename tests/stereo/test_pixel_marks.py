@@ -1,12 +1,12 @@
-"""The image kernels of csrc/pixel_marks.c (pixel marks, edge profiles) against their numpy formulations, and
-their bad input."""
+"""The image kernels of csrc/pixel_marks.c (pixel marks, edge profiles, measured pixels) against their numpy
+formulations, and their bad input."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cellctl.stereo.kernels import edge_profiles, mark_pixels
+from cellctl.stereo.kernels import edge_profiles, mark_pixels, measured_pixels
 
 
 def _numpy_marks(
@@ -137,3 +137,36 @@ def test_edge_profiles_bad_input_is_refused() -> None:
         edge_profiles(pixel, changed, None, 6)
     with pytest.raises(ValueError, match="out of range"):
         edge_profiles(pixel, changed, None, -1)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_measured_pixels_match_numpy(seed: int) -> None:
+    """The cloud's measured pixels as numpy gathered them (cellctl.vision.cloud before the kernel)."""
+    rng = np.random.default_rng(seed)
+    shape, invalid, scale, origin, shift = (23, 41), -32768, 16.0, (7, 3), 150
+    fixed = rng.integers(0, 3000, shape).astype(np.int16)
+    fixed[rng.random(shape) < 0.3] = invalid
+    texture = rng.uniform(0.0, 1.0, shape).astype(np.float32)
+    texture[rng.random(shape) < 0.1] = 0.5  # the threshold itself counts as texture
+    measured = (fixed != invalid) & (texture >= 0.5)
+    flat = np.flatnonzero(measured)
+    ys = flat // shape[1]
+    xs = flat - ys * shape[1]
+    disparity = fixed.ravel()[flat] / scale + shift
+    pixels = np.column_stack([xs + origin[0], ys + origin[1]]).astype(np.float64)
+    got = measured_pixels(fixed, texture, invalid, 0.5, origin, scale, shift)
+    for g, e in zip(got, (flat, pixels, np.column_stack([pixels, disparity]), disparity), strict=True):
+        assert g.dtype == e.dtype and np.array_equal(g, e)
+    assert 0 < len(flat) < fixed.size
+    none = measured_pixels(np.full(shape, invalid, np.int16), texture, invalid, 0.5, origin, scale, shift)
+    assert [a.shape for a in none] == [(0,), (0, 2), (0, 3), (0,)]
+
+
+def test_measured_pixels_bad_input_is_refused() -> None:
+    fixed, texture = np.zeros((4, 5), np.int16), np.ones((4, 5), np.float32)
+    with pytest.raises(ValueError, match="one non-empty image size"):
+        measured_pixels(fixed, np.ones((4, 4), np.float32), -1, 0.5, (0, 0), 16.0, 0)
+    with pytest.raises(ValueError, match="one non-empty image size"):
+        measured_pixels(np.zeros((0, 5), np.int16), np.ones((0, 5), np.float32), -1, 0.5, (0, 0), 16.0, 0)
+    with pytest.raises(ValueError, match="out of range"):
+        measured_pixels(fixed, texture, -1, 0.5, (0, 0), 0.0, 0)
