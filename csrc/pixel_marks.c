@@ -147,3 +147,19 @@ int pm_gather_measured(const int16_t *fixed, const float *texture, int64_t rows,
     }
     return k == n ? CK_OK : CK_ERR_SIZE;
 }
+
+int pm_label_areas(const int32_t *labels, int64_t n, int32_t count, int64_t *areas) {
+    if (!labels || !areas)
+        return CK_ERR_NULL;
+    if (n < 0 || count < 1)
+        return CK_ERR_SIZE;
+    for (int32_t l = 0; l < count; ++l)
+        areas[l] = 0;
+    for (int64_t i = 0; i < n; ++i) {
+        const int32_t l = labels[i];
+        if (l < 0 || l >= count)
+            return CK_ERR_RANGE;
+        ++areas[l];
+    }
+    return CK_OK;
+}

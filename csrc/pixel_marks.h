@@ -2,8 +2,8 @@
  * Passes over the rectified images for the sole's segmentation and outline checks, each one pass where numpy
  * makes many over the same elements: the rectified pixels of chosen cloud points marked on images
  * (cellctl.vision.sole_region), and the change mask's edge read along the outline's normals
- * (cellctl.vision.edge_checks.edge_offset_pair), and the measured pixels of the matcher's map gathered for the
- * cloud (cellctl.vision.cloud). Statuses are cloud_kernels.h's CK_* codes; nothing is allocated.
+ * (cellctl.vision.edge_checks.edge_offset_pair), the measured pixels of the matcher's map gathered for the
+ * cloud (cellctl.vision.cloud), and the areas of labelled regions (cellctl.vision.footprint). Statuses are cloud_kernels.h's CK_* codes; nothing is allocated.
  */
 #ifndef CELLCTL_PIXEL_MARKS_H
 #define CELLCTL_PIXEL_MARKS_H
@@ -50,5 +50,12 @@ int pm_count_measured(const int16_t *fixed, const float *texture, int64_t rows, 
 int pm_gather_measured(const int16_t *fixed, const float *texture, int64_t rows, int64_t cols, int16_t invalid,
                        float min_texture, int64_t x0, int64_t y0, double scale, double shift, int64_t n,
                        int64_t *flat, double *pixels, double *pixel_disparity, double *disparity);
+
+/*
+ * The number of cells of each label (cellctl.vision.footprint.largest_component): areas[l] for l = 0..count-1
+ * counts the n labels equal to l (as np.bincount counts them). Returns CK_OK, CK_ERR_NULL, CK_ERR_SIZE (n or
+ * count out of range) or CK_ERR_RANGE (a label outside 0..count-1).
+ */
+int pm_label_areas(const int32_t *labels, int64_t n, int32_t count, int64_t *areas);
 
 #endif

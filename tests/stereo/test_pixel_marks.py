@@ -1,12 +1,12 @@
-"""The image kernels of csrc/pixel_marks.c (pixel marks, edge profiles, measured pixels) against their numpy
-formulations, and their bad input."""
+"""The image kernels of csrc/pixel_marks.c (pixel marks, edge profiles, measured pixels, label areas) against their
+numpy formulations, and their bad input."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cellctl.stereo.kernels import edge_profiles, mark_pixels, measured_pixels
+from cellctl.stereo.kernels import edge_profiles, label_areas, mark_pixels, measured_pixels
 
 
 def _numpy_marks(
@@ -170,3 +170,16 @@ def test_measured_pixels_bad_input_is_refused() -> None:
         measured_pixels(np.zeros((0, 5), np.int16), np.ones((0, 5), np.float32), -1, 0.5, (0, 0), 16.0, 0)
     with pytest.raises(ValueError, match="out of range"):
         measured_pixels(fixed, texture, -1, 0.5, (0, 0), 0.0, 0)
+
+
+def test_label_areas_are_bincounts() -> None:
+    rng = np.random.default_rng(4)
+    for count in (1, 2, 7, 300):
+        labels = rng.integers(0, count, (37, 29)).astype(np.int32)
+        np.testing.assert_array_equal(label_areas(labels, count), np.bincount(labels.ravel(), minlength=count))
+    labels = np.zeros((3, 3), np.int32)
+    labels[1, 1] = 5
+    with pytest.raises(ValueError, match="outside its array"):
+        label_areas(labels, 5)
+    with pytest.raises(ValueError, match="at least 1"):
+        label_areas(labels, 0)
