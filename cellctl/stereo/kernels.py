@@ -346,3 +346,148 @@ def disc_dilate(mask: np.ndarray, half_widths: np.ndarray, of_zero: bool = False
     )
     _check(rc, "disc dilation")
     return out
+
+
+def mark_pixels(
+    pixels: np.ndarray,
+    disparity: np.ndarray | None,
+    index: np.ndarray | None,
+    shape: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The left (and right) rectified images (uint8 0/1, `shape` rows x columns) with 1 at the pixels of the
+    points `index` (all points if None): left at (rint(x), rint(y)) of `pixels` (N x 2 x y), right at
+    (rint(x - disparity), rint(y)) (no right image without `disparity`); rint rounds halves to even, as np.round.
+    Points whose pixel is off an image are left out of it (csrc/pixel_marks.h)."""
+    pixels = np.ascontiguousarray(pixels, np.float64)
+    if pixels.ndim != 2 or pixels.shape[1] != 2:
+        raise ValueError(f"pixels must be N x 2, got shape {pixels.shape}")
+    n = len(pixels)
+    rows, cols = shape
+    if rows < 1 or cols < 1:
+        raise ValueError(f"the images must have pixels, got shape {shape}")
+    if disparity is not None:
+        disparity = np.ascontiguousarray(disparity, np.float64)
+        if disparity.shape != (n,):
+            raise ValueError(f"disparity must have the {n} points' values, got shape {disparity.shape}")
+    if index is not None:
+        index = np.ascontiguousarray(index, np.int64)
+        if index.ndim != 1:
+            raise ValueError(f"index must be 1-D, got shape {index.shape}")
+    left = np.zeros((rows, cols), np.uint8)
+    right = None if disparity is None else np.zeros((rows, cols), np.uint8)
+    rc = lib.pm_mark_pixels(
+        _ptr("const double *", pixels),
+        ffi.NULL if disparity is None else _ptr("const double *", disparity),
+        n,
+        ffi.NULL if index is None else _ptr("const int64_t *", index),
+        0 if index is None else len(index),
+        rows,
+        cols,
+        _ptr("uint8_t *", left),
+        ffi.NULL if right is None else _ptr("uint8_t *", right),
+    )
+    _check(rc, "pixel marks")
+    return left, right
+
+
+def edge_profiles(
+    pixel: np.ndarray, changed: np.ndarray, level: np.ndarray | None, first_out: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The change mask's step along profiles (csrc/pixel_marks.h, pm_edge_profiles): per profile (row of
+    `pixel`, n x k x 2 integer x y) the first and the last step position j (0..k) of the least misfit, that misfit
+    and the number of known samples (int32 each). Samples off `changed` (bool or 0/1 image) are unknown, and so
+    are changed ones at or after sample `first_out` where `level` (n x k bool, or None) is set."""
+    pixel = np.ascontiguousarray(pixel, np.int64)
+    if pixel.ndim != 3 or pixel.shape[2] != 2 or pixel.shape[1] < 1:
+        raise ValueError(f"pixel must be n x k x 2 (k >= 1), got shape {pixel.shape}")
+    n, k = pixel.shape[:2]
+    mask = (
+        np.ascontiguousarray(changed).view(np.uint8)
+        if changed.dtype == bool
+        else np.ascontiguousarray(changed, np.uint8)
+    )
+    if mask.ndim != 2 or mask.size == 0:
+        raise ValueError(f"changed must be a non-empty image, got shape {mask.shape}")
+    excused = None
+    if level is not None:
+        excused = np.ascontiguousarray(level, bool).view(np.uint8)
+        if excused.shape != (n, k):
+            raise ValueError(f"level must be {n} x {k}, got shape {excused.shape}")
+    inner, outer, misfit, known = (np.empty(max(n, 1), np.int32) for _ in range(4))
+    rc = lib.pm_edge_profiles(
+        _ptr("const int64_t *", pixel),
+        n,
+        k,
+        _ptr("const uint8_t *", mask),
+        mask.shape[0],
+        mask.shape[1],
+        ffi.NULL if excused is None else _ptr("const uint8_t *", excused),
+        first_out,
+        _ptr("int32_t *", inner),
+        _ptr("int32_t *", outer),
+        _ptr("int32_t *", misfit),
+        _ptr("int32_t *", known),
+    )
+    _check(rc, "edge profiles")
+    return inner[:n], outer[:n], misfit[:n], known[:n]
+
+
+def measured_pixels(
+    fixed: np.ndarray,
+    texture: np.ndarray,
+    invalid: int,
+    min_texture: float,
+    origin: tuple[int, int],
+    scale: float,
+    shift: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The measured pixels of the matcher's int16 map (not `invalid`, `texture` >= min_texture, float32 compare),
+    in raster order (csrc/pixel_marks.h): their flat index in the map, their pixels (N x 2 x y, shifted by
+    `origin`), the same with the disparity (N x 3, the reprojection's input) and the disparity fixed / scale +
+    shift (N), float64."""
+    fixed = np.ascontiguousarray(fixed, np.int16)
+    texture = np.ascontiguousarray(texture, np.float32)
+    if fixed.ndim != 2 or fixed.size == 0 or texture.shape != fixed.shape:
+        raise ValueError(f"fixed and texture must be one non-empty image size, got {fixed.shape} and {texture.shape}")
+    rows, cols = fixed.shape
+    count = ffi.new("int64_t *")
+    _check(
+        lib.pm_count_measured(
+            _ptr("const int16_t *", fixed), _ptr("const float *", texture), rows, cols, invalid, min_texture, count
+        ),
+        "measured pixels",
+    )
+    n = int(count[0])
+    flat = np.empty(n, np.int64)
+    pixels, pixel_disparity, disparity = np.empty((n, 2)), np.empty((n, 3)), np.empty(n)
+    rc = lib.pm_gather_measured(
+        _ptr("const int16_t *", fixed),
+        _ptr("const float *", texture),
+        rows,
+        cols,
+        invalid,
+        min_texture,
+        int(origin[0]),
+        int(origin[1]),
+        float(scale),
+        float(shift),
+        n,
+        _ptr("int64_t *", flat),
+        _ptr("double *", pixels),
+        _ptr("double *", pixel_disparity),
+        _ptr("double *", disparity),
+    )
+    _check(rc, "measured pixels")
+    return flat, pixels, pixel_disparity, disparity
+
+
+def label_areas(labels: np.ndarray, count: int) -> np.ndarray:
+    """Cells per label 0..count-1 of a label image (int32, as cv2.connectedComponents gives it): np.bincount's
+    int64 counts in one pass, without its copy of the labels to intp (csrc/pixel_marks.h)."""
+    labels = np.ascontiguousarray(labels, np.int32)
+    if count < 1:
+        raise ValueError(f"count must be at least 1 (the background), got {count}")
+    areas = np.empty(count, np.int64)
+    rc = lib.pm_label_areas(_ptr("const int32_t *", labels), labels.size, count, _ptr("int64_t *", areas))
+    _check(rc, "label areas")
+    return areas

@@ -215,16 +215,18 @@ def _hidden(
     claimed: a region and a height per table point: where the surface has no measured height, the ray of
     point i is also below it inside the region up to height i.
     """
-    hidden = np.zeros(len(table_points), bool)
-    for z in np.arange(HIDDEN_STEP_MM, HIDDEN_MAX_MM, HIDDEN_STEP_MM):
-        fraction = z / camera[2]
-        xy = table_points[:, :2] + fraction * (camera[:2] - table_points[:, :2])
-        height = surface_height(xy)
-        hidden |= height >= z  # NaN (no sole there) compares False
-        if claimed is not None:
-            region, top = claimed
-            hidden |= np.isnan(height) & (top >= z) & region.contains(xy)
-    return hidden
+    # Every step's heights at once (steps x points): the same per-element arithmetic as one step at a time,
+    # one lookup of the surface instead of one per step (~60).
+    z = np.arange(HIDDEN_STEP_MM, HIDDEN_MAX_MM, HIDDEN_STEP_MM)[:, None]
+    fraction = (z / camera[2])[:, :, None]
+    base = table_points[:, :2]
+    xy = (base[None, :, :] + fraction * (camera[:2] - base)[None, :, :]).reshape(-1, 2)
+    height = surface_height(xy).reshape(len(z), len(base))
+    below = height >= z  # NaN (no sole there) compares False
+    if claimed is not None:
+        region, top = claimed
+        below |= np.isnan(height) & (top[None, :] >= z) & region.contains(xy).reshape(below.shape)
+    return np.any(below, axis=0)
 
 
 def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from cellctl.images import grey_f32
+from cellctl.stereo.kernels import measured_pixels
 from cellctl.vision.calibration import Calibration
 
 MIN_TEXTURE_DN = 0.5  # grey-level std over 5 x 5 px below which a pixel has nothing to match (sensor noise is ~1)
@@ -74,27 +75,23 @@ def cloud_from_disparity(
     x0, y0 = origin
     rows, cols = slice(y0, y0 + fixed.shape[0]), slice(x0, x0 + fixed.shape[1])
     # A flat patch (clipped highlight, covered lens) matches at any disparity and can still pass the
-    # left-right check: such pixels are not measurements.
-    measured = (fixed != INVALID) & (_local_std(grey_left[rows, cols]) >= MIN_TEXTURE_DN)
-    # The measured pixels by their flat index, in the order np.nonzero gives them: the maps are read with it
-    # as 1-D takes (numpy's two-index gather costs ~5 times as much on ~5 10^5 pixels).
-    flat = np.flatnonzero(measured)
-    ys = flat // fixed.shape[1]
-    xs = flat - ys * fixed.shape[1]
-    disparity = fixed.ravel()[flat] / float(DISP_SCALE) + shift
+    # left-right check: such pixels are not measurements. The measured pixels in raster order, their flat index
+    # (the maps are read with it as 1-D takes), pixels, disparities and the reprojection's x y d rows, in C
+    # (cellctl.stereo.kernels.measured_pixels: two passes where numpy made ~15 over the map and the points).
+    texture = _local_std(grey_left[rows, cols])
+    flat, pixels, pixel_disparity, disparity = measured_pixels(
+        fixed, texture, INVALID, MIN_TEXTURE_DN, origin, float(DISP_SCALE), shift
+    )
     colours = np.take(_smoothed_colours(rect_left[rows, cols]).reshape(-1, 3), flat, axis=0)
-    xs, ys = xs + x0, ys + y0
     # Only the measured pixels through Q ([X Y Z W] = Q [x y d 1], cv2.reprojectImageTo3D's formula), as
     # a perspective transform of (x, y, d): no H x W x 3 map to build and gather from.
-    pixel_disparity = np.empty((len(xs), 3))  # float64, filled in place (no stacked copies)
-    pixel_disparity[:, 0], pixel_disparity[:, 1], pixel_disparity[:, 2] = xs, ys, disparity
     # perspectiveTransform returns None for no points (an all-black or uniform pair: lens cap, lights off);
     # such a pair is a cloud of nothing, refused downstream as a scene error.
-    points = cv2.perspectiveTransform(pixel_disparity.reshape(-1, 1, 3), calib.Q) if len(xs) else np.zeros((0, 3))
+    points = cv2.perspectiveTransform(pixel_disparity.reshape(-1, 1, 3), calib.Q) if len(flat) else np.zeros((0, 3))
     return StereoCloud(
         points=points.reshape(-1, 3),
         colors=colours,
-        pixels=pixel_disparity[:, :2].copy(),
+        pixels=pixels,
         disparity=disparity,
         image_size=calib.image_size,
         timings=timings,

@@ -13,6 +13,7 @@ from collections.abc import Callable
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.stereo.kernels import edge_profiles
 from cellctl.vision.checks import MIN_TESTABLE, CheckFailure
 from cellctl.vision.closed_path import run_lengths
 from cellctl.vision.defaults import GLUE_OFFSET_MM
@@ -213,33 +214,30 @@ def edge_offset_pair(
     """
     steps = np.arange(-EDGE_SEARCH_MM, EDGE_SEARCH_MM + 1e-9, EDGE_SEARCH_STEP_MM)
     n, k = len(outline), len(steps)
-    xy = outline[:, None, :] + steps[None, :, None] * outward[:, None, :]
-    points = np.concatenate([xy.reshape(-1, 2), np.repeat(level, k)[:, None]], axis=1)
-    px = np.round(table_to_pixel(points)).astype(np.int64)
-    height, width = changed.shape
-    ok = (px[:, 0] >= 0) & (px[:, 0] < width) & (px[:, 1] >= 0) & (px[:, 1] < height)
-    flat = np.zeros(len(points), bool)
-    flat[ok] = changed[px[ok, 1], px[ok, 0]]
-    known = ok.reshape(n, k)
-    value = flat.reshape(n, k)
-    if table_level is not None:  # a changed pixel on the measured table outside: a shadow, no evidence
-        known &= ~(value & table_level.contains(xy.reshape(-1, 2)).reshape(n, k) & (steps > 0)[None, :])
-    on = value & known
-    off = ~value & known
-    # Misfit of a step between samples j-1 and j: unchanged before it plus changed from it on.
-    before = np.concatenate([np.zeros((n, 1)), np.cumsum(off, axis=1)], axis=1)
-    after = np.concatenate([np.cumsum(on[:, ::-1], axis=1)[:, ::-1], np.zeros((n, 1))], axis=1)
-    misfit = before + after
-    count = known.sum(axis=1)
+    # The samples' table points (x y level), written per coordinate into one array: the same sums as outline +
+    # steps x outward, ~5 x faster than broadcasting the pairs and concatenating.
+    points = np.empty((n, k, 3))
+    for c in (0, 1):
+        np.add(outline[:, c, None], steps[None, :] * outward[:, c, None], out=points[:, :, c])
+    points[:, :, 2] = level[:, None]
+    xy = points[:, :, :2]
+    px = np.round(table_to_pixel(points.reshape(-1, 3))).astype(np.int64).reshape(n, k, 2)
+    # A changed pixel on the measured table outside (steps > 0) is a shadow, no evidence: the cells are looked up
+    # here, the pixels' state in the kernel.
+    on_table = None if table_level is None else table_level.contains(xy.reshape(-1, 2)).reshape(n, k)
+    # The misfit of a step between samples j-1 and j, j = 0..k (unchanged before it plus changed from it on), its
+    # innermost and outermost least position and the known samples per profile, in C (cellctl.stereo.kernels:
+    # one pass where numpy took ~20 over the n x k samples; the same integers, np.argmin's first of ties and
+    # the last by the reversed argmin).
+    first_out = int(np.searchsorted(steps, 0.0, side="right"))  # the first sample beyond the outline
+    innermost, outermost, misfit, count = edge_profiles(px, changed, on_table, first_out)
     enough = count >= EDGE_PROFILE_MIN_KNOWN * k
-    # The innermost and the outermost step of the same (least) misfit: misfit has k + 1 columns.
+    clear = enough & (misfit <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1))
     readings = []
-    for best in (np.argmin(misfit, axis=1), k - np.argmin(misfit[:, ::-1], axis=1)):
+    for best in (innermost, outermost):
         offset = steps[0] - 0.5 * EDGE_SEARCH_STEP_MM + best * EDGE_SEARCH_STEP_MM
-        clear = enough & (misfit[np.arange(n), best] <= EDGE_PROFILE_MAX_MISFIT * np.maximum(count, 1))
         # A step at either end of the search is no edge found within it.
-        clear &= (best > 0) & (best < k)
-        readings.append(np.where(clear, offset, np.nan))
+        readings.append(np.where(clear & (best > 0) & (best < k), offset, np.nan))
     return readings[0], readings[1]
 
 

@@ -146,8 +146,9 @@ def check_drift(taught: TaughtTable, points: np.ndarray, exclude: np.ndarray | N
     surroundings), are the table now; their median height and the tilt of a plane fitted to them are
     compared with the taught plane.
     """
-    keep = np.ones(len(points), bool) if exclude is None else ~exclude
-    sample = points[keep][::DRIFT_SAMPLE_STRIDE]
+    # Without `exclude`, every DRIFT_SAMPLE_STRIDE-th row read in place: the rows (and the strides) a mask of all
+    # points would give, without copying the ~5 10^5 points first.
+    sample = points[::DRIFT_SAMPLE_STRIDE] if exclude is None else points[~exclude][::DRIFT_SAMPLE_STRIDE]
     heights = taught.plane.heights(sample)
     near = np.abs(heights) < DRIFT_BAND_MM
     if np.count_nonzero(near) < 1000:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision import checks
 from cellctl.vision.checks import check_glue_path, check_outline_depth
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.glue_path import without_single_outliers
@@ -128,3 +131,41 @@ def test_a_notch_cut_into_the_outline_is_refused_though_most_of_the_outline_agre
     problem = check_outline_depth(notched, outward, raised, measured)
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert "stretch" in problem.reason
+
+
+def _hidden_step_by_step(
+    table_points: np.ndarray,
+    camera: np.ndarray,
+    surface_height: Callable[[np.ndarray], np.ndarray],
+    claimed: tuple[Footprint, np.ndarray] | None,
+) -> np.ndarray:
+    """checks._hidden's rule one height step at a time (as it was written before the steps were batched)."""
+    hidden = np.zeros(len(table_points), bool)
+    for z in np.arange(checks.HIDDEN_STEP_MM, checks.HIDDEN_MAX_MM, checks.HIDDEN_STEP_MM):
+        xy = table_points[:, :2] + z / camera[2] * (camera[:2] - table_points[:, :2])
+        height = surface_height(xy)
+        hidden |= height >= z
+        if claimed is not None:
+            hidden |= np.isnan(height) & (claimed[1] >= z) & claimed[0].contains(xy)
+    return hidden
+
+
+def test_hidden_rays_are_the_step_by_step_rule() -> None:
+    """A dome of a sole (NaN off it, and a hole without depth inside the claimed region), rays to a camera
+    off to one side: every height step's verdict, batched, is the step-by-step one."""
+    rng = np.random.default_rng(3)
+
+    def dome(xy: np.ndarray) -> np.ndarray:
+        r = np.hypot(xy[:, 0], xy[:, 1] / 0.4)
+        z = np.where(r < 60.0, 25.0 * np.sqrt(np.clip(1.0 - (r / 60.0) ** 2, 0.0, None)), np.nan)
+        return np.where(np.hypot(xy[:, 0] - 20.0, xy[:, 1]) < 6.0, np.nan, z)  # no depth in a hole
+
+    claimed = Footprint.empty_like(np.array([[-70.0, -30.0], [70.0, 30.0]]), 0.5)
+    claimed.mask[:] = 1
+    points = np.column_stack([rng.uniform(-90, 90, 500), rng.uniform(-40, 40, 500), np.zeros(500)])
+    camera = np.array([150.0, 20.0, 550.0])
+    top = rng.uniform(0.0, 30.0, 500)
+    for region in (None, (claimed, top)):
+        expected = _hidden_step_by_step(points, camera, dome, region)
+        assert 0 < np.count_nonzero(expected) < len(points)  # some rays pass, some do not
+        np.testing.assert_array_equal(checks._hidden(points, camera, dome, region), expected)

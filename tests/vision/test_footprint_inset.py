@@ -82,3 +82,17 @@ def test_closing_fills_a_narrow_dent_and_keeps_the_rest_of_the_edge_and_a_pointe
     sliver = radius - np.sqrt(radius**2 - 9.0)
     missing_rows = np.nonzero(whole.mask & ~closed.mask)[0]
     assert missing_rows.size and whole.origin[1] + (missing_rows.min() + 0.5) * CELL > 30.0 - sliver - CELL
+
+
+def test_centres_are_the_marked_cells_centres_in_raster_order() -> None:
+    """Footprint.centres (flat indices) against the two-index formulation it replaced, value for value."""
+    rng = np.random.default_rng(11)
+    for shape, share, cell in (((1, 1), 1.0, 0.5), ((5, 7), 0.0, 0.25), ((40, 30), 0.3, 0.5), ((1, 300), 0.9, 1.0)):
+        mask = (rng.random(shape) < share).astype(np.uint8)
+        footprint = Footprint(mask, (float(rng.uniform(-50, 50)), float(rng.uniform(-50, 50))), cell)
+        rows, cols = np.nonzero(mask)
+        expected = np.column_stack(
+            [footprint.origin[0] + (cols + 0.5) * cell, footprint.origin[1] + (rows + 0.5) * cell]
+        )
+        centres = footprint.centres()
+        assert centres.shape == expected.shape and np.array_equal(centres, expected)
