@@ -8,10 +8,26 @@
 /* Below this many pixels a call stays on one thread: waking the others costs more. */
 #define CHK_PARALLEL_MIN 4096
 /* Float planes chk_texture keeps in its scratch space besides the row sums. */
-#define CHK_PLANES 7
+#define CHK_PLANES 11
+
+/* The vectorised loops twice, for AVX2 and for any x86-64 (chosen when the module loads): the same IEEE
+ * operations in the same order, so the same results, with twice the lanes. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define CHK_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define CHK_CLONES
+#endif
 
 /* numpy's maximum for values that are never NaN (checked on entry), as one instruction. */
 static inline float max_f(float a, float b) { return a > b ? a : b; }
+
+/* The value, unknown to the optimiser: x / max(p, 1) is otherwise split into two branches (x / p or x, one
+ * being a division by 1), which keeps the loop from being vectorised. */
+static inline float opaque(float value)
+{
+    volatile float hidden = value;
+    return hidden;
+}
 
 static int thread_count(int threads, int height, int width)
 {
@@ -32,182 +48,194 @@ static inline int reflect101(int p, int n)
 
 static inline int at(int p, int n) { return (unsigned)p < (unsigned)n ? p : reflect101(p, n); }
 
-/* What a row pass sums: a, a * a, or a * b (the float32 product numpy forms before cv2.blur sees it). */
+/* What a box sums: a, a * a, or a * b (the float32 product numpy forms before cv2.blur sees it). */
 enum source { SRC_A, SRC_SQUARE, SRC_PRODUCT };
 
-static inline double source_at(const float *a, const float *b, enum source kind, int x)
+/* One box mean to compute: its source image(s), window and destination (contiguous height x width, never the
+ * source: the border rows are read again at the end). */
+typedef struct {
+    const float *a, *b;
+    int64_t a_stride, b_stride;
+    enum source kind;
+    int k;
+    float *dst;
+} box_job;
+
+/* The source row y extended by reflection, e[i] = source[reflect(i - k / 2)], i < width + k - 1. */
+static void extended_row(const box_job *job, int y, int width, float *restrict e)
 {
-    switch (kind) {
+    const int anchor = job->k / 2, n = width + job->k - 1;
+    const float *restrict a = job->a + y * job->a_stride;
+    const float *restrict b = job->b ? job->b + y * job->b_stride : a;
+    float *restrict mid = e + anchor;
+    switch (job->kind) {
     case SRC_SQUARE:
-        return (double)(a[x] * a[x]);
-    case SRC_PRODUCT:
-        return (double)(a[x] * b[x]);
-    default:
-        return (double)a[x];
-    }
-}
-
-/* Rows summed side by side in the running loop: each row's sum is a serial chain of additions (OpenCV's
- * order), so a few independent rows keep the adder busy. */
-#define CHK_ROWS 4
-
-/*
- * CHK_ROWS rows (`n` of them used) of OpenCV's RowSum<float, double> over the border-extended row
- * S[i] = source[reflect(i - k / 2)]: sizes 3 and 5 summed directly, larger ones as a running sum
- * (s += S[i + k] - S[i]), each row in that order.
- */
-static inline __attribute__((always_inline)) void row_block(const float *const *a, const float *const *b,
-                                                            enum source kind, int n, int width, int k,
-                                                            double *const *d)
-{
-    const int anchor = k / 2;
-#define S(r, i) source_at(a[r], b[r], kind, at((i) - anchor, width))
-    if (k == 3 || k == 5) {
-        for (int r = 0; r < n; ++r)
-            for (int i = 0; i < width; ++i)
-                d[r][i] = k == 3 ? S(r, i) + S(r, i + 1) + S(r, i + 2)
-                                 : S(r, i) + S(r, i + 1) + S(r, i + 2) + S(r, i + 3) + S(r, i + 4);
-        return;
-    }
-    double s[CHK_ROWS] = {0};
-    for (int r = 0; r < n; ++r) {
-        for (int i = 0; i < k; ++i)
-            s[r] += S(r, i);
-        d[r][0] = s[r];
-    }
-    /* Where S[i] and S[i + k] both lie inside the row: no reflection. */
-    const int first = anchor, last = width - 1 - k + anchor;
-    if (n == CHK_ROWS) {
-        for (int i = 0; i < width - 1; ++i) {
-            if (i >= first && i <= last) {
-                for (int r = 0; r < CHK_ROWS; ++r) {
-                    s[r] += source_at(a[r], b[r], kind, i + k - anchor) - source_at(a[r], b[r], kind, i - anchor);
-                    d[r][i + 1] = s[r];
-                }
-            } else {
-                for (int r = 0; r < CHK_ROWS; ++r) {
-                    s[r] += S(r, i + k) - S(r, i);
-                    d[r][i + 1] = s[r];
-                }
-            }
-        }
-        return;
-    }
-    for (int r = 0; r < n; ++r)
-        for (int i = 0; i < width - 1; ++i) {
-            s[r] += S(r, i + k) - S(r, i);
-            d[r][i + 1] = s[r];
-        }
-#undef S
-}
-
-/* The row pass of a box over a whole image (rows `stride` floats apart), into `rows` (height x width); a
- * worksharing loop inside the caller's parallel region. */
-static inline __attribute__((always_inline)) void row_sums_kind(const float *a, int64_t a_stride, const float *b,
-                                                                int64_t b_stride, enum source kind, int height,
-                                                                int width, int k, double *rows)
-{
-    const int blocks = (height + CHK_ROWS - 1) / CHK_ROWS;
-#pragma omp for schedule(static)
-    for (int block = 0; block < blocks; ++block) {
-        const float *ra[CHK_ROWS], *rb[CHK_ROWS];
-        double *rd[CHK_ROWS];
-        const int y0 = block * CHK_ROWS, n = height - y0 < CHK_ROWS ? height - y0 : CHK_ROWS;
-        for (int r = 0; r < CHK_ROWS; ++r) {
-            const int y = y0 + (r < n ? r : 0);
-            ra[r] = a + y * a_stride;
-            rb[r] = b ? b + y * b_stride : ra[r];
-            rd[r] = rows + (size_t)y * width;
-        }
-        row_block(ra, rb, kind, n, width, k, rd);
-    }
-}
-
-static void row_sums(const float *a, int64_t a_stride, const float *b, int64_t b_stride, enum source kind,
-                     int height, int width, int k, double *rows)
-{
-    switch (kind) {
-    case SRC_SQUARE:
-        row_sums_kind(a, a_stride, b, b_stride, SRC_SQUARE, height, width, k, rows);
+        for (int x = 0; x < width; ++x)
+            mid[x] = a[x] * a[x];
         break;
     case SRC_PRODUCT:
-        row_sums_kind(a, a_stride, b, b_stride, SRC_PRODUCT, height, width, k, rows);
+        for (int x = 0; x < width; ++x)
+            mid[x] = a[x] * b[x];
         break;
     default:
-        row_sums_kind(a, a_stride, b, b_stride, SRC_A, height, width, k, rows);
+        memcpy(mid, a, (size_t)width * sizeof(float));
+    }
+    for (int i = 0; i < anchor; ++i)
+        e[i] = mid[at(i - anchor, width)];
+    for (int i = anchor + width; i < n; ++i)
+        e[i] = mid[at(i - anchor, width)];
+}
+
+/* OpenCV's RowSum<float, double> over an extended row: sizes 3 and 5 summed directly, larger ones as a running
+ * sum (s += e[i + k] - e[i]), in that order. */
+static void row_sum(const float *restrict e, int width, int k, double *restrict d)
+{
+    if (k == 3) {
+        for (int i = 0; i < width; ++i)
+            d[i] = (double)e[i] + (double)e[i + 1] + (double)e[i + 2];
+        return;
+    }
+    if (k == 5) {
+        for (int i = 0; i < width; ++i)
+            d[i] = (double)e[i] + (double)e[i + 1] + (double)e[i + 2] + (double)e[i + 3] + (double)e[i + 4];
+        return;
+    }
+    double s = 0;
+    for (int i = 0; i < k; ++i)
+        s += (double)e[i];
+    d[0] = s;
+    for (int i = 0; i < width - 1; ++i) {
+        s += (double)e[i + k] - (double)e[i];
+        d[i + 1] = s;
     }
 }
 
-/*
- * The column pass of OpenCV's ColumnSum<double, float>: per column a running sum down the whole height over
- * the border-extended rows (the first k - 1 summed from 0, then s = sum + newest; out = s * scale; sum = s -
- * oldest). Each thread of the caller's parallel region takes a range of columns, in OpenCV's order; a barrier
- * before (the row sums) and after (the result).
- */
-static void column_sums(const double *rows, int height, int width, int k, float *dst, double *sum)
+/* Two rows' running sums side by side (the same order in each): each is a serial chain of additions, two keep
+ * the adder busy. */
+static void row_sum2(const float *restrict e0, const float *restrict e1, int width, int k, double *restrict d0,
+                     double *restrict d1)
 {
-    const int anchor = k / 2;
+    if (k < 7) {
+        row_sum(e0, width, k, d0);
+        row_sum(e1, width, k, d1);
+        return;
+    }
+    double s0 = 0, s1 = 0;
+    for (int i = 0; i < k; ++i) {
+        s0 += (double)e0[i];
+        s1 += (double)e1[i];
+    }
+    d0[0] = s0;
+    d1[0] = s1;
+    for (int i = 0; i < width - 1; ++i) {
+        s0 += (double)e0[i + k] - (double)e0[i];
+        s1 += (double)e1[i + k] - (double)e1[i];
+        d0[i + 1] = s0;
+        d1[i + 1] = s1;
+    }
+}
+
+/* Doubles of one thread's scratch for boxes up to k x k on rows of `width`: a ring of k + 1 row sums, the
+ * column sums, and two extended rows (floats). */
+static size_t thread_doubles(int width, int k) { return (size_t)(k + 2) * width + (size_t)width + k + 1; }
+
+/* The row sums of extended rows j and j + 1 (the latter only if it exists) into their ring slots. */
+static void ring_rows(const box_job *job, int j, int last, int height, int width, double *ring, float *e0, float *e1)
+{
+    const int k = job->k, anchor = k / 2, slots = k + 1;
+    double *d0 = ring + (size_t)(j % slots) * width;
+    extended_row(job, at(j - anchor, height), width, e0);
+    if (j + 1 > last) {
+        row_sum(e0, width, k, d0);
+        return;
+    }
+    extended_row(job, at(j + 1 - anchor, height), width, e1);
+    row_sum2(e0, e1, width, k, d0, ring + (size_t)((j + 1) % slots) * width);
+}
+
+/*
+ * One box mean, streamed down the image on one thread: the row sums of the extended rows a column sum needs
+ * are kept in a ring (two computed at a time), and OpenCV's ColumnSum<double, float> runs over them (the first
+ * k - 1 rows summed from 0, then per row s = sum + newest; out = s / (k * k) as a float; sum = s - oldest).
+ * The same operations in the same order as cv2.blur, in cache.
+ */
+CHK_CLONES static void box_stream(const box_job *job, int height, int width, double *scratch)
+{
+    const int k = job->k, slots = k + 1, last = height + k - 2; /* extended rows 0..last */
     const double scale = 1. / (k * k);
-    const int t = omp_get_thread_num(), n = omp_get_num_threads();
-    const int c0 = (int)((int64_t)width * t / n), c1 = (int)((int64_t)width * (t + 1) / n);
-    for (int c = c0; c < c1; ++c)
+    double *ring = scratch, *restrict sum = scratch + (size_t)slots * width;
+    float *e0 = (float *)(sum + width), *e1 = e0 + width + k;
+    for (int c = 0; c < width; ++c)
         sum[c] = 0;
+    int next = 0; /* the next extended row to compute */
     for (int j = 0; j < k - 1; ++j) {
-        const double *r = rows + (size_t)at(j - anchor, height) * width;
-        for (int c = c0; c < c1; ++c)
-            sum[c] += r[c];
+        if (j >= next) {
+            ring_rows(job, j, k - 2, height, width, ring, e0, e1);
+            next = j + 2;
+        }
+        const double *restrict row = ring + (size_t)(j % slots) * width;
+        for (int c = 0; c < width; ++c)
+            sum[c] += row[c];
     }
     for (int y = 0; y < height; ++y) {
-        const double *newest = rows + (size_t)at(y + k - 1 - anchor, height) * width;
-        const double *oldest = rows + (size_t)at(y - anchor, height) * width;
-        float *d = dst + (size_t)y * width;
-        for (int c = c0; c < c1; ++c) {
+        const int j = y + k - 1;
+        if (j >= next) {
+            ring_rows(job, j, last, height, width, ring, e0, e1);
+            next = j + 2;
+        }
+        const double *restrict newest = ring + (size_t)(j % slots) * width;
+        const double *restrict oldest = ring + (size_t)(y % slots) * width;
+        float *restrict d = job->dst + (size_t)y * width;
+        for (int c = 0; c < width; ++c) {
             const double s = sum[c] + newest[c];
             d[c] = (float)(s * scale);
             sum[c] = s - oldest[c];
         }
     }
-#pragma omp barrier
 }
 
-/* Scratch layout: row sums (height x width doubles), the column sums (width doubles), then the float planes. */
+/* Scratch layout: per thread its box scratch (thread_doubles), then the float planes. */
 typedef struct {
-    double *rows, *sum;
+    double *boxes;
+    size_t per_thread;
     float *plane[CHK_PLANES];
 } workspace;
 
-size_t chk_scratch_bytes(int height, int width)
+static int resolved_threads(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+
+size_t chk_scratch_bytes(int height, int width, int window, int threads)
 {
-    if (height < 1 || width < 1 || height > CHK_MAX_DIM || width > CHK_MAX_DIM)
+    if (height < 1 || width < 1 || height > CHK_MAX_DIM || width > CHK_MAX_DIM || window < 3 ||
+        window > CHK_MAX_WINDOW || threads < 0 || threads > 256)
         return 0;
     const size_t pixels = (size_t)height * width;
-    return (pixels + (size_t)width) * sizeof(double) + CHK_PLANES * pixels * sizeof(float);
+    return (size_t)resolved_threads(threads) * thread_doubles(width, window) * sizeof(double) +
+           CHK_PLANES * pixels * sizeof(float);
 }
 
-static workspace carve(void *scratch, int height, int width)
+static workspace carve(void *scratch, int height, int width, int window, int threads)
 {
     const size_t pixels = (size_t)height * width;
     workspace w;
-    w.rows = scratch;
-    w.sum = w.rows + pixels;
-    float *next = (float *)(w.sum + width);
+    w.boxes = scratch;
+    w.per_thread = thread_doubles(width, window);
+    float *next = (float *)(w.boxes + (size_t)threads * w.per_thread);
     for (int i = 0; i < CHK_PLANES; ++i, next += pixels)
         w.plane[i] = next;
     return w;
 }
 
-/* A box mean (see change_kernels.h), called by every thread of a parallel region. */
-static void box(const workspace *w, const float *a, int64_t a_stride, const float *b, int64_t b_stride,
-                enum source kind, int height, int width, int k, float *dst)
+/* The jobs' boxes, shared out among the threads of the caller's parallel region (a barrier at the end). */
+static void boxes(const workspace *w, const box_job *jobs, int count, int height, int width)
 {
-    row_sums(a, a_stride, b, b_stride, kind, height, width, k, w->rows); /* ends in a barrier */
-    column_sums(w->rows, height, width, k, dst, w->sum);
+#pragma omp for schedule(dynamic, 1)
+    for (int i = 0; i < count; ++i)
+        box_stream(&jobs[i], height, width, w->boxes + (size_t)omp_get_thread_num() * w->per_thread);
 }
 
-/* The contiguous plane's box mean (dst may be the plane). */
-static void box_plane(const workspace *w, const float *plane, int height, int width, int k, float *dst)
+static box_job plane_job(const float *plane, int width, int k, float *dst)
 {
-    box(w, plane, width, NULL, 0, SRC_A, height, width, k, dst);
+    return (box_job){plane, NULL, width, 0, SRC_A, k, dst};
 }
 
 static int check_image(const void *data, int64_t stride, int height, int width)
@@ -221,11 +249,11 @@ static int check_image(const void *data, int64_t stride, int height, int width)
 
 static int check_window(int k) { return k >= 3 && k <= CHK_MAX_WINDOW; }
 
-static int check_scratch(const void *scratch, size_t bytes, int height, int width)
+static int check_scratch(const void *scratch, size_t bytes, int height, int width, int window, int threads)
 {
     if (!scratch)
         return CHK_ERR_NULL;
-    if ((uintptr_t)scratch % sizeof(double) != 0 || bytes < chk_scratch_bytes(height, width))
+    if ((uintptr_t)scratch % sizeof(double) != 0 || bytes < chk_scratch_bytes(height, width, window, threads))
         return CHK_ERR_SIZE;
     return CHK_OK;
 }
@@ -242,20 +270,19 @@ static int finite_image(const float *image, int64_t stride, int height, int widt
 }
 
 int chk_box_mean(const float *src, int64_t src_stride, int height, int width, int k, float *dst, void *scratch,
-                 size_t scratch_bytes, int threads)
+                 size_t scratch_bytes)
 {
     int rc = check_image(src, src_stride, height, width);
     if (rc != CHK_OK)
         return rc;
     if (!dst)
         return CHK_ERR_NULL;
-    if ((rc = check_scratch(scratch, scratch_bytes, height, width)) != CHK_OK)
-        return rc;
-    if (!check_window(k) || threads < 0 || threads > 256)
+    if (!check_window(k))
         return CHK_ERR_SIZE;
-    const workspace w = carve(scratch, height, width);
-#pragma omp parallel num_threads(thread_count(threads, height, width))
-    box(&w, src, src_stride, NULL, 0, SRC_A, height, width, k, dst);
+    if ((rc = check_scratch(scratch, scratch_bytes, height, width, k, 1)) != CHK_OK)
+        return rc;
+    const box_job job = {src, NULL, src_stride, 0, SRC_A, k, dst};
+    box_stream(&job, height, width, scratch);
     return CHK_OK;
 }
 
@@ -291,120 +318,178 @@ static int check_params(const chk_texture_params *p)
     return CHK_OK;
 }
 
+/* One row of the window votes from the window sums (mean_c ... cr), into 0/1 planes: textured, table-like,
+ * fitted, confident, fit-eligible, and the brightness ratio of the confident windows (0 elsewhere). A function
+ * of its own so that the loop is vectorised (restrict rows, no OpenMP data in the loop). */
+CHK_CLONES static void window_votes_row(const chk_texture_params *p, int width, const float *restrict mcs,
+                             const float *restrict mrs, const float *restrict ccs, const float *restrict rrs,
+                             const float *restrict crs, float *restrict textured_out, float *restrict table_like_out,
+                             float *restrict fitted_out, float *restrict confident_out, float *restrict eligible_out,
+                             float *restrict factor_out)
+{
+    const float gain = (float)p->gain, offset = (float)p->offset, gain_floor = (float)p->gain_floor;
+    const float eps = (float)1e-6, one = opaque(1.0f);
+    const float table_ncc = (float)p->table_ncc, min_gain = (float)p->min_texture_gain;
+    const float max_gain = (float)p->max_texture_gain, textured_var = (float)p->textured_variance;
+    const float still_var = (float)p->still_variance, fit_var = (float)p->fit_variance;
+    const float agreement = (float)p->scale_agreement, max_shadow = (float)p->max_shadow_factor;
+#pragma omp simd
+    for (int i = 0; i < width; ++i) {
+        const float mc = mcs[i], mr = mrs[i];
+        const float var_c = ccs[i] - mc * mc;
+        const float var_r = rrs[i] - mr * mr;
+        float brightness = mr * gain;
+        brightness = brightness + offset;
+        brightness = mc / max_f(brightness, one);
+        const float covariance = crs[i] - mc * mr;
+        float unexplained = (covariance * covariance) / max_f(var_r, eps);
+        unexplained = var_c - unexplained;
+        const float ncc = covariance / sqrtf(max_f(var_c * var_r, eps));
+        const float texture_gain = (covariance / max_f(var_r, eps)) / gain_floor;
+        /* Integer masks and-ed bitwise, stored as 0/1 floats: branch-free, so the loop is vectorised. */
+        const int textured = var_r > textured_var;
+        const int in_scale = (texture_gain > min_gain) & (texture_gain < max_gain);
+        const int correlated = ncc > table_ncc;
+        const int eligible = var_r > still_var;
+        const int fitted = eligible & (unexplained < fit_var) & (texture_gain > min_gain) & in_scale &
+                           (fabsf(texture_gain - brightness) < agreement * brightness) & (brightness < max_shadow);
+        const int confident = correlated & fitted;
+        textured_out[i] = (float)textured;
+        table_like_out[i] = (float)(correlated & in_scale & textured);
+        fitted_out[i] = (float)fitted;
+        confident_out[i] = (float)confident;
+        eligible_out[i] = (float)eligible;
+        factor_out[i] = brightness * (float)confident;
+    }
+}
+
 /* The window statistics and each window's votes (ChangeTest._texture up to its first blurs of the votes). */
 static void window_votes(const float *cur, int64_t cs, const float *ref, int64_t rs, int height, int width,
                          const chk_texture_params *p, const workspace *w)
 {
     const int k = p->ncc_window;
     float *mean_c = w->plane[0], *mean_r = w->plane[1], *cc = w->plane[2], *rr = w->plane[3], *cr = w->plane[4];
-    box(w, cur, cs, NULL, 0, SRC_A, height, width, k, mean_c);
-    box(w, ref, rs, NULL, 0, SRC_A, height, width, k, mean_r);
-    box(w, cur, cs, NULL, 0, SRC_SQUARE, height, width, k, cc);
-    box(w, ref, rs, NULL, 0, SRC_SQUARE, height, width, k, rr);
-    box(w, cur, cs, ref, rs, SRC_PRODUCT, height, width, k, cr);
-    const float gain = (float)p->gain, offset = (float)p->offset, gain_floor = (float)p->gain_floor;
-    const float eps = (float)1e-6, one = 1.0f;
-    const float table_ncc = (float)p->table_ncc, min_gain = (float)p->min_texture_gain;
-    const float max_gain = (float)p->max_texture_gain, textured_var = (float)p->textured_variance;
-    const float still_var = (float)p->still_variance, fit_var = (float)p->fit_variance;
-    const float agreement = (float)p->scale_agreement, max_shadow = (float)p->max_shadow_factor;
-    /* Planes afterwards: 0 textured, 1 table-like, 2 fitted, 3 confident, 4 fit-eligible (0/1), 5 the
-     * brightness ratio of the confident windows (0 elsewhere). */
-    const int64_t pixels = (int64_t)height * width;
+    const box_job jobs[] = {
+        {cur, NULL, cs, 0, SRC_A, k, mean_c},   {ref, NULL, rs, 0, SRC_A, k, mean_r},
+        {cur, NULL, cs, 0, SRC_SQUARE, k, cc},  {ref, NULL, rs, 0, SRC_SQUARE, k, rr},
+        {cur, ref, cs, rs, SRC_PRODUCT, k, cr},
+    };
+    boxes(w, jobs, (int)(sizeof jobs / sizeof jobs[0]), height, width);
+    /* Planes afterwards: see window_votes_row. */
 #pragma omp for schedule(static)
-    for (int64_t i = 0; i < pixels; ++i) {
-        const float mc = mean_c[i], mr = mean_r[i];
-        const float var_c = cc[i] - mc * mc;
-        const float var_r = rr[i] - mr * mr;
-        float brightness = mr * gain;
-        brightness = brightness + offset;
-        brightness = mc / max_f(brightness, one);
-        const float covariance = cr[i] - mc * mr;
-        float unexplained = (covariance * covariance) / max_f(var_r, eps);
-        unexplained = var_c - unexplained;
-        const float ncc = covariance / sqrtf(max_f(var_c * var_r, eps));
-        const float texture_gain = (covariance / max_f(var_r, eps)) / gain_floor;
-        const int textured = var_r > textured_var;
-        const int in_scale = (texture_gain > min_gain) & (texture_gain < max_gain);
-        const int table_like = (ncc > table_ncc) & in_scale & textured;
-        const int eligible = var_r > still_var;
-        const int fitted = eligible & (unexplained < fit_var) & (texture_gain > min_gain) & in_scale &
-                           (fabsf(texture_gain - brightness) < agreement * brightness) & (brightness < max_shadow);
-        const int confident = (ncc > table_ncc) & fitted;
-        w->plane[0][i] = (float)textured;
-        w->plane[1][i] = (float)table_like;
-        w->plane[2][i] = (float)fitted;
-        w->plane[3][i] = (float)confident;
-        w->plane[4][i] = (float)eligible;
-        w->plane[5][i] = brightness * (float)confident;
+    for (int y = 0; y < height; ++y) {
+        const size_t row = (size_t)y * width;
+        window_votes_row(p, width, mean_c + row, mean_r + row, cc + row, rr + row, cr + row, w->plane[0] + row,
+                         w->plane[1] + row, w->plane[2] + row, w->plane[3] + row, w->plane[4] + row,
+                         w->plane[5] + row);
     }
 }
 
-/* Still table, texture gone, and the still table's weight (plane 0) and weighted factor (plane 1) for the
+/* One row of still table, texture gone, and the still table's weight and weighted factor for the
+ * illumination (vectorised as window_votes_row). */
+CHK_CLONES static void still_and_gone_row(const chk_texture_params *p, int width, const float *restrict c,
+                               const float *restrict r, const float *restrict share, const float *restrict agree,
+                               const float *restrict fit_share, uint8_t *restrict still, uint8_t *restrict gone,
+                               float *restrict weight_out, float *restrict weighted_out, float *restrict illumination)
+{
+    const float gain = (float)p->gain, offset = (float)p->offset, one = opaque(1.0f);
+    const float min_share = (float)p->min_textured_share, gone_share = (float)p->gone_share;
+    const float unanimous = (float)p->unanimous, min_gain = (float)p->min_texture_gain;
+    const float max_carried = (float)p->max_carried_factor;
+#pragma omp simd
+    for (int x = 0; x < width; ++x) {
+        const float sh = share[x], ag = agree[x];
+        const int enough = sh > min_share;
+        gone[x] = (uint8_t)((ag < sh * gone_share) & enough);
+        const int is_still = ((ag > sh * unanimous) & enough) | (fit_share[x] > unanimous);
+        still[x] = (uint8_t)is_still;
+        const float scaled = r[x] * gain;
+        const float predicted = scaled + offset;
+        const float ratio = c[x] / max_f(predicted, one);
+        const float weight = (float)(is_still & (ratio > min_gain) & (ratio < max_carried));
+        weight_out[x] = weight;
+        weighted_out[x] = ratio * weight;
+        illumination[x] = 1.0f;
+    }
+}
+
+/* Still table, texture gone, and the still table's weight (plane 0) and weighted factor (plane 6) for the
  * illumination, from the boxed votes (share, plane 1 agree, plane 2 fit share). */
+/* Still table, texture gone, and the still table's weight (plane 0) and weighted factor (plane 1) for the
+ * illumination, from the boxed votes (share, plane 6 agree, plane 7 fit share). */
 static void still_and_gone(const float *cur, int64_t cs, const float *ref, int64_t rs, int height, int width,
                            const chk_texture_params *p, const workspace *w, const float *share, uint8_t *still,
                            uint8_t *gone, float *illumination)
 {
-    const float gain = (float)p->gain, offset = (float)p->offset, one = 1.0f;
-    const float min_share = (float)p->min_textured_share, gone_share = (float)p->gone_share;
-    const float unanimous = (float)p->unanimous, min_gain = (float)p->min_texture_gain;
-    const float max_carried = (float)p->max_carried_factor;
 #pragma omp for schedule(static)
     for (int y = 0; y < height; ++y) {
-        const float *c = cur + y * cs, *r = ref + y * rs;
         const size_t row = (size_t)y * width;
-        for (int x = 0; x < width; ++x) {
-            const size_t i = row + x;
-            const float sh = share[i], agree = w->plane[1][i];
-            const int enough = sh > min_share;
-            gone[i] = (uint8_t)((agree < sh * gone_share) & enough);
-            const int is_still = ((agree > sh * unanimous) & enough) | (w->plane[2][i] > unanimous);
-            still[i] = (uint8_t)is_still;
-            float predicted = r[x] * gain;
-            predicted = predicted + offset;
-            const float ratio = c[x] / max_f(predicted, one);
-            const float weight = (float)(is_still & (ratio > min_gain) & (ratio < max_carried));
-            w->plane[0][i] = weight;
-            w->plane[1][i] = ratio * weight;
-            illumination[i] = one;
-        }
+        still_and_gone_row(p, width, cur + y * cs, ref + y * rs, share + row, w->plane[6] + row, w->plane[7] + row,
+                           still + row, gone + row, w->plane[0] + row, w->plane[1] + row, illumination + row);
+    }
+}
+
+/* illumination = weighted / weights where weights >= least (a select: the division is done everywhere). */
+static void carried_row(int width, const float *restrict weights, const float *restrict weighted, float least,
+                        float *restrict illumination)
+{
+#pragma omp simd
+    for (int x = 0; x < width; ++x) {
+        const float carried = weighted[x] / weights[x];
+        illumination[x] = weights[x] >= least ? carried : illumination[x];
+    }
+}
+
+/* The local shadow fit's factor where it speaks (see chk_texture_params). */
+static void local_fit_row(int width, const float *restrict weight_fit, const float *restrict eligible,
+                          const float *restrict factor, const uint8_t *restrict raised, float min_fit,
+                          float raised_fit, float *restrict illumination)
+{
+#pragma omp simd
+    for (int x = 0; x < width; ++x) {
+        int local = weight_fit[x] >= min_fit;
+        if (raised)
+            local &= (raised[x] == 0) | (weight_fit[x] >= raised_fit * eligible[x]);
+        const float fit = factor[x] / weight_fit[x];
+        illumination[x] = local ? fit : illumination[x];
     }
 }
 
 /* The illumination factor carried from the still table (the whole window, then its half where the still
- * table is near: the later one wins), then the local shadow fit's where it speaks. */
+ * table is near: the later one wins), then the local shadow fit's where it speaks (planes 8-10). */
 static void carried_illumination(int height, int width, const chk_texture_params *p, const workspace *w,
                                  const uint8_t *raised, int64_t raised_stride, float *illumination)
 {
-    const int sizes[2] = {p->illumination_window, p->illumination_window / 2};
-    const float least[2] = {(float)p->far_weight, (float)p->near_weight};
-    float *weights = w->plane[2], *weighted = w->plane[6];
-    const int64_t pixels = (int64_t)height * width;
-    for (int s = 0; s < 2; ++s) {
-        box_plane(w, w->plane[0], height, width, sizes[s], weights);
-        box_plane(w, w->plane[1], height, width, sizes[s], weighted);
-#pragma omp for schedule(static)
-        for (int64_t i = 0; i < pixels; ++i)
-            if (weights[i] >= least[s])
-                illumination[i] = weighted[i] / weights[i];
-    }
-    if (!p->local_shadow_fit)
-        return;
+    const int whole = p->illumination_window, half = p->illumination_window / 2;
+    const box_job jobs[] = {plane_job(w->plane[0], width, whole, w->plane[2]),
+                            plane_job(w->plane[1], width, whole, w->plane[3]),
+                            plane_job(w->plane[0], width, half, w->plane[4]),
+                            plane_job(w->plane[1], width, half, w->plane[5])};
+    boxes(w, jobs, 4, height, width);
+    const float far = (float)p->far_weight, near = (float)p->near_weight;
     const float min_fit = (float)p->min_local_fit_share, raised_fit = (float)p->raised_local_fit_share;
-    const float *weight_fit = w->plane[3], *eligible = w->plane[4], *factor = w->plane[5];
 #pragma omp for schedule(static)
     for (int y = 0; y < height; ++y) {
         const size_t row = (size_t)y * width;
-        for (int x = 0; x < width; ++x) {
-            const size_t i = row + x;
-            int local = weight_fit[i] >= min_fit;
-            if (raised)
-                local &= !raised[y * raised_stride + x] | (weight_fit[i] >= raised_fit * eligible[i]);
-            if (local)
-                illumination[i] = factor[i] / weight_fit[i];
-        }
+        carried_row(width, w->plane[2] + row, w->plane[3] + row, far, illumination + row);
+        carried_row(width, w->plane[4] + row, w->plane[5] + row, near, illumination + row);
+        if (p->local_shadow_fit)
+            local_fit_row(width, w->plane[8] + row, w->plane[9] + row, w->plane[10] + row,
+                          raised ? raised + y * raised_stride : NULL, min_fit, raised_fit, illumination + row);
     }
+}
+
+/* The widest box chk_texture computes. */
+static int widest(const chk_texture_params *p)
+{
+    return p->illumination_window > p->ncc_window ? p->illumination_window : p->ncc_window;
+}
+
+size_t chk_texture_scratch_bytes(int height, int width, const chk_texture_params *p, int threads)
+{
+    if (!p || check_params(p) != CHK_OK)
+        return 0;
+    return chk_scratch_bytes(height, width, widest(p), thread_count(threads, height, width));
 }
 
 int chk_texture(const float *current, int64_t current_stride, const float *reference, int64_t reference_stride,
@@ -420,32 +505,30 @@ int chk_texture(const float *current, int64_t current_stride, const float *refer
         return rc;
     if (!p || !still || !gone || !illumination || !share)
         return CHK_ERR_NULL;
-    if ((rc = check_scratch(scratch, scratch_bytes, height, width)) != CHK_OK)
-        return rc;
     if (threads < 0 || threads > 256)
         return CHK_ERR_SIZE;
     if ((rc = check_params(p)) != CHK_OK)
         return rc;
     threads = thread_count(threads, height, width);
+    if ((rc = check_scratch(scratch, scratch_bytes, height, width, widest(p), threads)) != CHK_OK)
+        return rc;
     if (!finite_image(current, current_stride, height, width, threads) ||
         !finite_image(reference, reference_stride, height, width, threads))
         return CHK_ERR_VALUE;
 
-    const workspace w = carve(scratch, height, width);
+    const workspace w = carve(scratch, height, width, widest(p), threads);
     const int k = p->ncc_window;
-    /* One parallel region: every step is a worksharing loop or a column range per thread, with a barrier. */
+    /* The vote's boxes (planes 0-5 into share and planes 6-10). */
+    const box_job votes[] = {plane_job(w.plane[0], width, k, share),     plane_job(w.plane[1], width, k, w.plane[6]),
+                             plane_job(w.plane[2], width, k, w.plane[7]), plane_job(w.plane[3], width, k, w.plane[8]),
+                             plane_job(w.plane[5], width, k, w.plane[10]), plane_job(w.plane[4], width, k, w.plane[9])};
+    /* The fits' boxes only for the local shadow fit, their eligible windows only on raised pixels. */
+    const int vote_boxes = !p->local_shadow_fit ? 3 : raised ? 6 : 5;
+    /* One parallel region: every step is a worksharing loop (boxes shared out whole), with a barrier. */
 #pragma omp parallel num_threads(threads)
     {
         window_votes(current, current_stride, reference, reference_stride, height, width, p, &w);
-        box_plane(&w, w.plane[0], height, width, k, share);
-        box_plane(&w, w.plane[1], height, width, k, w.plane[1]); /* agree */
-        box_plane(&w, w.plane[2], height, width, k, w.plane[2]); /* fit share */
-        if (p->local_shadow_fit) {
-            box_plane(&w, w.plane[3], height, width, k, w.plane[3]); /* weight of the fits */
-            if (raised)
-                box_plane(&w, w.plane[4], height, width, k, w.plane[4]); /* eligible */
-            box_plane(&w, w.plane[5], height, width, k, w.plane[5]);     /* their factor */
-        }
+        boxes(&w, votes, vote_boxes, height, width);
         still_and_gone(current, current_stride, reference, reference_stride, height, width, p, &w, share, still,
                        gone, illumination);
         carried_illumination(height, width, p, &w, raised, raised_stride, illumination);

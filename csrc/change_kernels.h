@@ -7,8 +7,9 @@
  * (thresholds are the doubles Python computes, rounded to float32 as numpy rounds a Python float against a
  * float32 array), and each box mean is computed as OpenCV's cv2.blur computes it on float32 (border
  * BORDER_REFLECT_101; running sums in double along each row, then down each column over the whole height,
- * each output the double sum times 1 / (k * k), rounded to float32). The row sums run in parallel over rows,
- * the column sums over columns, so results do not depend on the thread count.
+ * each output the double sum times 1 / (k * k), rounded to float32). Each box is streamed down the image by
+ * one thread (its row sums in a ring of k rows, in cache); the threads share out the independent boxes of a
+ * step and the rows of the per-pixel steps, so results do not depend on the thread count.
  *
  * Each entry point checks its arguments and returns a CHK_* status; nothing is allocated: scratch space comes
  * from the caller (chk_scratch_bytes). `threads`: OpenMP threads (0: all OpenMP offers).
@@ -56,15 +57,19 @@ typedef struct {
     double raised_local_fit_share; /* RAISED_LOCAL_FIT_SHARE */
 } chk_texture_params;
 
-/* Bytes of scratch space chk_texture needs for an image of height x width (0 if out of range). */
-size_t chk_scratch_bytes(int height, int width);
+/* Bytes of scratch space for boxes up to window x window on `threads` threads (0: all OpenMP offers) over an
+ * image of height x width (0 if out of range). chk_box_mean needs it for its window and one thread. */
+size_t chk_scratch_bytes(int height, int width, int window, int threads);
+
+/* Bytes of scratch space chk_texture needs with these rules and threads (0 if out of range). */
+size_t chk_texture_scratch_bytes(int height, int width, const chk_texture_params *p, int threads);
 
 /*
  * ChangeTest._texture: per pixel still table (0/1), texture gone (0/1), the illumination factor and the
  * share of textured windows (float32), as cellctl.vision.change defines them.
  * current, reference: float32 height x width images, rows `current_stride` / `reference_stride` floats apart,
  * finite values; raised: NULL or a 0/1 image, rows `raised_stride` bytes apart. Outputs: contiguous height x
- * width. scratch: chk_scratch_bytes(height, width) bytes, 8-byte aligned.
+ * width. scratch: chk_texture_scratch_bytes(height, width, p, threads) bytes, 8-byte aligned.
  */
 int chk_texture(const float *current, int64_t current_stride, const float *reference, int64_t reference_stride,
                 const uint8_t *raised, int64_t raised_stride, int height, int width, const chk_texture_params *p,
@@ -72,11 +77,11 @@ int chk_texture(const float *current, int64_t current_stride, const float *refer
                 size_t scratch_bytes, int threads);
 
 /*
- * The box mean of a float32 image over k x k (k odd, 1..CHK_MAX_WINDOW) as cv2.blur computes it (see above),
- * into a contiguous height x width float32 image (which may be the source when its stride is width).
- * scratch: chk_scratch_bytes(height, width) bytes. For the tests and for the rules' other boxes.
+ * The box mean of a float32 image over k x k (k 3..CHK_MAX_WINDOW) as cv2.blur computes it (see above), on
+ * one thread, into a contiguous height x width float32 image (not the source). scratch:
+ * chk_scratch_bytes(height, width, k, 1) bytes, 8-byte aligned. For the tests.
  */
 int chk_box_mean(const float *src, int64_t src_stride, int height, int width, int k, float *dst, void *scratch,
-                 size_t scratch_bytes, int threads);
+                 size_t scratch_bytes);
 
 #endif

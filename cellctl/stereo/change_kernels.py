@@ -84,10 +84,10 @@ def _image(image: np.ndarray, dtype: type, name: str) -> tuple[np.ndarray, int]:
     return array, array.strides[0] // array.itemsize if array.shape[0] > 1 else array.shape[1]
 
 
-def _scratch(height: int, width: int) -> tuple[np.ndarray, int]:
-    need = int(lib.chk_scratch_bytes(height, width))
+def _scratch(need: int, height: int, width: int) -> tuple[np.ndarray, int]:
+    """A buffer of at least `need` bytes (0: the kernel refused the size), kept for the calling thread."""
     if need == 0:
-        raise ValueError(f"image size {height} x {width} out of range (1..{MAX_DIM})")
+        raise ValueError(f"image size {height} x {width} or window out of range (1..{MAX_DIM}, 3..{MAX_WINDOW})")
     buffer: np.ndarray | None = getattr(_SCRATCH, "buffer", None)
     if buffer is None or buffer.nbytes < need:
         buffer = np.empty(need // 8 + 1, np.float64)  # 8-byte aligned
@@ -156,7 +156,9 @@ def texture(
     gone = np.empty((height, width), np.uint8)
     illumination = np.empty((height, width), np.float32)
     share = np.empty((height, width), np.float32)
-    scratch, scratch_bytes = _scratch(height, width)
+    need = int(lib.chk_texture_scratch_bytes(height, width, params, _threads(threads)))
+    # No size for bad rules or sizes: the kernel itself says which (before it reads the scratch space).
+    scratch, scratch_bytes = _scratch(need, height, width) if need else (np.empty(1, np.float64), 8)
     rc = lib.chk_texture(
         _view_ptr("const float *", cur),
         cur_stride,
@@ -179,12 +181,12 @@ def texture(
     return still.view(bool), gone.view(bool), illumination, share
 
 
-def box_mean(image: np.ndarray, size: int, threads: int = ALL_THREADS) -> np.ndarray:
-    """cv2.blur(image, (size, size)) of a float32 image, bit for bit (odd size 3..MAX_WINDOW)."""
+def box_mean(image: np.ndarray, size: int) -> np.ndarray:
+    """cv2.blur(image, (size, size)) of a float32 image, bit for bit (size 3..MAX_WINDOW), on one thread."""
     src, stride = _image(image, np.float32, "image")
     height, width = src.shape
     out = np.empty((height, width), np.float32)
-    scratch, scratch_bytes = _scratch(height, width)
+    scratch, scratch_bytes = _scratch(int(lib.chk_scratch_bytes(height, width, size, 1)), height, width)
     rc = lib.chk_box_mean(
         _view_ptr("const float *", src),
         stride,
@@ -194,7 +196,6 @@ def box_mean(image: np.ndarray, size: int, threads: int = ALL_THREADS) -> np.nda
         _float_ptr(out),
         ffi.from_buffer(scratch),
         scratch_bytes,
-        _threads(threads),
     )
     _check(rc, "box mean")
     return out
