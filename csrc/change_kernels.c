@@ -535,3 +535,129 @@ int chk_texture(const float *current, int64_t current_stride, const float *refer
     }
     return CHK_OK;
 }
+
+/* One row of the residual against the table as lit now, its magnitude where it is clear (plane 0) and the
+ * clear pixels (plane 1, 0/1). */
+CHK_CLONES static void residual_row(const chk_residual_params *p, int width, const float *restrict c,
+                                    const float *restrict r, const float *restrict illumination,
+                                    float *restrict residual, float *restrict clear_magnitude, float *restrict clear)
+{
+    const float gain = (float)p->gain, offset = (float)p->offset, one = opaque(1.0f);
+    const float floor = (float)p->floor;
+#pragma omp simd
+    for (int x = 0; x < width; ++x) {
+        const float scaled = r[x] * gain;
+        const float predicted = scaled + offset;
+        const float plain = c[x] - predicted;
+        const float shadowed = predicted * (illumination[x] - one);
+        const float res = plain - shadowed;
+        residual[x] = res;
+        const float magnitude = fabsf(res);
+        const float is_clear = (float)(magnitude > floor);
+        clear_magnitude[x] = magnitude * is_clear;
+        clear[x] = is_clear;
+    }
+}
+
+/* One row of the pixel test (plane 4: raw as 0/1) and the faint-contrast texture vote's candidates. */
+CHK_CLONES static void pixel_test_row(const chk_residual_params *p, int width, const float *restrict residual,
+                                      const float *restrict contrast_sum, const float *restrict clear_share,
+                                      const uint8_t *restrict gone, float *restrict raw, uint8_t *restrict faint_gone)
+{
+    const float floor = (float)p->floor, faint_limit = (float)p->faint_contrast, eps = (float)1e-6;
+    const float half = 0.5f;
+    for (int x = 0; x < width; ++x) {
+        const float contrast = contrast_sum[x] / max_f(clear_share[x], eps);
+        const float half_contrast = contrast * half;
+        const int is_raw = fabsf(residual[x]) > max_f(floor, half_contrast);
+        raw[x] = (float)is_raw;
+        faint_gone[x] = (uint8_t)((gone[x] != 0) & (contrast < faint_limit));
+    }
+}
+
+/* One row of the final pixel test: raw, or texture gone where the change is faint or inside a changed region. */
+static void changed_row(const chk_residual_params *p, int width, const float *restrict raw,
+                        const float *restrict raw_share, const uint8_t *restrict gone,
+                        const uint8_t *restrict faint_gone, uint8_t *restrict out)
+{
+    const float inside_share = (float)p->gone_inside;
+    for (int x = 0; x < width; ++x) {
+        const int inside = (raw_share[x] > inside_share) & (gone[x] != 0);
+        out[x] = (uint8_t)((raw[x] != 0.0f) | faint_gone[x] | inside);
+    }
+}
+
+static int check_residual_params(const chk_residual_params *p)
+{
+    const double values[] = {p->gain, p->offset, p->floor, p->faint_contrast, p->gone_inside};
+    for (size_t i = 0; i < sizeof values / sizeof values[0]; ++i)
+        if (!isfinite(values[i]))
+            return CHK_ERR_VALUE;
+    if (!check_window(p->contrast_window) || !check_window(p->gone_window))
+        return CHK_ERR_SIZE;
+    return CHK_OK;
+}
+
+static int residual_window(const chk_residual_params *p)
+{
+    return p->contrast_window > p->gone_window ? p->contrast_window : p->gone_window;
+}
+
+size_t chk_residual_scratch_bytes(int height, int width, const chk_residual_params *p, int threads)
+{
+    if (!p || check_residual_params(p) != CHK_OK)
+        return 0;
+    return chk_scratch_bytes(height, width, residual_window(p), thread_count(threads, height, width));
+}
+
+int chk_residual(const float *current, int64_t current_stride, const float *reference, int64_t reference_stride,
+                 const float *illumination, const uint8_t *gone, int height, int width, const chk_residual_params *p,
+                 float *residual, uint8_t *raw, void *scratch, size_t scratch_bytes, int threads)
+{
+    int rc;
+    if ((rc = check_image(current, current_stride, height, width)) != CHK_OK ||
+        (rc = check_image(reference, reference_stride, height, width)) != CHK_OK)
+        return rc;
+    if (!p || !illumination || !gone || !residual || !raw)
+        return CHK_ERR_NULL;
+    if (threads < 0 || threads > 256)
+        return CHK_ERR_SIZE;
+    if ((rc = check_residual_params(p)) != CHK_OK)
+        return rc;
+    threads = thread_count(threads, height, width);
+    if ((rc = check_scratch(scratch, scratch_bytes, height, width, residual_window(p), threads)) != CHK_OK)
+        return rc;
+    if (!finite_image(current, current_stride, height, width, threads) ||
+        !finite_image(reference, reference_stride, height, width, threads) ||
+        !finite_image(illumination, width, height, width, threads))
+        return CHK_ERR_VALUE;
+
+    const workspace w = carve(scratch, height, width, residual_window(p), threads);
+    const box_job contrast[] = {plane_job(w.plane[0], width, p->contrast_window, w.plane[2]),
+                                plane_job(w.plane[1], width, p->contrast_window, w.plane[3])};
+    const box_job inside = plane_job(w.plane[4], width, p->gone_window, w.plane[5]);
+    uint8_t *faint_gone = (uint8_t *)w.plane[6];
+#pragma omp parallel num_threads(threads)
+    {
+#pragma omp for schedule(static)
+        for (int y = 0; y < height; ++y) {
+            const size_t row = (size_t)y * width;
+            residual_row(p, width, current + y * current_stride, reference + y * reference_stride,
+                         illumination + row, residual + row, w.plane[0] + row, w.plane[1] + row);
+        }
+        boxes(&w, contrast, 2, height, width);
+#pragma omp for schedule(static)
+        for (int y = 0; y < height; ++y) {
+            const size_t row = (size_t)y * width;
+            pixel_test_row(p, width, residual + row, w.plane[2] + row, w.plane[3] + row, gone + row,
+                           w.plane[4] + row, faint_gone + row);
+        }
+        boxes(&w, &inside, 1, height, width);
+#pragma omp for schedule(static)
+        for (int y = 0; y < height; ++y) {
+            const size_t row = (size_t)y * width;
+            changed_row(p, width, w.plane[4] + row, w.plane[5] + row, gone + row, faint_gone + row, raw + row);
+        }
+    }
+    return CHK_OK;
+}

@@ -84,4 +84,31 @@ int chk_texture(const float *current, int64_t current_stride, const float *refer
 int chk_box_mean(const float *src, int64_t src_stride, int height, int width, int k, float *dst, void *scratch,
                  size_t scratch_bytes);
 
+/*
+ * The pixel test of ChangeTest.changed, after the texture vote: the residual against the table as lit now,
+ * residual = (current - predicted) - predicted (illumination - 1), predicted = gain x reference + offset;
+ * raw (0/1) where |residual| exceeds `floor` and half the local contrast (the mean magnitude of the clear
+ * pixels, above floor, within contrast_window), or where the texture is gone (gone, 0/1) and the contrast is
+ * fainter than faint_contrast or more than gone_inside of the pixels within gone_window passed the first test.
+ */
+typedef struct {
+    double gain, offset;
+    double floor;           /* PIXEL_SIGMAS sigma */
+    int contrast_window;    /* CONTRAST_WINDOW_PX */
+    double faint_contrast;  /* FAINT_CONTRAST_SIGMAS sigma */
+    int gone_window;        /* GONE_WINDOW_PX */
+    double gone_inside;     /* GONE_INSIDE */
+} chk_residual_params;
+
+/* Bytes of scratch space chk_residual needs with these rules and threads (0 if out of range). */
+size_t chk_residual_scratch_bytes(int height, int width, const chk_residual_params *p, int threads);
+
+/*
+ * current, reference as for chk_texture; illumination (float32, finite) and gone (0/1) contiguous height x
+ * width, as chk_texture gives them. Out: residual (float32) and raw (0/1), contiguous height x width.
+ */
+int chk_residual(const float *current, int64_t current_stride, const float *reference, int64_t reference_stride,
+                 const float *illumination, const uint8_t *gone, int height, int width, const chk_residual_params *p,
+                 float *residual, uint8_t *raw, void *scratch, size_t scratch_bytes, int threads);
+
 #endif

@@ -199,3 +199,72 @@ def box_mean(image: np.ndarray, size: int) -> np.ndarray:
     )
     _check(rc, "box mean")
     return out
+
+
+@dataclass(frozen=True)
+class ResidualRules:
+    """The pixel test's constants (cellctl.vision.change), with the fitted gain and offset and the thresholds in
+    DN: floor = PIXEL_SIGMAS sigma, faint_contrast = FAINT_CONTRAST_SIGMAS sigma."""
+
+    gain: float
+    offset: float
+    floor: float
+    contrast_window: int
+    faint_contrast: float
+    gone_window: int
+    gone_inside: float
+
+
+def residual(
+    current: np.ndarray,
+    reference: np.ndarray,
+    rules: ResidualRules,
+    illumination: np.ndarray,
+    gone: np.ndarray,
+    threads: int = ALL_THREADS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """ChangeTest.changed's pixel test in C after the texture vote: (residual against the table as lit now,
+    float32; raw, bool) from `illumination` and texture `gone` as texture() gives them."""
+    cur, cur_stride = _image(current, np.float32, "current")
+    ref, ref_stride = _image(reference, np.float32, "reference")
+    if ref.shape != cur.shape:
+        raise ValueError(f"reference {ref.shape} and current {cur.shape} differ in shape")
+    height, width = cur.shape
+    light = np.ascontiguousarray(illumination, np.float32)
+    lost = np.ascontiguousarray(np.asarray(gone, bool)).view(np.uint8)
+    if light.shape != cur.shape or lost.shape != cur.shape:
+        raise ValueError(f"illumination {light.shape} and gone {lost.shape} must have current's shape {cur.shape}")
+    params = ffi.new(
+        "chk_residual_params *",
+        {
+            "gain": rules.gain,
+            "offset": rules.offset,
+            "floor": rules.floor,
+            "contrast_window": rules.contrast_window,
+            "faint_contrast": rules.faint_contrast,
+            "gone_window": rules.gone_window,
+            "gone_inside": rules.gone_inside,
+        },
+    )
+    out = np.empty((height, width), np.float32)
+    raw = np.empty((height, width), np.uint8)
+    need = int(lib.chk_residual_scratch_bytes(height, width, params, _threads(threads)))
+    scratch, scratch_bytes = _scratch(need, height, width) if need else (np.empty(1, np.float64), 8)
+    rc = lib.chk_residual(
+        _view_ptr("const float *", cur),
+        cur_stride,
+        _view_ptr("const float *", ref),
+        ref_stride,
+        _float_ptr(light),
+        ffi.cast("const uint8_t *", ffi.from_buffer(lost)),
+        height,
+        width,
+        params,
+        _float_ptr(out),
+        ffi.cast("uint8_t *", ffi.from_buffer(raw)),
+        ffi.from_buffer(scratch),
+        scratch_bytes,
+        _threads(threads),
+    )
+    _check(rc, "change residual")
+    return out, raw.view(bool)

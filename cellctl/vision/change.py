@@ -14,14 +14,12 @@ shadowed table, not the taught one.
 
 from __future__ import annotations
 
-from concurrent import futures
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from cellctl.stereo import change_kernels
-from cellctl.vision.workers import worker
 
 CHANGE_SIGMAS = 4.0  # gain fit: residuals beyond this many sigmas are not table
 PIXEL_SIGMAS = 3.0  # a pixel is changed beyond this many sigmas (0.3 % false flags, removed by the majority)
@@ -172,39 +170,35 @@ class ChangeTest:
                 lifted=None if lifted is None else lifted[box],
             )
             return changed
-        # The texture votes on a worker thread beside the residual (numpy and OpenCV release the GIL).
-        texture = worker("change-texture").submit(self._texture, current, reference, raised)
-        try:
-            predicted = self.predicted(reference)
-            residual = np.subtract(np.asarray(current, np.float32), predicted)
-        finally:
-            futures.wait([texture])
-        still_table, texture_gone, illumination, textured_share = texture.result()
+        still_table, texture_gone, illumination, textured_share = self._texture(current, reference, raised)
         # Against the table as lit now: where the still table is darker or lighter than taught (a shadow), its
         # factor is carried to the pixels beside it, so a shadowed table pixel next to the sole is not changed.
-        predicted *= illumination - 1.0
-        residual -= predicted
-        magnitude = np.abs(residual)
-        floor = PIXEL_SIGMAS * self.sigma
-        clear = (magnitude > floor).astype(np.float32)
-        window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
-        contrast = cv2.blur(magnitude * clear, window)
-        contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
-        half_contrast = np.multiply(contrast, 0.5, out=clear)
-        raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
-        faint = contrast < FAINT_CONTRAST_SIGMAS * self.sigma
+        # Then the pixel test (in C, csrc/change_kernels.c, bit-identical to the numpy formulas kept in
+        # tests/vision/change_reference.py): a pixel is changed where |residual| exceeds PIXEL_SIGMAS of noise and
+        # half the local contrast (the mean magnitude of the clear pixels within CONTRAST_WINDOW_PX).
         # Next to a strong step every window covering a table pixel also covers the step and correlates
-        # poorly: the texture vote would move the edge out. It only speaks where the change is faint.
-        # Inside a changed region, though, a pixel whose texture is gone is changed whatever the contrast: a
-        # sole of about the table's brightness matches the prediction at scattered pixels. Inside: most of
-        # its GONE_WINDOW_PX neighbourhood passed the pixel test, which a table pixel beside the edge (half
-        # its neighbourhood at most) never has, even where the windows along a step of the table's texture
-        # lost its correlation.
-        inside = cv2.blur(raw.astype(np.float32), (GONE_WINDOW_PX, GONE_WINDOW_PX)) > GONE_INSIDE
-        inside &= texture_gone
-        texture_gone &= faint
-        raw |= texture_gone
-        raw |= inside
+        # poorly: the texture vote would move the edge out. It only speaks where the change is faint
+        # (FAINT_CONTRAST_SIGMAS). Inside a changed region, though, a pixel whose texture is gone is changed
+        # whatever the contrast: a sole of about the table's brightness matches the prediction at scattered
+        # pixels. Inside: more than GONE_INSIDE of its GONE_WINDOW_PX neighbourhood passed the pixel test, which
+        # a table pixel beside the edge (half its neighbourhood at most) never has, even where the windows along
+        # a step of the table's texture lost its correlation.
+        floor = PIXEL_SIGMAS * self.sigma
+        residual, raw = change_kernels.residual(
+            current,
+            reference,
+            change_kernels.ResidualRules(
+                gain=self.gain,
+                offset=self.offset,
+                floor=floor,
+                contrast_window=CONTRAST_WINDOW_PX,
+                faint_contrast=FAINT_CONTRAST_SIGMAS * self.sigma,
+                gone_window=GONE_WINDOW_PX,
+                gone_inside=GONE_INSIDE,
+            ),
+            illumination,
+            texture_gone,
+        )
         if lifted is not None:
             reach = 2 * LIFTED_STILL_REACH_PX + 1
             near_table = cv2.dilate(
@@ -220,7 +214,7 @@ class ChangeTest:
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         changed = cv2.medianBlur(mask, 3) > 0
         if raised is not None and RIM_RING:
-            changed |= _rim_ring(changed, residual, magnitude, floor, raised, raw, still_table)
+            changed |= _rim_ring(changed, residual, floor, raised, raw, still_table)
         return changed
 
     def _texture(
@@ -319,7 +313,6 @@ def _holes(changed: np.ndarray) -> np.ndarray:
 def _rim_ring(
     changed: np.ndarray,
     residual: np.ndarray,
-    magnitude: np.ndarray,
     floor: float,
     raised: np.ndarray,
     raw: np.ndarray,
@@ -340,7 +333,7 @@ def _rim_ring(
     for label, (x, y, w, h, _) in enumerate(stats[1:], start=1):
         rows = slice(max(y - reach, 0), min(y + h + reach, height))
         cols = slice(max(x - reach, 0), min(x + w + reach, width))
-        magnitude_box = magnitude[rows, cols]
+        magnitude_box = np.abs(residual[rows, cols])
         own = _own_sign_contrast(residual[rows, cols], magnitude_box, floor, window)
         box = magnitude_box > np.maximum(floor, 0.5 * own)
         box |= raw[rows, cols]

@@ -113,3 +113,37 @@ def test_bad_images_are_refused() -> None:
         change_kernels.box_mean(current, 1)
     with pytest.raises(ValueError, match="out of range"):
         change_kernels.box_mean(current, change_kernels.MAX_WINDOW + 2)
+
+
+RESIDUAL = change_kernels.ResidualRules(
+    gain=0.97, offset=1.5, floor=3.9, contrast_window=11, faint_contrast=10.4, gone_window=9, gone_inside=0.6
+)
+
+
+def test_the_pixel_test_is_the_same_on_one_thread_and_on_all() -> None:
+    current, reference = _pair((200, 260))
+    _, gone, illumination, _ = change_kernels.texture(current, reference, RULES)
+    one = change_kernels.residual(current, reference, RESIDUAL, illumination, gone, threads=1)
+    for threads in (0, 2, 3):
+        for got, want in zip(
+            change_kernels.residual(current, reference, RESIDUAL, illumination, gone, threads), one, strict=True
+        ):
+            assert np.array_equal(got, want)
+    assert one[1].any() and not one[1].all()
+
+
+def test_bad_pixel_test_arguments_are_refused() -> None:
+    current, reference = _pair((30, 40))
+    illumination, gone = np.ones((30, 40), np.float32), np.zeros((30, 40), bool)
+    with pytest.raises(ValueError, match="shape"):
+        change_kernels.residual(current, reference, RESIDUAL, illumination[:, 1:], gone)
+    with pytest.raises(ValueError, match="shape"):
+        change_kernels.residual(current, reference[1:], RESIDUAL, illumination, gone)
+    spoilt = illumination.copy()
+    spoilt[0, 0] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        change_kernels.residual(current, reference, RESIDUAL, spoilt, gone)
+    with pytest.raises(ValueError, match="not finite"):
+        change_kernels.residual(current, reference, dataclasses.replace(RESIDUAL, floor=np.inf), illumination, gone)
+    with pytest.raises(ValueError, match="out of range"):
+        change_kernels.residual(current, reference, dataclasses.replace(RESIDUAL, gone_window=0), illumination, gone)

@@ -1,6 +1,7 @@
-"""The change test's texture vote in numpy and OpenCV: the reference the C kernel (csrc/change_kernels.c,
-called by ChangeTest._texture) must equal bit for bit (its float32 operations, in its order, and cv2.blur's box
-means). ChangeTest._texture's docstring gives the rules."""
+"""The change test's texture vote and pixel test in numpy and OpenCV (main's code before the C kernels): the
+reference the kernels (csrc/change_kernels.c, called by ChangeTest._texture and ChangeTest.changed) must equal
+bit for bit (their float32 operations, in their order, and cv2.blur's box means). ChangeTest's docstrings give
+the rules."""
 
 from __future__ import annotations
 
@@ -8,10 +9,16 @@ import cv2
 import numpy as np
 
 from cellctl.vision.change import (
+    CONTRAST_WINDOW_PX,
+    FAINT_CONTRAST_SIGMAS,
     FIT_SIGMAS,
+    GONE_INSIDE,
+    GONE_WINDOW_PX,
     ILLUMINATION_FAR_WEIGHT,
     ILLUMINATION_NEAR_WEIGHT,
     ILLUMINATION_WINDOW_PX,
+    LIFTED_STILL_REACH_PX,
+    LIFTED_VOTE_SHARE,
     LOCAL_SHADOW_FIT,
     MAX_CARRIED_FACTOR,
     MAX_SHADOW_FACTOR,
@@ -20,13 +27,16 @@ from cellctl.vision.change import (
     MIN_TEXTURE_GAIN,
     MIN_TEXTURED_SHARE,
     NCC_WINDOW_PX,
+    PIXEL_SIGMAS,
     RAISED_LOCAL_FIT_SHARE,
+    RIM_RING,
     SCALE_AGREEMENT,
     STILL_TEXTURE_SIGMAS,
     TABLE_NCC,
     TEXTURE_SIGMAS,
     UNANIMOUS,
     ChangeTest,
+    _rim_ring,
 )
 
 
@@ -119,3 +129,53 @@ def texture_reference(
         factor = cv2.blur(np.multiply(brightness, confident, dtype=np.float32), window)
         np.divide(factor, weight_fit, out=illumination, where=local)
     return still, gone, illumination, share
+
+
+def residual_reference(
+    test: ChangeTest, current: np.ndarray, reference: np.ndarray, illumination: np.ndarray, texture_gone: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(residual, raw) of ChangeTest.changed's pixel test after the texture vote, in numpy and OpenCV."""
+    predicted = test.predicted(reference)
+    residual = np.subtract(np.asarray(current, np.float32), predicted)
+    predicted *= illumination - 1.0
+    residual -= predicted
+    magnitude = np.abs(residual)
+    floor = PIXEL_SIGMAS * test.sigma
+    clear = (magnitude > floor).astype(np.float32)
+    window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
+    contrast = cv2.blur(magnitude * clear, window)
+    contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
+    half_contrast = np.multiply(contrast, 0.5, out=clear)
+    raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
+    faint = contrast < FAINT_CONTRAST_SIGMAS * test.sigma
+    inside = cv2.blur(raw.astype(np.float32), (GONE_WINDOW_PX, GONE_WINDOW_PX)) > GONE_INSIDE
+    inside &= texture_gone
+    gone = texture_gone & faint
+    raw |= gone
+    raw |= inside
+    return residual, raw
+
+
+def changed_reference(
+    test: ChangeTest,
+    current: np.ndarray,
+    reference: np.ndarray,
+    raised: np.ndarray | None = None,
+    lifted: np.ndarray | None = None,
+) -> np.ndarray:
+    """ChangeTest.changed (no box) with the numpy texture vote and pixel test: main's code before the kernels."""
+    still_table, texture_gone, illumination, textured_share = texture_reference(test, current, reference, raised)
+    residual, raw = residual_reference(test, current, reference, illumination, texture_gone)
+    if lifted is not None:
+        reach = 2 * LIFTED_STILL_REACH_PX + 1
+        near_table = cv2.dilate(
+            still_table.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach))
+        )
+        fill = lifted & (near_table == 0) & (textured_share > LIFTED_VOTE_SHARE) & (illumination > MAX_SHADOW_FACTOR)
+        fill &= cv2.erode((raw | fill).view(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        raw |= fill
+    mask = np.greater(raw, still_table).view(np.uint8)
+    changed = cv2.medianBlur(mask, 3) > 0
+    if raised is not None and RIM_RING:
+        changed |= _rim_ring(changed, residual, PIXEL_SIGMAS * test.sigma, raised, raw, still_table)
+    return changed

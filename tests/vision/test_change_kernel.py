@@ -1,6 +1,6 @@
-"""The change test's texture vote in C (ChangeTest._texture) against its numpy reference
-(tests/vision/change_reference.py): the same still-table, texture-gone, illumination and share images, bit for
-bit, on scenes with every rule at work (shadows, a lamp, a sole of the table's brightness, a raised sole)."""
+"""The change test in C (ChangeTest._texture's vote and ChangeTest.changed's pixel test) against its numpy
+reference (tests/vision/change_reference.py): the same images bit for bit, and the same masks, on scenes with
+every rule at work (shadows, a lamp, a sole of the table's brightness, a raised and lifted sole)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
+from cellctl.stereo import change_kernels
+from cellctl.vision import change
 from cellctl.vision.change import ChangeTest
 
-from .change_reference import texture_reference
+from .change_reference import changed_reference, residual_reference, texture_reference
 
 
 def _scene(seed: int, shape: tuple[int, int] = (150, 190)) -> tuple[ChangeTest, np.ndarray, np.ndarray, np.ndarray]:
@@ -73,3 +75,34 @@ def test_a_non_finite_pixel_is_refused() -> None:
     current[3, 4] = np.nan
     with pytest.raises(ValueError, match="not finite"):
         test._texture(current, reference)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_whole_change_test_equals_the_numpy_reference_pixel_for_pixel(seed: int) -> None:
+    # The pixel test after the vote is in C too (change_kernels.residual): with depth's raised and lifted
+    # pixels (the rim ring and the lifted fill at work) the mask is main's numpy mask, pixel for pixel.
+    test, current, reference, sole = _scene(seed)
+    lifted = cv2.erode(sole.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+    for raised, lift in ((None, None), (sole, None), (sole, lifted)):
+        got = test.changed(current, reference, raised=raised, lifted=lift)
+        want = changed_reference(test, current, reference, raised, lift)
+        assert np.array_equal(got, want), f"{np.count_nonzero(got != want)} pixels differ"
+    assert 0.2 < got.mean() < 0.6
+
+
+def test_the_pixel_test_equals_the_numpy_reference_bit_for_bit() -> None:
+    test, current, reference, sole = _scene(3)
+    _, gone, illumination, _ = test._texture(current, reference, sole)
+    rules = change_kernels.ResidualRules(
+        gain=test.gain,
+        offset=test.offset,
+        floor=change.PIXEL_SIGMAS * test.sigma,
+        contrast_window=change.CONTRAST_WINDOW_PX,
+        faint_contrast=change.FAINT_CONTRAST_SIGMAS * test.sigma,
+        gone_window=change.GONE_WINDOW_PX,
+        gone_inside=change.GONE_INSIDE,
+    )
+    residual, raw = change_kernels.residual(current, reference, rules, illumination, gone)
+    want_residual, want_raw = residual_reference(test, current, reference, illumination, gone)
+    assert np.array_equal(residual, want_residual) and np.array_equal(raw, want_raw)
+    assert raw.any() and (raw & gone).any()
