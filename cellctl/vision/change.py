@@ -138,6 +138,7 @@ class ChangeTest:
         box: tuple[slice, slice] | None = None,
         raised: np.ndarray | None = None,
         lifted: np.ndarray | None = None,
+        threads: int = change_kernels.ALL_THREADS,
     ) -> np.ndarray:
         """Bool image: pixels that no longer show the taught table (only within `box`, rows and columns, if
         given: False elsewhere; the windows reach a few pixels, so a box a few mm larger than what is read
@@ -160,6 +161,8 @@ class ChangeTest:
         on the sole's edge for a white sole as for a black rim on a dark table; a global threshold would put
         it a pixel out on strong contrast and cut a weakly contrasting rim off. A 3 x 3 majority (median)
         then removes isolated flags and misses; a straight edge stays where it is.
+
+        `threads`: the C kernels' OpenMP threads (0: all); the same mask on any number.
         """
         if box is not None:
             changed = np.zeros(np.shape(current), bool)
@@ -168,9 +171,10 @@ class ChangeTest:
                 np.asarray(reference)[box],
                 raised=None if raised is None else raised[box],
                 lifted=None if lifted is None else lifted[box],
+                threads=threads,
             )
             return changed
-        still_table, texture_gone, illumination, textured_share = self._texture(current, reference, raised)
+        still_table, texture_gone, illumination, textured_share = self._texture(current, reference, raised, threads)
         # Against the table as lit now: where the still table is darker or lighter than taught (a shadow), its
         # factor is carried to the pixels beside it, so a shadowed table pixel next to the sole is not changed.
         # Then the pixel test (in C, csrc/change_kernels.c, bit-identical to the numpy formulas kept in
@@ -198,6 +202,7 @@ class ChangeTest:
             ),
             illumination,
             texture_gone,
+            threads,
         )
         if lifted is not None:
             reach = 2 * LIFTED_STILL_REACH_PX + 1
@@ -218,7 +223,11 @@ class ChangeTest:
         return changed
 
     def _texture(
-        self, current: np.ndarray, reference: np.ndarray, raised: np.ndarray | None = None
+        self,
+        current: np.ndarray,
+        reference: np.ndarray,
+        raised: np.ndarray | None = None,
+        threads: int = change_kernels.ALL_THREADS,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(still table, texture gone, illumination, textured share): the table's own texture is still there,
         only darker or lighter (a shadow), or it is gone (covered by something of whatever brightness).
@@ -259,7 +268,7 @@ class ChangeTest:
         #   ratio instead (on `raised` pixels only with RAISED_LOCAL_FIT_SHARE of the fit-eligible windows).
         # In C (csrc/change_kernels.c): ~40 full-image float32 passes and ~15 box blurs in numpy and OpenCV were
         # most of the taught cycle's background stage.
-        return change_kernels.texture(current, reference, self._texture_rules(), raised)
+        return change_kernels.texture(current, reference, self._texture_rules(), raised, threads)
 
     def _texture_rules(self) -> change_kernels.TextureRules:
         """This test's gain and noise with the texture vote's constants, as the C kernel takes them."""

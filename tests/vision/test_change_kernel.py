@@ -106,3 +106,11 @@ def test_the_pixel_test_equals_the_numpy_reference_bit_for_bit() -> None:
     want_residual, want_raw = residual_reference(test, current, reference, illumination, gone)
     assert np.array_equal(residual, want_residual) and np.array_equal(raw, want_raw)
     assert raw.any() and (raw & gone).any()
+
+
+def test_the_mask_is_the_same_on_one_thread() -> None:
+    test, current, reference, sole = _scene(4)
+    box = (slice(10, 140), slice(20, 185))
+    assert np.array_equal(
+        test.changed(current, reference, box, sole, sole, threads=1), test.changed(current, reference, box, sole, sole)
+    )
