@@ -375,13 +375,13 @@ static void window_votes(const float *cur, int64_t cs, const float *ref, int64_t
         {cur, ref, cs, rs, SRC_PRODUCT, k, cr},
     };
     boxes(w, jobs, (int)(sizeof jobs / sizeof jobs[0]), height, width);
-    /* Planes afterwards: see window_votes_row. */
+    /* The votes into planes 5-10 (not over the sums: the row function's rows are restrict). */
 #pragma omp for schedule(static)
     for (int y = 0; y < height; ++y) {
         const size_t row = (size_t)y * width;
-        window_votes_row(p, width, mean_c + row, mean_r + row, cc + row, rr + row, cr + row, w->plane[0] + row,
-                         w->plane[1] + row, w->plane[2] + row, w->plane[3] + row, w->plane[4] + row,
-                         w->plane[5] + row);
+        window_votes_row(p, width, mean_c + row, mean_r + row, cc + row, rr + row, cr + row, w->plane[5] + row,
+                         w->plane[6] + row, w->plane[7] + row, w->plane[8] + row, w->plane[9] + row,
+                         w->plane[10] + row);
     }
 }
 
@@ -415,8 +415,8 @@ CHK_CLONES static void still_and_gone_row(const chk_texture_params *p, int width
 
 /* Still table, texture gone, and the still table's weight (plane 0) and weighted factor (plane 6) for the
  * illumination, from the boxed votes (share, plane 1 agree, plane 2 fit share). */
-/* Still table, texture gone, and the still table's weight (plane 0) and weighted factor (plane 1) for the
- * illumination, from the boxed votes (share, plane 6 agree, plane 7 fit share). */
+/* Still table, texture gone, and the still table's weight (plane 5) and weighted factor (plane 6) for the
+ * illumination, from the boxed votes (share, plane 0 agree, plane 1 fit share). */
 static void still_and_gone(const float *cur, int64_t cs, const float *ref, int64_t rs, int height, int width,
                            const chk_texture_params *p, const workspace *w, const float *share, uint8_t *still,
                            uint8_t *gone, float *illumination)
@@ -424,8 +424,8 @@ static void still_and_gone(const float *cur, int64_t cs, const float *ref, int64
 #pragma omp for schedule(static)
     for (int y = 0; y < height; ++y) {
         const size_t row = (size_t)y * width;
-        still_and_gone_row(p, width, cur + y * cs, ref + y * rs, share + row, w->plane[6] + row, w->plane[7] + row,
-                           still + row, gone + row, w->plane[0] + row, w->plane[1] + row, illumination + row);
+        still_and_gone_row(p, width, cur + y * cs, ref + y * rs, share + row, w->plane[0] + row, w->plane[1] + row,
+                           still + row, gone + row, w->plane[5] + row, w->plane[6] + row, illumination + row);
     }
 }
 
@@ -456,25 +456,25 @@ static void local_fit_row(int width, const float *restrict weight_fit, const flo
 }
 
 /* The illumination factor carried from the still table (the whole window, then its half where the still
- * table is near: the later one wins), then the local shadow fit's where it speaks (planes 8-10). */
+ * table is near: the later one wins), then the local shadow fit's where it speaks (planes 2-4). */
 static void carried_illumination(int height, int width, const chk_texture_params *p, const workspace *w,
                                  const uint8_t *raised, int64_t raised_stride, float *illumination)
 {
     const int whole = p->illumination_window, half = p->illumination_window / 2;
-    const box_job jobs[] = {plane_job(w->plane[0], width, whole, w->plane[2]),
-                            plane_job(w->plane[1], width, whole, w->plane[3]),
-                            plane_job(w->plane[0], width, half, w->plane[4]),
-                            plane_job(w->plane[1], width, half, w->plane[5])};
+    const box_job jobs[] = {plane_job(w->plane[5], width, whole, w->plane[7]),
+                            plane_job(w->plane[6], width, whole, w->plane[8]),
+                            plane_job(w->plane[5], width, half, w->plane[9]),
+                            plane_job(w->plane[6], width, half, w->plane[10])};
     boxes(w, jobs, 4, height, width);
     const float far = (float)p->far_weight, near = (float)p->near_weight;
     const float min_fit = (float)p->min_local_fit_share, raised_fit = (float)p->raised_local_fit_share;
 #pragma omp for schedule(static)
     for (int y = 0; y < height; ++y) {
         const size_t row = (size_t)y * width;
-        carried_row(width, w->plane[2] + row, w->plane[3] + row, far, illumination + row);
-        carried_row(width, w->plane[4] + row, w->plane[5] + row, near, illumination + row);
+        carried_row(width, w->plane[7] + row, w->plane[8] + row, far, illumination + row);
+        carried_row(width, w->plane[9] + row, w->plane[10] + row, near, illumination + row);
         if (p->local_shadow_fit)
-            local_fit_row(width, w->plane[8] + row, w->plane[9] + row, w->plane[10] + row,
+            local_fit_row(width, w->plane[2] + row, w->plane[3] + row, w->plane[4] + row,
                           raised ? raised + y * raised_stride : NULL, min_fit, raised_fit, illumination + row);
     }
 }
@@ -518,10 +518,11 @@ int chk_texture(const float *current, int64_t current_stride, const float *refer
 
     const workspace w = carve(scratch, height, width, widest(p), threads);
     const int k = p->ncc_window;
-    /* The vote's boxes (planes 0-5 into share and planes 6-10). */
-    const box_job votes[] = {plane_job(w.plane[0], width, k, share),     plane_job(w.plane[1], width, k, w.plane[6]),
-                             plane_job(w.plane[2], width, k, w.plane[7]), plane_job(w.plane[3], width, k, w.plane[8]),
-                             plane_job(w.plane[5], width, k, w.plane[10]), plane_job(w.plane[4], width, k, w.plane[9])};
+    /* The votes' boxes (planes 5-10 into share, 0 agree, 1 fit share, 2 fits' weight, 4 their factor, 3 the
+     * fit-eligible windows). */
+    const box_job votes[] = {plane_job(w.plane[5], width, k, share),     plane_job(w.plane[6], width, k, w.plane[0]),
+                             plane_job(w.plane[7], width, k, w.plane[1]), plane_job(w.plane[8], width, k, w.plane[2]),
+                             plane_job(w.plane[10], width, k, w.plane[4]), plane_job(w.plane[9], width, k, w.plane[3])};
     /* The fits' boxes only for the local shadow fit, their eligible windows only on raised pixels. */
     const int vote_boxes = !p->local_shadow_fit ? 3 : raised ? 6 : 5;
     /* One parallel region: every step is a worksharing loop (boxes shared out whole), with a barrier. */

@@ -8,11 +8,11 @@
  * float32 array), and each box mean is computed as OpenCV's cv2.blur computes it on float32 (border
  * BORDER_REFLECT_101; running sums in double along each row, then down each column over the whole height,
  * each output the double sum times 1 / (k * k), rounded to float32). Each box is streamed down the image by
- * one thread (its row sums in a ring of k rows, in cache); the threads share out the independent boxes of a
+ * one thread (its row sums in a ring of k + 1 rows, in cache); the threads share out the independent boxes of a
  * step and the rows of the per-pixel steps, so results do not depend on the thread count.
  *
  * Each entry point checks its arguments and returns a CHK_* status; nothing is allocated: scratch space comes
- * from the caller (chk_scratch_bytes). `threads`: OpenMP threads (0: all OpenMP offers).
+ * from the caller (chk_texture_scratch_bytes, chk_residual_scratch_bytes). `threads`: OpenMP threads (0: all OpenMP offers).
  */
 #ifndef CELLCTL_CHANGE_KERNELS_H
 #define CELLCTL_CHANGE_KERNELS_H
