@@ -37,12 +37,15 @@ ffibuilder.cdef(_cdef_from_header((HERE / "cellctl_core.h").read_text()))
 # The measurement's hot loops (cellctl.vision.outliers, subpixel) share the module: one extension to build.
 ffibuilder.cdef(_cdef_from_header((HERE / "cloud_kernels.h").read_text(), defines=False))
 ffibuilder.cdef(_cdef_from_header((HERE / "pixel_marks.h").read_text(), defines=False))
+# The change test against the taught table (cellctl.vision.change) too; its two limits for the wrapper's checks.
+ffibuilder.cdef("#define CHK_MAX_DIM ...\n#define CHK_MAX_WINDOW ...\n")
+ffibuilder.cdef(_cdef_from_header((HERE / "change_kernels.h").read_text(), defines=False))
 
 _sources = sorted(str(p.relative_to(HERE.parent)) for p in HERE.glob("*.c"))
 _extra = os.environ.get("CELLCTL_CFLAGS", "").split()
 ffibuilder.set_source(
     "cellctl.stereo._core",
-    '#include "cellctl_core.h"\n#include "cloud_kernels.h"\n#include "pixel_marks.h"',
+    '#include "cellctl_core.h"\n#include "cloud_kernels.h"\n#include "pixel_marks.h"\n#include "change_kernels.h"',
     sources=_sources,
     include_dirs=[str(HERE.relative_to(HERE.parent))],
     # -fvisibility=hidden: the module exports only its init function, so calls between the core's

@@ -14,13 +14,12 @@ shadowed table, not the taught one.
 
 from __future__ import annotations
 
-from concurrent import futures
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from cellctl.vision.workers import worker
+from cellctl.stereo import change_kernels
 
 CHANGE_SIGMAS = 4.0  # gain fit: residuals beyond this many sigmas are not table
 PIXEL_SIGMAS = 3.0  # a pixel is changed beyond this many sigmas (0.3 % false flags, removed by the majority)
@@ -56,6 +55,9 @@ STILL_TEXTURE_SIGMAS = 1.0
 # Shadow-corrected residual: the illumination factor of the still table is carried over ILLUMINATION_WINDOW_PX
 # (~12 mm; half that where the still table is near) to the pixels next to it, so the edge of a sole in a shadow is placed against the shadowed table.
 ILLUMINATION_WINDOW_PX = 31
+# The least share of still-table pixels in the whole window and in its half for the factor to be carried.
+ILLUMINATION_FAR_WEIGHT = 0.05
+ILLUMINATION_NEAR_WEIGHT = 0.1
 # Where some of the windows covering a pixel (MIN_LOCAL_FIT_SHARE) fit the reference at a shadow's factor with
 # a clear correlation, their factor replaces the carried one: two lamps' shadows overlap in a darker band
 # beside the sole (3-5 mm), whose weak texture gives no still vote, and the broad shadow's factor carried
@@ -136,6 +138,7 @@ class ChangeTest:
         box: tuple[slice, slice] | None = None,
         raised: np.ndarray | None = None,
         lifted: np.ndarray | None = None,
+        threads: int = change_kernels.ALL_THREADS,
     ) -> np.ndarray:
         """Bool image: pixels that no longer show the taught table (only within `box`, rows and columns, if
         given: False elsewhere; the windows reach a few pixels, so a box a few mm larger than what is read
@@ -158,6 +161,8 @@ class ChangeTest:
         on the sole's edge for a white sole as for a black rim on a dark table; a global threshold would put
         it a pixel out on strong contrast and cut a weakly contrasting rim off. A 3 x 3 majority (median)
         then removes isolated flags and misses; a straight edge stays where it is.
+
+        `threads`: the C kernels' OpenMP threads (0: all); the same mask on any number.
         """
         if box is not None:
             changed = np.zeros(np.shape(current), bool)
@@ -166,41 +171,39 @@ class ChangeTest:
                 np.asarray(reference)[box],
                 raised=None if raised is None else raised[box],
                 lifted=None if lifted is None else lifted[box],
+                threads=threads,
             )
             return changed
-        # The texture votes on a worker thread beside the residual (numpy and OpenCV release the GIL).
-        texture = worker("change-texture").submit(self._texture, current, reference, raised)
-        try:
-            predicted = self.predicted(reference)
-            residual = np.subtract(np.asarray(current, np.float32), predicted)
-        finally:
-            futures.wait([texture])
-        still_table, texture_gone, illumination, textured_share = texture.result()
+        still_table, texture_gone, illumination, textured_share = self._texture(current, reference, raised, threads)
         # Against the table as lit now: where the still table is darker or lighter than taught (a shadow), its
         # factor is carried to the pixels beside it, so a shadowed table pixel next to the sole is not changed.
-        predicted *= illumination - 1.0
-        residual -= predicted
-        magnitude = np.abs(residual)
-        floor = PIXEL_SIGMAS * self.sigma
-        clear = (magnitude > floor).astype(np.float32)
-        window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
-        contrast = cv2.blur(magnitude * clear, window)
-        contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
-        half_contrast = np.multiply(contrast, 0.5, out=clear)
-        raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
-        faint = contrast < FAINT_CONTRAST_SIGMAS * self.sigma
+        # Then the pixel test (in C, csrc/change_kernels.c, bit-identical to the numpy formulas kept in
+        # tests/vision/change_reference.py): a pixel is changed where |residual| exceeds PIXEL_SIGMAS of noise and
+        # half the local contrast (the mean magnitude of the clear pixels within CONTRAST_WINDOW_PX).
         # Next to a strong step every window covering a table pixel also covers the step and correlates
-        # poorly: the texture vote would move the edge out. It only speaks where the change is faint.
-        # Inside a changed region, though, a pixel whose texture is gone is changed whatever the contrast: a
-        # sole of about the table's brightness matches the prediction at scattered pixels. Inside: most of
-        # its GONE_WINDOW_PX neighbourhood passed the pixel test, which a table pixel beside the edge (half
-        # its neighbourhood at most) never has, even where the windows along a step of the table's texture
-        # lost its correlation.
-        inside = cv2.blur(raw.astype(np.float32), (GONE_WINDOW_PX, GONE_WINDOW_PX)) > GONE_INSIDE
-        inside &= texture_gone
-        texture_gone &= faint
-        raw |= texture_gone
-        raw |= inside
+        # poorly: the texture vote would move the edge out. It only speaks where the change is faint
+        # (FAINT_CONTRAST_SIGMAS). Inside a changed region, though, a pixel whose texture is gone is changed
+        # whatever the contrast: a sole of about the table's brightness matches the prediction at scattered
+        # pixels. Inside: more than GONE_INSIDE of its GONE_WINDOW_PX neighbourhood passed the pixel test, which
+        # a table pixel beside the edge (half its neighbourhood at most) never has, even where the windows along
+        # a step of the table's texture lost its correlation.
+        floor = PIXEL_SIGMAS * self.sigma
+        residual, raw = change_kernels.residual(
+            current,
+            reference,
+            change_kernels.ResidualRules(
+                gain=self.gain,
+                offset=self.offset,
+                floor=floor,
+                contrast_window=CONTRAST_WINDOW_PX,
+                faint_contrast=FAINT_CONTRAST_SIGMAS * self.sigma,
+                gone_window=GONE_WINDOW_PX,
+                gone_inside=GONE_INSIDE,
+            ),
+            illumination,
+            texture_gone,
+            threads,
+        )
         if lifted is not None:
             reach = 2 * LIFTED_STILL_REACH_PX + 1
             near_table = cv2.dilate(
@@ -216,11 +219,15 @@ class ChangeTest:
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         changed = cv2.medianBlur(mask, 3) > 0
         if raised is not None and RIM_RING:
-            changed |= _rim_ring(changed, residual, magnitude, floor, raised, raw, still_table)
+            changed |= _rim_ring(changed, residual, floor, raised, raw, still_table)
         return changed
 
     def _texture(
-        self, current: np.ndarray, reference: np.ndarray, raised: np.ndarray | None = None
+        self,
+        current: np.ndarray,
+        reference: np.ndarray,
+        raised: np.ndarray | None = None,
+        threads: int = change_kernels.ALL_THREADS,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(still table, texture gone, illumination, textured share): the table's own texture is still there,
         only darker or lighter (a shadow), or it is gone (covered by something of whatever brightness).
@@ -239,88 +246,54 @@ class ChangeTest:
         over the still table within ILLUMINATION_WINDOW_PX, and the share of the windows covering each pixel
         where the reference has texture to vote with.
         """
-        # The same float32 operations in the same order as the plain formulas in the comments, in place on
-        # few buffers and without copies of float32 inputs (a quarter of the time went to allocation).
-        window = (NCC_WINDOW_PX, NCC_WINDOW_PX)
-        cur, ref = np.asarray(current, np.float32), np.asarray(reference, np.float32)
-        mean_c, mean_r = cv2.blur(cur, window), cv2.blur(ref, window)
-        scratch = np.multiply(cur, cur)
-        var_c = cv2.blur(scratch, window)  # blur(cur * cur) - mean_c * mean_c
-        var_c -= np.multiply(mean_c, mean_c, out=scratch)
-        var_r = cv2.blur(np.multiply(ref, ref, out=scratch), window)  # blur(ref * ref) - mean_r * mean_r
-        var_r -= np.multiply(mean_r, mean_r, out=scratch)
-        # The window's brightness against the taught prediction: a shadow or a lamp scales it as it scales
-        # the texture (the fit's vote below needs both), a sole's brightness has nothing to do with it.
-        brightness = self.predicted(mean_r)
-        np.divide(mean_c, np.maximum(brightness, 1.0, out=brightness), out=brightness)
-        covariance = cv2.blur(np.multiply(cur, ref, out=scratch), window)  # blur(cur * ref) - mean_c * mean_r
-        covariance -= np.multiply(mean_c, mean_r, out=mean_c)
-        # Residual variance of the local fit cur = a ref + b: var_c - covariance^2 / var_r (before var_c is reused).
-        unexplained = np.divide(np.multiply(covariance, covariance), np.maximum(var_r, 1e-6))
-        np.subtract(var_c, unexplained, out=unexplained)
-        # ncc = covariance / sqrt(max(var_c * var_r, 1e-6))
-        ncc = np.multiply(var_c, var_r, out=var_c)
-        np.sqrt(np.maximum(ncc, 1e-6, out=ncc), out=ncc)
-        np.divide(covariance, ncc, out=ncc)
-        # texture_gain = covariance / max(var_r, 1e-6) / max(gain, 1e-6)
-        texture_gain = np.divide(covariance, np.maximum(var_r, 1e-6), out=mean_r)
-        texture_gain /= max(self.gain, 1e-6)
-        textured = var_r > (TEXTURE_SIGMAS * self.sigma) ** 2
-        # Votes of the textured windows covering each pixel: nearly all correlate, or nearly none does.
-        share = cv2.blur(textured.astype(np.float32), window)
-        # Nor by less than a shadow's least factor: a sole's own texture correlates with the table's by chance
-        # in some windows (NCC above TABLE_NCC in one in ten on the matrix's grey soles), at 0.0-0.3 of its scale.
-        in_scale = (texture_gain > MIN_TEXTURE_GAIN) & (texture_gain < MAX_TEXTURE_GAIN)
-        table_like = np.greater(ncc, TABLE_NCC)
-        table_like &= in_scale
-        table_like &= textured
-        agree = cv2.blur(table_like.astype(np.float32), window)
-        enough = share > MIN_TEXTURED_SHARE
-        gone = agree < np.multiply(share, 1.0 - UNANIMOUS, out=scratch)
-        gone &= enough
-        # Still table: the correlation's vote, or the local fit's (less texture needed, see FIT_SIGMAS).
-        still = agree > np.multiply(share, UNANIMOUS, out=scratch)
-        still &= enough
-        fitted = var_r > (STILL_TEXTURE_SIGMAS * self.sigma) ** 2
-        fitted &= unexplained < (FIT_SIGMAS * self.sigma) ** 2
-        fitted &= texture_gain > MIN_TEXTURE_GAIN
-        fitted &= in_scale
-        fitted &= np.abs(texture_gain - brightness) < SCALE_AGREEMENT * brightness
-        fitted &= brightness < MAX_SHADOW_FACTOR
-        fit_share = cv2.blur(fitted.astype(np.float32), window)
-        still |= fit_share > UNANIMOUS
-        # The illumination factor over the still table, carried to its neighbours.
-        predicted = self.predicted(ref)
-        ratio = np.divide(cur, np.maximum(predicted, 1.0), out=predicted)
-        # Near still table from a window of half the size (a shadow's own edge stays sharp), farther out
-        # from the whole window (the band beside the sole, whose windows do not vote).
-        # A shadow's factor or the unshadowed table's (~1) is carried, so the table beside a shadow keeps its
-        # own; a stray still pixel on a white sole (ratio ~5) or a black one on the dark table (1.2-1.5) is not.
-        plausible = (ratio > MIN_TEXTURE_GAIN) & (ratio < MAX_CARRIED_FACTOR)
-        weight = (still & plausible).astype(np.float32)
-        weighted = ratio * weight
-        illumination = np.ones_like(ratio)
-        for size, least in ((ILLUMINATION_WINDOW_PX, 0.05), (ILLUMINATION_WINDOW_PX // 2, 0.1)):
-            weights = cv2.blur(weight, (size, size))
-            near = weights >= least
-            illumination[near] = cv2.blur(weighted, (size, size))[near] / weights[near]
-        if LOCAL_SHADOW_FIT:
-            # Where windows covering the pixel fit the reference at a shadow's factor, that factor (their mean)
-            # rather than the one carried from the still table farther away: two lamps' shadows overlap in a
-            # darker band beside the sole, too narrow and too weakly textured for the still vote.
-            # Only windows whose fit is also a clear correlation (TABLE_NCC) speak here: on a uniform black sole
-            # one window in ten fits a shadow's factor by chance, the correlation of a fit that explains the
-            # table's texture does not come by chance.
-            confident = np.greater(ncc, TABLE_NCC)
-            confident &= fitted
-            weight_fit = cv2.blur(confident.astype(np.float32), window)
-            local = weight_fit >= MIN_LOCAL_FIT_SHARE
-            if raised is not None:
-                eligible = cv2.blur((var_r > (STILL_TEXTURE_SIGMAS * self.sigma) ** 2).astype(np.float32), window)
-                local &= ~raised | (weight_fit >= RAISED_LOCAL_FIT_SHARE * eligible)
-            factor = cv2.blur(np.multiply(brightness, confident, dtype=np.float32), window)
-            np.divide(factor, weight_fit, out=illumination, where=local)
-        return still, gone, illumination, share
+        # The rules, in the kernel's order (the numpy formulas, comment by comment, in
+        # tests/vision/change_reference.py, which the kernel equals bit for bit):
+        # - per NCC window: means, variances and covariance of cur and ref; ncc = cov / sqrt(max(var_c var_r,
+        #   1e-6)); texture gain = cov / max(var_r, 1e-6) / gain; brightness = mean_c / max(predicted(mean_r), 1)
+        #   (a shadow or a lamp scales the brightness as it scales the texture, a sole's brightness has nothing to
+        #   do with it); the fit's unexplained variance var_c - cov^2 / var_r.
+        # - a window is table-like where textured, ncc > TABLE_NCC and the texture gain lies between
+        #   MIN_TEXTURE_GAIN (a sole's own texture correlates with the table's by chance in one window in ten on
+        #   the matrix's grey soles, at 0.0-0.3 of its scale) and MAX_TEXTURE_GAIN; still: more than UNANIMOUS of
+        #   the textured windows covering the pixel (at least MIN_TEXTURED_SHARE of them) are, or more than
+        #   UNANIMOUS of them fit (FIT_SIGMAS, at a shadow's factor that agrees with the brightness ratio); gone:
+        #   fewer than 1 - UNANIMOUS are.
+        # - the illumination factor: current / predicted on the still pixels whose factor is a shadow's or the
+        #   unshadowed table's (MIN_TEXTURE_GAIN..MAX_CARRIED_FACTOR; a stray still pixel on a white sole, ratio
+        #   ~5, or a black one on the dark table, 1.2-1.5, is not carried), averaged over ILLUMINATION_WINDOW_PX
+        #   where ILLUMINATION_FAR_WEIGHT of it is still, then over its half where ILLUMINATION_NEAR_WEIGHT is (a
+        #   shadow's own edge stays sharp); where LOCAL_SHADOW_FIT's confident windows (a fit that is also a
+        #   clear correlation: on a uniform black sole one window in ten fits a shadow's factor by chance, the
+        #   correlation does not come by chance) cover MIN_LOCAL_FIT_SHARE of the pixel's, their mean brightness
+        #   ratio instead (on `raised` pixels only with RAISED_LOCAL_FIT_SHARE of the fit-eligible windows).
+        # In C (csrc/change_kernels.c): ~40 full-image float32 passes and ~15 box blurs in numpy and OpenCV were
+        # most of the taught cycle's background stage.
+        return change_kernels.texture(current, reference, self._texture_rules(), raised, threads)
+
+    def _texture_rules(self) -> change_kernels.TextureRules:
+        """This test's gain and noise with the texture vote's constants, as the C kernel takes them."""
+        return change_kernels.TextureRules(
+            gain=self.gain,
+            offset=self.offset,
+            ncc_window=NCC_WINDOW_PX,
+            table_ncc=TABLE_NCC,
+            min_texture_gain=MIN_TEXTURE_GAIN,
+            max_texture_gain=MAX_TEXTURE_GAIN,
+            unanimous=UNANIMOUS,
+            min_textured_share=MIN_TEXTURED_SHARE,
+            textured_variance=(TEXTURE_SIGMAS * self.sigma) ** 2,
+            still_variance=(STILL_TEXTURE_SIGMAS * self.sigma) ** 2,
+            fit_variance=(FIT_SIGMAS * self.sigma) ** 2,
+            scale_agreement=SCALE_AGREEMENT,
+            max_shadow_factor=MAX_SHADOW_FACTOR,
+            max_carried_factor=MAX_CARRIED_FACTOR,
+            illumination_window=ILLUMINATION_WINDOW_PX,
+            far_weight=ILLUMINATION_FAR_WEIGHT,
+            near_weight=ILLUMINATION_NEAR_WEIGHT,
+            local_shadow_fit=LOCAL_SHADOW_FIT,
+            min_local_fit_share=MIN_LOCAL_FIT_SHARE,
+            raised_local_fit_share=RAISED_LOCAL_FIT_SHARE,
+        )
 
 
 def _own_sign_contrast(
@@ -349,7 +322,6 @@ def _holes(changed: np.ndarray) -> np.ndarray:
 def _rim_ring(
     changed: np.ndarray,
     residual: np.ndarray,
-    magnitude: np.ndarray,
     floor: float,
     raised: np.ndarray,
     raw: np.ndarray,
@@ -370,7 +342,7 @@ def _rim_ring(
     for label, (x, y, w, h, _) in enumerate(stats[1:], start=1):
         rows = slice(max(y - reach, 0), min(y + h + reach, height))
         cols = slice(max(x - reach, 0), min(x + w + reach, width))
-        magnitude_box = magnitude[rows, cols]
+        magnitude_box = np.abs(residual[rows, cols])
         own = _own_sign_contrast(residual[rows, cols], magnitude_box, floor, window)
         box = magnitude_box > np.maximum(floor, 0.5 * own)
         box |= raw[rows, cols]
