@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cellctl.stereo._core import ffi, lib
+from cellctl.stereo.kernels import ALL_THREADS, _threads
 
 _ERRORS = {
     lib.CHK_ERR_NULL: "a required array is missing",
@@ -20,7 +21,6 @@ _ERRORS = {
     lib.CHK_ERR_VALUE: "a value is not finite or out of range",
 }
 
-ALL_THREADS = 0  # every thread OpenMP offers; the same result on any number
 MAX_DIM = int(lib.CHK_MAX_DIM)
 MAX_WINDOW = int(lib.CHK_MAX_WINDOW)
 
@@ -61,12 +61,6 @@ def _check(rc: int, what: str) -> None:
         raise ValueError(f"{what}: {_ERRORS.get(rc, f'error {rc}')}")
 
 
-def _threads(threads: int) -> int:
-    if not 0 <= threads <= 256:
-        raise ValueError(f"threads must be between 0 (all) and 256, got {threads}")
-    return threads
-
-
 def _image(image: np.ndarray, dtype: type, name: str) -> tuple[np.ndarray, int]:
     """The image as the kernel reads it (rows contiguous; a row-strided view is not copied) and its row stride
     in elements."""
@@ -82,6 +76,21 @@ def _image(image: np.ndarray, dtype: type, name: str) -> tuple[np.ndarray, int]:
     ):
         array = np.ascontiguousarray(array, dtype)
     return array, array.strides[0] // array.itemsize if array.shape[0] > 1 else array.shape[1]
+
+
+def _pair(current: np.ndarray, reference: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, int]:
+    """Current and reference as the kernels read them (`_image`), with their row strides; shapes must agree."""
+    cur, cur_stride = _image(current, np.float32, "current")
+    ref, ref_stride = _image(reference, np.float32, "reference")
+    if ref.shape != cur.shape:
+        raise ValueError(f"reference {ref.shape} and current {cur.shape} differ in shape")
+    return cur, cur_stride, ref, ref_stride
+
+
+def _kernel_scratch(need: int, height: int, width: int) -> tuple[np.ndarray, int]:
+    """`_scratch` for a kernel that checks its own rules: with no size (`need` 0: bad rules or sizes) a dummy
+    buffer, so the kernel itself says which argument is wrong (before it reads the scratch space)."""
+    return _scratch(need, height, width) if need else (np.empty(1, np.float64), 8)
 
 
 def _scratch(need: int, height: int, width: int) -> tuple[np.ndarray, int]:
@@ -114,10 +123,7 @@ def texture(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """ChangeTest._texture in C: (still table, texture gone, illumination, textured share) of `current` against
     `reference` (float32 images, finite), `raised` (bool image or None) as the rules define them."""
-    cur, cur_stride = _image(current, np.float32, "current")
-    ref, ref_stride = _image(reference, np.float32, "reference")
-    if ref.shape != cur.shape:
-        raise ValueError(f"reference {ref.shape} and current {cur.shape} differ in shape")
+    cur, cur_stride, ref, ref_stride = _pair(current, reference)
     height, width = cur.shape
     raised_ptr, raised_stride = ffi.NULL, 0
     if raised is not None:
@@ -157,8 +163,7 @@ def texture(
     illumination = np.empty((height, width), np.float32)
     share = np.empty((height, width), np.float32)
     need = int(lib.chk_texture_scratch_bytes(height, width, params, _threads(threads)))
-    # No size for bad rules or sizes: the kernel itself says which (before it reads the scratch space).
-    scratch, scratch_bytes = _scratch(need, height, width) if need else (np.empty(1, np.float64), 8)
+    scratch, scratch_bytes = _kernel_scratch(need, height, width)
     rc = lib.chk_texture(
         _view_ptr("const float *", cur),
         cur_stride,
@@ -225,10 +230,7 @@ def residual(
 ) -> tuple[np.ndarray, np.ndarray]:
     """ChangeTest.changed's pixel test in C after the texture vote: (residual against the table as lit now,
     float32; raw, bool) from `illumination` and texture `gone` as texture() gives them."""
-    cur, cur_stride = _image(current, np.float32, "current")
-    ref, ref_stride = _image(reference, np.float32, "reference")
-    if ref.shape != cur.shape:
-        raise ValueError(f"reference {ref.shape} and current {cur.shape} differ in shape")
+    cur, cur_stride, ref, ref_stride = _pair(current, reference)
     height, width = cur.shape
     light = np.ascontiguousarray(illumination, np.float32)
     lost = np.ascontiguousarray(np.asarray(gone, bool)).view(np.uint8)
@@ -249,7 +251,7 @@ def residual(
     out = np.empty((height, width), np.float32)
     raw = np.empty((height, width), np.uint8)
     need = int(lib.chk_residual_scratch_bytes(height, width, params, _threads(threads)))
-    scratch, scratch_bytes = _scratch(need, height, width) if need else (np.empty(1, np.float64), 8)
+    scratch, scratch_bytes = _kernel_scratch(need, height, width)
     rc = lib.chk_residual(
         _view_ptr("const float *", cur),
         cur_stride,
