@@ -66,6 +66,9 @@ def lights(look: SceneLook) -> tuple[np.ndarray, np.ndarray]:
 
 def sole_material(color: str, look: SceneLook) -> Material:
     base = SOLE_MATERIALS[color]
+    if look.texture_contrast != 1.0:  # a smoother moulding: the same pattern, fainter
+        octaves = tuple((wavelength, amplitude * look.texture_contrast) for wavelength, amplitude in base.octaves)
+        base = Material(base.albedo_bgr, octaves, base.specular, base.shininess)
     if look.gloss:
         return Material(base.albedo_bgr, base.octaves, *GLOSS)
     return base

@@ -11,7 +11,8 @@ gives the same scene. Variations that touch different fields combine: `look_for(
 "gain-low"), seed)`. Each variation also says which refusals (`FailureKind`) are a correct answer to it;
 the matrix's entries are meant to be measurable, so most list none: a refusal of such a scene is a missed
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
-False, e.g. "camouflage") are unmeasurable by design: only a refusal with one of their kinds is right.
+False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
+"faint-texture" is kept out so that the matrix sets keep their soles, and is judged like any entry.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ class SceneLook:
     noise: str = "normal"  # NOISE_LEVELS
     rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
     camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
+    texture_contrast: float = 1.0  # the sole's texture contrast relative to its material's (1: as SOLE_MATERIALS)
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -67,6 +69,8 @@ class SceneLook:
             raise ValueError("wall slope must be in [0, 45) degrees and the top edge radius >= 0 mm")
         if self.right_gain <= 0.0 or self.right_gamma <= 0.0:
             raise ValueError("right camera gain and gamma must be positive")
+        if self.texture_contrast <= 0.0:
+            raise ValueError("the sole's texture contrast must be positive")
 
 
 @dataclass(frozen=True)
@@ -78,7 +82,7 @@ class Variation:
     fields: tuple[str, ...]  # the SceneLook fields it sets: two variations setting one field do not combine
     apply: Callable[[SceneLook, np.random.Generator], SceneLook]
     refusals: frozenset[FailureKind] = field(default_factory=frozenset)
-    in_matrix: bool = True  # False: unmeasurable by design, only run when named
+    in_matrix: bool = True  # False: only run when named (the module doc says which and why)
 
 
 def _set(**values: object) -> Callable[[SceneLook, np.random.Generator], SceneLook]:
@@ -153,6 +157,17 @@ VARIATIONS: dict[str, Variation] = {
         ),
         Variation(
             "distorted-rig", "wide-angle rig: strong distortion, 2 degree misalignment", ("rig",), _set(rig="distorted")
+        ),
+        # Outside the matrix so that its sets keep their soles (a matrix sole's variations follow from its place in
+        # MATRIX_ENTRIES), not because it is unmeasurable: a light sole stays measurable, a black one with half
+        # the texture has too little of it for glue heights within 1 mm, and refusing it for that is right.
+        Variation(
+            "faint-texture",
+            "sole texture contrast 50-65 % of its material's (a smoother moulding, finer grain)",
+            ("texture_contrast",),
+            _draw("texture_contrast", 0.50, 0.65),
+            _SURFACE_LOST,
+            in_matrix=False,
         ),
     )
 }

@@ -232,6 +232,25 @@ def test_camouflaged_sole_has_the_tables_colour() -> None:
     assert fair_refusals(("camouflage",)) == {FailureKind.COLOURS_TOO_SIMILAR}
 
 
+def test_faint_texture_is_the_same_pattern_fainter() -> None:
+    """faint-texture scales the sole's texture octaves (the same draws: the pattern stays, its contrast drops) and
+    leaves the albedo; out of the matrix, its fair refusals are the lost surface's."""
+    from cellctl.sim.appearance import SOLE_MATERIALS, Texture, sole_material
+
+    look = look_for(("faint-texture",), 4)
+    assert 0.5 <= look.texture_contrast <= 0.65 and "faint-texture" not in MATRIX_ENTRIES
+    plain, faint = sole_material("black", SceneLook()), sole_material("black", look)
+    assert faint.albedo_bgr == plain.albedo_bgr
+    textures = [
+        Texture.fractal(np.random.default_rng(1), (0.0, 0.0), (60.0, 40.0), 0.2, m.octaves) for m in (plain, faint)
+    ]
+    deviation = [t.image - t.image.mean() for t in textures]
+    np.testing.assert_allclose(deviation[1].std() / deviation[0].std(), look.texture_contrast, rtol=0.02)
+    assert np.corrcoef(deviation[0].ravel(), deviation[1].ravel())[0, 1] > 0.999
+    assert fair_refusals(("faint-texture",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
+    assert plain is SOLE_MATERIALS["black"]  # the default look renders exactly as before the variation existed
+
+
 def test_patterned_table_has_strong_contrast() -> None:
     rng = np.random.default_rng(0)
     from cellctl.sim.appearance import table_texture
