@@ -42,6 +42,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     # Defaults live in cellctl.vision.measurement, which is imported only when the command runs (Open3D is slow to load).
     parser.add_argument("--glue-offset", type=float, metavar="MM", help="glue path inset from the edge (default 2)")
     parser.add_argument("--glue-spacing", type=float, metavar="MM", help="glue path point spacing (default 2)")
+    parser.add_argument(
+        "--glue-height-tolerance",
+        type=float,
+        metavar="MM",
+        help="how far glue heights may stray: a sole measured too coarsely for it is refused (default 1)",
+    )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument(
         "--ply", type=Path, metavar="out.ply", help="write the sole's point cloud (table frame, colours)"
@@ -62,17 +68,18 @@ def run(args: argparse.Namespace) -> int:
     import cv2
 
     from cellctl.vision.calibration import Calibration
-    from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
+    from cellctl.vision.defaults import GLUE_HEIGHT_TOLERANCE_MM, GLUE_OFFSET_MM, GLUE_SPACING_MM
     from cellctl.vision.measurement import check_glue_settings, measure_sole
     from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
     from cellctl.vision.teach import TeachError, load_taught
 
     offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset
     spacing = GLUE_SPACING_MM if args.glue_spacing is None else args.glue_spacing
+    tolerance = GLUE_HEIGHT_TOLERANCE_MM if args.glue_height_tolerance is None else args.glue_height_tolerance
     try:
-        check_glue_settings(offset, spacing)
+        check_glue_settings(offset, spacing, tolerance)
     except ValueError as exc:
-        raise UserError(f"--glue-offset/--glue-spacing: {exc}") from None
+        raise UserError(f"--glue-offset/--glue-spacing/--glue-height-tolerance: {exc}") from None
     calib = Calibration.load(args.calib)
     left, right = _read(args.left, "LEFT"), _read(args.right, "RIGHT")
     for name, image in (("LEFT", left), ("RIGHT", right)):
@@ -86,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     except TeachError as exc:
         raise UserError(str(exc)) from None
     reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right)
-    result = measure_sole(reconstruction, offset, spacing)
+    result = measure_sole(reconstruction, offset, spacing, tolerance)
     if args.ply:
         _write_ply(args.ply, reconstruction)
     if args.export:

@@ -25,6 +25,8 @@ from cellctl.service.config_plc import PlcConfig, read_plc
 from cellctl.service.config_table import ConfigError, Table, read_toml
 from cellctl.vision.defaults import (
     DEPTH_RANGE_MM,
+    GLUE_HEIGHT_TOLERANCE_MM,
+    GLUE_HEIGHT_TOLERANCE_RANGE_MM,
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
     GLUE_SPACING_MM,
@@ -48,6 +50,7 @@ class MeasureConfig:
     depth_range_mm: tuple[float, float] = DEPTH_RANGE_MM
     glue_offset_mm: float = GLUE_OFFSET_MM
     glue_spacing_mm: float = GLUE_SPACING_MM
+    glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM
 
 
 @dataclass(frozen=True)
@@ -237,6 +240,12 @@ def _measure(t: Table) -> MeasureConfig:
         ),
         glue_spacing_mm=t.number(
             "glue_spacing_mm", GLUE_SPACING_MM, low=GLUE_SPACING_RANGE_MM[0], high=GLUE_SPACING_RANGE_MM[1]
+        ),
+        glue_height_tolerance_mm=t.number(
+            "glue_height_tolerance_mm",
+            GLUE_HEIGHT_TOLERANCE_MM,
+            low=GLUE_HEIGHT_TOLERANCE_RANGE_MM[0],
+            high=GLUE_HEIGHT_TOLERANCE_RANGE_MM[1],
         ),
     )
     t.finish()

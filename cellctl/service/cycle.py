@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 
 from cellctl.cameras.base import StereoFrame
 from cellctl.errors import FailureKind, MeasurementInputError
+from cellctl.vision.defaults import GLUE_HEIGHT_TOLERANCE_MM
 from cellctl.vision.measurement import MeasurementRefused, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor
 from cellctl.vision.stereo_order import cameras_swapped
@@ -25,10 +26,12 @@ SWAPPED = (
 
 @dataclass(frozen=True)
 class MeasureSettings:
-    """What a cycle needs to know beyond the frame: glue path offset and spacing (mm)."""
+    """What a cycle needs to know beyond the frame: glue path offset and spacing, and the glue heights'
+    tolerance (mm)."""
 
     glue_offset_mm: float
     glue_spacing_mm: float
+    glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM
 
 
 @dataclass(frozen=True)
@@ -58,7 +61,9 @@ def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings
         reconstruction = reconstructor.reconstruct(frame.left, frame.right)
     except MeasurementInputError as exc:  # e.g. frames of another size than the calibration
         return Refused(exc.kind, f"cameras deliver frames the measurement cannot use: {exc}")
-    measurement = measure_sole(reconstruction, settings.glue_offset_mm, settings.glue_spacing_mm)
+    measurement = measure_sole(
+        reconstruction, settings.glue_offset_mm, settings.glue_spacing_mm, settings.glue_height_tolerance_mm
+    )
     timings = dict(measurement.timings)
     if isinstance(measurement, MeasurementRefused):
         if measurement.failure in _SWAP_SYMPTOMS and cameras_swapped(

@@ -67,7 +67,7 @@ class CellMeasurer:
             plane = self.reconstructor.learn_table(frame.left, frame.right)
             log.info("table plane %s", "learnt from the warm-up pair" if plane is not None else "NOT found")
         measure = self.config.measure
-        settings = MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm)
+        settings = MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm, measure.glue_height_tolerance_mm)
         result = measure_frame(frame, self.reconstructor, settings)
         outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
         log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
@@ -108,7 +108,10 @@ class CellMeasurer:
         reconstructor = self.reconstructor
         if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
             reconstructor = self._reconstructor_for(recipe.depth_range_mm)
-        result = measure_frame(frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm))
+        tolerance = self.config.measure.glue_height_tolerance_mm  # the cell's dispenser, not the sole model's
+        result = measure_frame(
+            frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm, tolerance)
+        )
         timings.update(result.timings)
         if isinstance(result, Refused):
             raise CycleFailed.of(result.failure, result.reason)

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision.defaults import GLUE_HEIGHT_TOLERANCE_MM
 from cellctl.vision.footprint import Footprint
 
 OUTLINE_INSIDE_MM = 2.0  # the sole must rise above the table this far inside its outline...
@@ -58,6 +59,16 @@ MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a
 # gets its heights from elsewhere: 1-8 mm off on simulated soles.
 GLUE_COVER_RADIUS_MM = 1.0
 MAX_GLUE_UNCOVERED = 0.05
+# The glue heights' precision: the median along the path of each height's expected error (the sd of the fit that
+# gave it: glue_path.sample_variance's noise model and the fit's bias, cellctl.vision.surface.path_heights), as a
+# share of the glue-height tolerance. A path's worst point lies ~2.3 x that median off (median ratio over the 185
+# valid results of the four matrix sets, 90th percentile 3.2), so beyond 0.45 x the tolerance its worst point is
+# more likely than not outside it: the top has too little texture, or the images too much noise, for heights that
+# fine. Measured (issue 11, session 12, docs/sole-benchmark.md), against the default 1 mm: the matrix's valid soles
+# read 0.11-0.55 mm (black 0.34 median); black soles with 50-60 % of the simulator's texture contrast read
+# 0.47-0.61 and those above 0.5 were published 1.1-1.2 mm off; white soles through a rig of half the resolution
+# read 0.57-0.64 and were published 1.0-1.8 mm off.
+GLUE_TYPICAL_SD_SHARE = 0.45
 
 
 @dataclass(frozen=True)
@@ -238,6 +249,22 @@ def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:
             f"{100 * uncovered:.0f} % of the glue path runs where no surface was measured within "
             f"{GLUE_COVER_RADIUS_MM:g} mm (a steep or rounded edge the cameras do not see; need at most "
             f"{100 * MAX_GLUE_UNCOVERED:.0f} %): its heights there would not be measurements",
+        )
+    return None
+
+
+def check_glue_precision(height_sd: np.ndarray, tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM) -> CheckFailure | None:
+    """The glue heights' expected errors (per point, mm) against what a glue-height tolerance of `tolerance_mm`
+    allows (GLUE_TYPICAL_SD_SHARE of it, in the median along the path)."""
+    if not np.any(np.isfinite(height_sd)):
+        return CheckFailure(FailureKind.SURFACE_NOT_MEASURED, "the glue heights' expected error is unknown")
+    typical, limit = float(np.nanmedian(height_sd)), GLUE_TYPICAL_SD_SHARE * tolerance_mm
+    if typical > limit:
+        return CheckFailure(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"the sole's top is measured too coarsely for its glue heights: their expected error is {typical:.2f} mm "
+            f"(median along the path; at most {limit:.2f} for the {tolerance_mm:g} mm tolerance): too little "
+            "texture on the top or too much image noise; light the sole more brightly or raise the exposure",
         )
     return None
 

@@ -13,6 +13,10 @@ GLUE_SPACING_MM = 2.0
 #: Their bounds: no dispenser places glue finer than 0.1 mm (1e-6 mm once grew the path to 18 GB).
 GLUE_OFFSET_RANGE_MM: tuple[float, float] = (0.0, 50.0)
 GLUE_SPACING_RANGE_MM: tuple[float, float] = (0.1, 50.0)
+#: How far (mm) a glue height may stray from the sole's top: a path whose heights are expected to stray further
+#: is refused (cellctl.vision.checks.check_glue_precision); its bounds.
+GLUE_HEIGHT_TOLERANCE_MM = 1.0
+GLUE_HEIGHT_TOLERANCE_RANGE_MM: tuple[float, float] = (0.1, 10.0)
 #: Results outside these ranges are no sole on this cell: refused, never published.
 PLAUSIBLE_LENGTH_MM: tuple[float, float] = (100.0, 400.0)
 PLAUSIBLE_HEIGHT_MM: tuple[float, float] = (0.5, 150.0)

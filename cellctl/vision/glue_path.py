@@ -69,11 +69,11 @@ def glue_path(
     # One after the other on this thread: beside each other on two threads (tried) they are two Python threads
     # making hundreds of short numpy calls each, handing the GIL back and forth, and the demo's glue path then
     # stalled for 200-350 ms in some cycles (max / median worse in 9 of 10 A/B pairs, docs/benchmarks.md).
-    z = path_heights(path_xy, raw, path_variance)
+    z, height_sd = path_heights(path_xy, raw, path_variance)
     normals = _slopes(path_xy, path_inward, inner_xy, raw, inner, path_variance, spacing_mm)
     patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals), None
+    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals, height_sd), None
 
 
 def _slopes(

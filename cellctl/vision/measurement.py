@@ -26,9 +26,11 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.vision.checks import GLUE_COVER_RADIUS_MM, check_glue_coverage, check_glue_path
+from cellctl.vision.checks import GLUE_COVER_RADIUS_MM, check_glue_coverage, check_glue_path, check_glue_precision
 from cellctl.vision.closed_path import smooth_closed
 from cellctl.vision.defaults import (
+    GLUE_HEIGHT_TOLERANCE_MM,
+    GLUE_HEIGHT_TOLERANCE_RANGE_MM,
     GLUE_OFFSET_MM,
     GLUE_OFFSET_RANGE_MM,
     GLUE_SPACING_MM,
@@ -73,23 +75,31 @@ GLUE_EDGE_CLOSE_MM = MIN_CONCAVE_RADIUS_MM
 GLUE_OUTLINE_SMOOTHING_MM = 2.0  # the glue line's staircase and pixel noise; its inward normals follow it
 
 
-def check_glue_settings(glue_offset_mm: float, glue_spacing_mm: float) -> None:
-    """ValueError unless the glue path's offset and spacing are possible (a tiny spacing would exhaust memory)."""
+def check_glue_settings(
+    glue_offset_mm: float, glue_spacing_mm: float, glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM
+) -> None:
+    """ValueError unless the glue path's offset, spacing and height tolerance are possible (a tiny spacing would
+    exhaust memory)."""
     (offset_low, offset_high), (spacing_low, spacing_high) = GLUE_OFFSET_RANGE_MM, GLUE_SPACING_RANGE_MM
     if not (offset_low <= glue_offset_mm <= offset_high and spacing_low <= glue_spacing_mm <= spacing_high):
         raise ValueError(
             f"glue offset must be in {offset_low:g}..{offset_high:g} mm and spacing in {spacing_low:g}..{spacing_high:g}"
             f" mm, got {glue_offset_mm:g} and {glue_spacing_mm:g}"
         )
+    low, high = GLUE_HEIGHT_TOLERANCE_RANGE_MM
+    if not low <= glue_height_tolerance_mm <= high:
+        raise ValueError(f"glue height tolerance must be in {low:g}..{high:g} mm, got {glue_height_tolerance_mm:g}")
 
 
 def measure_sole(
     reconstruction: ReconstructionResult,
     glue_offset_mm: float = GLUE_OFFSET_MM,
     glue_spacing_mm: float = GLUE_SPACING_MM,
+    glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM,
 ) -> MeasurementResult:
-    """Length, heel and toe height and glue path of a reconstructed sole."""
-    check_glue_settings(glue_offset_mm, glue_spacing_mm)
+    """Length, heel and toe height and glue path of a reconstructed sole; a glue path whose heights are expected
+    to stray beyond `glue_height_tolerance_mm` is refused (checks.check_glue_precision)."""
+    check_glue_settings(glue_offset_mm, glue_spacing_mm, glue_height_tolerance_mm)
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
     # What every result carries, valid or not; grows as the measurement learns more about the sole.
@@ -150,6 +160,8 @@ def measure_sole(
     problem = check_glue_path(
         path.points, path.normals, raw_z, patch_normals, (float(sole_z[0]), float(sole_z[1])), glue_spacing_mm
     )
+    if problem is None and path.height_sd is not None:
+        problem = check_glue_precision(path.height_sd, glue_height_tolerance_mm)
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     implausible = _implausible(length, heel_z, toe_z)

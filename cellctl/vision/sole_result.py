@@ -25,6 +25,9 @@ class GluePath:
     # surface patch before smoothing along the path, and the patches' own normals smoothed along it.
     raw_z: np.ndarray | None = None
     surface_normals: np.ndarray | None = None
+    # Per point the expected error (sd, mm) of its height: the noise and bias of the fit along the path that gave
+    # it (cellctl.vision.surface.path_heights), for the glue-precision check.
+    height_sd: np.ndarray | None = None
 
     @property
     def length_mm(self) -> float:

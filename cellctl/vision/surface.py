@@ -217,36 +217,38 @@ def path_noise(z: np.ndarray, lag: int = PATH_NOISE_LAG, window: int = PATH_NOIS
     return np.where(count > 0, np.sqrt(total / np.maximum(count, 1)), np.nan)
 
 
-def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> np.ndarray:
+def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Heights at the samples (xy K x 2, heights z K, NaN: unknown) of a closed path, each from the local fit of
-    smallest expected error (see PATH_SMOOTHING_STEPS_MM): `variance` (K, mm^2) is each sample's noise variance
-    counted with its correlation to its neighbours (glue_path.sample_variance), so that a fit's variance is
-    sum(row^2 x variance) (local_fit.slope_gradients).
+    smallest expected error (see PATH_SMOOTHING_STEPS_MM), and that expected error (K, mm, an sd: the fit's noise
+    and its estimated bias): `variance` (K, mm^2) is each sample's noise variance counted with its correlation to
+    its neighbours (glue_path.sample_variance), so that a fit's variance is sum(row^2 x variance)
+    (local_fit.slope_gradients).
 
     The reference for the bias is the plane plus the curve along the path at the widest width: no bias from the
     top's curve along the path and the least noise of such fits. Where the path turns more than
     local_fit.FOLD_TURN_DEG within that fit's reach (round a pointed end) the distance along one tangent means
     nothing: there only planes compete and the narrowest is the reference."""
-    result = np.full(len(z), np.nan)
+    result, expected = np.full(len(z), np.nan), np.full(len(z), np.nan)
     finite = np.isfinite(z)
     if not finite.any():
-        return result
+        return result, expected
     known = known_variance(variance)
     tangent = np.roll(xy, -1, axis=0) - np.roll(xy, 1, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     samples, noise = z[finite], known[finite]
     straight = unfolded(tangent, PATH_SMOOTHING_STEPS_MM[-1], _median_spacing(xy))
     for part in query_chunks(len(z)):  # a few queries at a time: the same values (local_fit.QUERY_CHUNK)
-        result[part] = _least_error_heights(
+        result[part], expected[part] = _least_error_heights(
             _RowGeometry(xy[part], xy[finite], tangent[part]), samples, noise, straight[part]
         )
-    return result
+    return result, np.sqrt(expected)
 
 
 def _least_error_heights(
     geometry: _RowGeometry, samples: np.ndarray, noise: np.ndarray, straight: np.ndarray
-) -> np.ndarray:
-    """path_heights at the queries of `geometry` (whose fits along the path are unfolded where `straight`)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """path_heights at the queries of `geometry` (whose fits along the path are unfolded where `straight`), and
+    their expected squared errors."""
     # The planes narrow to wide, then the curved fit at the widest width: the reference where the path is straight.
     # A narrower curved fit cannot win there but by a rounding: its expected error is at least its variance, which
     # exceeds the reference's own (the fit of the same shape over more samples). Over the 135 valid results of the
@@ -265,7 +267,8 @@ def _least_error_heights(
         error[i] = np.maximum((estimates[i] - reference_estimate) ** 2 - difference @ noise, 0.0) + variances[i]
     error[planes:, ~straight] = np.inf
     best = np.argmin(error, axis=0)
-    return estimates[best, np.arange(len(straight))]
+    pick = np.arange(len(straight))
+    return estimates[best, pick], error[best, pick]
 
 
 def height_rows(at: np.ndarray, xy: np.ndarray, sigma_mm: float, tangent: np.ndarray | None = None) -> np.ndarray:

@@ -158,6 +158,18 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         ],
         "spacing in 0.1..50 mm",
     ),
+    "measure: glue height tolerance 0": lambda d, _: Case(
+        [
+            "measure",
+            "--calib",
+            str(d / "calib.yaml"),
+            "--glue-height-tolerance",
+            "0",
+            str(d / "grey.png"),
+            str(d / "grey.png"),
+        ],
+        "glue height tolerance must be in 0.1..10 mm",
+    ),
     "plc-sim: missing serial port": lambda d, _: Case(
         ["plc-sim", "--serial", "/dev/ttyNOPE9", "--cycles", "1"], "cannot connect to the controller", exit_code=1
     ),

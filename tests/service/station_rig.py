@@ -16,7 +16,7 @@ from cellctl.service.daemon import Daemon
 from cellctl.service.events import CellEvent, CycleDone
 from cellctl.service.station import Station
 from firmware_io.plc_sim import CycleReading, PlcSimulator
-from tests.sim_rig import write_half_size_rig
+from tests.sim_rig import HALF_RIG_MEASURE, write_half_size_rig
 
 TOKEN = "test-token-0123"
 
@@ -30,6 +30,7 @@ def write_station_config(directory: Path, *, every_nth_good: int = 0) -> CellCon
         f'[journal]\nstate_dir = "{directory / "state"}"\nkeep_artifacts = 3\n'
         f'[station]\nport = 0\ntoken = "{TOKEN}"\nboard = "9x6"\n'
         f"[image_log]\nevery_nth_good = {every_nth_good}\nkeep_cycles = 20\n"
+        f"{HALF_RIG_MEASURE}"
     )
     return CellConfig.load(path)
 

@@ -82,6 +82,7 @@ def test_rtu_endpoint(tmp_path: Path) -> None:
         ("[plc]\nheartbeat_period_s = 0.6\n", r"heartbeat_period_s: 0.6 is impossible"),
         ("[measure]\ndepth_range_mm = [650, 450]\n", r"depth_range_mm: .* need 0 < near < far"),
         ("[measure]\nglue_spacing_mm = 0\n", r"glue_spacing_mm: 0 is impossible"),
+        ("[measure]\nglue_height_tolerance_mm = 0\n", r"glue_height_tolerance_mm: 0 is impossible: must be in 0.1..10"),
     ],
 )
 def test_mistakes_are_refused_naming_the_key(tmp_path: Path, extra: str, message: str) -> None:

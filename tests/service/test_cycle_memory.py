@@ -13,14 +13,18 @@ from cellctl.cameras.base import StereoFrame
 from cellctl.service.cycle import Measured, MeasureSettings, measure_frame
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.reconstruction import SoleReconstructor
-from tests.sim_rig import half_size_rig
+from tests.sim_rig import HALF_RIG_GLUE_TOLERANCE_MM, half_size_rig
 
 
 def test_a_measured_cycle_keeps_its_sole_but_no_image_sized_raster() -> None:
     calib = half_size_rig()
     pair = SoleScene.random(seed=1, calib=calib).render()
     reconstructor = SoleReconstructor(calib)
-    result = measure_frame(StereoFrame(pair.left, pair.right, 0.0, 0.0), reconstructor, MeasureSettings(2.0, 2.0))
+    result = measure_frame(
+        StereoFrame(pair.left, pair.right, 0.0, 0.0),
+        reconstructor,
+        MeasureSettings(2.0, 2.0, HALF_RIG_GLUE_TOLERANCE_MM),
+    )
     assert isinstance(result, Measured)
     kept = result.reconstruction
     assert len(kept.sole_points) == len(kept.sole_colors) == len(kept.sole_pixels) > 1000

@@ -31,7 +31,7 @@ from cellctl.vision.reconstruction import ReconstructionRefused, ReconstructionR
 from firmware_io.endpoints import TcpEndpoint
 from firmware_io.plc_sim import ModbusRequestError, PlcSimulator, TriggerRefused
 from firmware_io.registers import ErrorCode, Register, StatusBit
-from tests.sim_rig import write_half_size_rig
+from tests.sim_rig import HALF_RIG_MEASURE, write_half_size_rig
 
 pytestmark = pytest.mark.slow  # real service cycles on rendered scenes (see the module docstring)
 
@@ -46,12 +46,13 @@ def write_config(
     directory: Path, seeds: list[int], state_dir: Path, calib: Path | None = None, cycle_timeout_s: float = 60.0
 ) -> CellConfig:
     # cycle_timeout_s: generous by default, as a cycle on the shared loaded test machine may take several s.
+    measure = HALF_RIG_MEASURE if calib is None else ""
     calib = write_half_size_rig(directory) if calib is None else calib
     path = directory / "cell.toml"
     path.write_text(
         f'[cameras]\nbackend = "simulated"\n[cameras.simulated]\nseeds = {seeds}\n'
         f'[calibration]\npath = "{calib}"\n[plc]\nport = 0\ncycle_timeout_s = {cycle_timeout_s}\n'
-        f'[journal]\nstate_dir = "{state_dir}"\nkeep_artifacts = 3\n'
+        f'[journal]\nstate_dir = "{state_dir}"\nkeep_artifacts = 3\n{measure}'
     )
     return CellConfig.load(path)
 

@@ -78,6 +78,8 @@ def test_logged_cycles_replay_through_the_replay_backend_and_measure(cell: Stati
         calib,
         str(entry.path("left")),
         str(entry.path("right")),
+        "--glue-height-tolerance",
+        str(cell.daemon.config.measure.glue_height_tolerance_mm),  # the cell's own
     ]
     done = subprocess.run([*command, "--json"], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

@@ -8,7 +8,7 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision import checks
-from cellctl.vision.checks import check_glue_path, check_outline_depth
+from cellctl.vision.checks import GLUE_TYPICAL_SD_SHARE, check_glue_path, check_glue_precision, check_outline_depth
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.glue_path import without_single_outliers
 
@@ -52,6 +52,23 @@ def test_a_height_jump_and_a_path_off_its_samples_are_refused() -> None:
     points, normals = _glue(smooth)
     problem = check_glue_path(points, normals, raw, normals, (15.0, 25.0), 2.0)
     assert problem is not None and "from the surface measured there" in problem.reason
+
+
+def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
+    """The median expected error along the path decides: a few coarse points (a pointed end's narrow fits) pass,
+    a path coarse over most of its length does not, with the reason and the remedy."""
+    sd = np.full(300, 0.3)
+    sd[:40] = 2.0
+    assert check_glue_precision(sd) is None
+    sd[:] = GLUE_TYPICAL_SD_SHARE * 1.0 + 0.05
+    sd[:100] = 0.2
+    problem = check_glue_precision(sd, 1.0)
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert "expected error is 0.50 mm" in problem.reason and "1 mm tolerance" in problem.reason
+    assert "exposure" in problem.reason
+    assert check_glue_precision(sd, 2.0) is None  # a cell whose dispenser allows 2 mm takes it
+    unknown = check_glue_precision(np.full(10, np.nan))
+    assert unknown is not None and unknown.kind is FailureKind.SURFACE_NOT_MEASURED
 
 
 def test_a_glue_normal_against_the_surface_is_refused() -> None:

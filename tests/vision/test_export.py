@@ -83,7 +83,7 @@ def test_bad_input_is_refused(tmp_path: Path) -> None:
 def test_measure_export_writes_the_three_files_of_one_pair(tmp_path: Path) -> None:
     from cellctl.cli import main
     from cellctl.sim.scene import SoleScene
-    from tests.sim_rig import half_size_rig, write_half_size_rig
+    from tests.sim_rig import HALF_RIG_GLUE_TOLERANCE_MM, half_size_rig, write_half_size_rig
 
     scene = SoleScene.random(1, "white", half_size_rig())
     scene.write(tmp_path, scene.render())
@@ -91,6 +91,7 @@ def test_measure_export_writes_the_three_files_of_one_pair(tmp_path: Path) -> No
     out = tmp_path / "export"
     out.mkdir()
     args = ["measure", "--calib", str(calib), str(tmp_path / "left.png"), str(tmp_path / "right.png")]
+    args += ["--glue-height-tolerance", str(HALF_RIG_GLUE_TOLERANCE_MM)]
     assert main([*args, "--export", str(out)]) == 0
     table = np.loadtxt(out / "glue-path.csv", delimiter=",", skiprows=1)
     assert len(table) > 100 and np.allclose(np.linalg.norm(table[:, 4:], axis=1), 1.0, atol=1e-5)

@@ -33,7 +33,27 @@ def correlated_noise(n: int, sd: float, seed: int, length: int = 1) -> np.ndarra
 
 def heights(xy: np.ndarray, z: np.ndarray) -> np.ndarray:
     """path_heights with the noise model glue_path gives it."""
-    return path_heights(xy, z, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(xy, z, SPACING))
+    return path_heights(xy, z, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(xy, z, SPACING))[0]
+
+
+def test_the_expected_error_follows_the_noise() -> None:
+    """The heights' expected error (the chosen fit's noise and bias, as an sd) grows with the patches' noise, and
+    the heights' actual errors are of its size: the glue-precision check reads it (checks.check_glue_precision)."""
+    xy = ellipse_path()
+    typical = []
+    for sd in (0.15, 0.3, 0.6):
+        errors, expected = [], []
+        for seed in range(4):
+            z = top(xy) + correlated_noise(len(xy), sd, seed, 2)
+            result, error = path_heights(xy, z, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(xy, z, SPACING))
+            assert np.all(np.isfinite(error)) and np.all(error > 0)
+            errors.append(np.sqrt(np.mean((result - top(xy)) ** 2)))
+            expected.append(np.median(error))
+        typical.append(np.median(expected))
+        # the model's noise is taken at its tail (GLUE_SLOPE_NOISE_RATIO): never below the actual error
+        assert 1.0 < np.median(expected) / np.median(errors) < 3.0
+    assert typical[0] < typical[1] < typical[2]
+    np.testing.assert_allclose(typical[2] / typical[0], 4.0, rtol=0.35)
 
 
 def test_the_plane_rows_are_local_planes() -> None:
