@@ -207,7 +207,7 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
         "Place the sole inside the marked area and re-trigger.",
     ),
     ErrorCode.TOO_FEW_POINTS: (
-        "Too few valid 3D points were reconstructed on the sole.",
+        "Too few valid 3D points were reconstructed on the sole, or ones too imprecise for the glue heights' tolerance.",
         "Check lighting and lens cleanliness; very glossy or dark soles may need more light.",
     ),
     ErrorCode.MEASUREMENT_INVALID: (
