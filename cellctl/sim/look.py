@@ -12,7 +12,8 @@ gives the same scene. Variations that touch different fields combine: `look_for(
 the matrix's entries are meant to be measurable, so most list none: a refusal of such a scene is a missed
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
-"faint-texture" is kept out so that the matrix sets keep their soles, and is judged like any entry.
+"off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
+"wide-rig" and "narrow-rig" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -29,7 +30,9 @@ HEIGHT_CLASSES = ("normal", "flat", "tall")
 COLOUR_SCHEMES = ("plain", "rim", "logo", "patches")
 TABLE_LOOKS = ("dark", "grey", "patterned")
 NOISE_LEVELS = ("normal", "heavy")
-RIGS = ("default", "distorted")
+RIGS = ("default", "distorted", "wide", "narrow")  # cellctl.sim.rig.rig_for
+HEADINGS = ("along", "any")
+PLACEMENTS = ("in-view", "off-image")
 DEFAULT_RIGHT_GAIN = 0.97  # the two cameras never expose identically
 
 
@@ -52,6 +55,8 @@ class SceneLook:
     rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
     camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
     texture_contrast: float = 1.0  # the sole's texture contrast relative to its material's (1: as SOLE_MATERIALS)
+    heading: str = "along"  # HEADINGS: along = heel-toe axis within 35 degrees of the image rows, any = any heading
+    placement: str = "in-view"  # PLACEMENTS: off-image = one end runs up to OFF_IMAGE_PX beyond an image's edge
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -62,6 +67,8 @@ class SceneLook:
             ("table", TABLE_LOOKS),
             ("noise", NOISE_LEVELS),
             ("rig", RIGS),
+            ("heading", HEADINGS),
+            ("placement", PLACEMENTS),
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
@@ -167,6 +174,32 @@ VARIATIONS: dict[str, Variation] = {
             ("texture_contrast",),
             _draw("texture_contrast", 0.50, 0.65),
             _SURFACE_LOST,
+            in_matrix=False,
+        ),
+        # Outside the matrix for the same reason. The matrix's soles lie with their heel-toe axis along the image
+        # rows (the epipolar lines: their long sides are the hardest edges for the matcher); another cell may feed
+        # them across, and a judge may draw any heading.
+        Variation(
+            "any-heading",
+            "the sole at any heading on the table, across the image rows too",
+            ("heading",),
+            _set(heading="any"),
+            in_matrix=False,
+        ),
+        # Other rigs than the simulated one: a longer baseline (finer depth, larger occlusions at the walls) and a
+        # shorter one (depth noise x1.5: glue heights may no longer hold 1 mm, and refusing for that is right).
+        Variation(
+            "wide-rig", "a rig with a 100 mm baseline (60 mm by default)", ("rig",), _set(rig="wide"), in_matrix=False
+        ),
+        Variation(
+            "narrow-rig", "a rig with a 40 mm baseline", ("rig",), _set(rig="narrow"), _SURFACE_LOST, in_matrix=False
+        ),
+        Variation(
+            "off-image",
+            "the sole runs off the image at one end: unmeasurable by design",
+            ("placement",),
+            _set(placement="off-image"),
+            frozenset({FailureKind.SOLE_AT_BORDER}),
             in_matrix=False,
         ),
     )

@@ -15,11 +15,14 @@ from cellctl.vision.calibration import Calibration
 
 IMAGE_SIZE: tuple[int, int] = (1280, 1024)  # (width, height) px
 BASELINE_MM: float = 60.0
+WIDE_BASELINE_MM: float = 100.0  # the `wide` rig (SceneLook.rig): the same cameras further apart
+NARROW_BASELINE_MM: float = 40.0  # the `narrow` rig: closer together
 WORKING_DISTANCE_MM: float = 550.0  # camera to table
 
 
-def default_rig() -> Calibration:
-    """The true calibration of the simulated rig (what a perfect calibration would find)."""
+def default_rig(baseline_mm: float = BASELINE_MM) -> Calibration:
+    """The true calibration of the simulated rig (what a perfect calibration would find), its cameras
+    `baseline_mm` apart."""
     K1 = np.array([[1402.0, 0.0, 645.0], [0.0, 1399.0, 508.0], [0.0, 0.0, 1.0]])
     K2 = np.array([[1396.0, 0.0, 633.0], [0.0, 1395.0, 517.0], [0.0, 0.0, 1.0]])
     # k1, k2, p1, p2, k3: mild barrel distortion of a typical 8 mm machine-vision lens.
@@ -27,8 +30,8 @@ def default_rig() -> Calibration:
     D2 = np.array([[-0.080, 0.052, -0.0002, 0.0005, 0.0]])
     # The right camera is turned by under a degree about each axis w.r.t. the left one...
     R = cv2.Rodrigues(np.array([0.004, -0.012, 0.003]))[0]
-    # ...and sits BASELINE_MM to its right; T is the left-to-right transform's translation (x_r = R x_l + T).
-    right_centre_in_left = np.array([BASELINE_MM, -0.4, 0.6]) * BASELINE_MM / np.linalg.norm([BASELINE_MM, -0.4, 0.6])
+    # ...and sits baseline_mm to its right; T is the left-to-right transform's translation (x_r = R x_l + T).
+    right_centre_in_left = np.array([BASELINE_MM, -0.4, 0.6]) * baseline_mm / np.linalg.norm([BASELINE_MM, -0.4, 0.6])
     T = -R @ right_centre_in_left.reshape(3, 1)
     return Calibration.from_extrinsics(IMAGE_SIZE, K1, D1, K2, D2, R, T)
 
@@ -50,8 +53,13 @@ def distorted_rig() -> Calibration:
 
 
 def rig_for(name: str) -> Calibration:
-    """The simulated rig a SceneLook names ("default" or "distorted")."""
-    rigs = {"default": default_rig, "distorted": distorted_rig}
+    """The simulated rig a SceneLook names (cellctl.sim.look.RIGS)."""
+    rigs = {
+        "default": default_rig,
+        "distorted": distorted_rig,
+        "wide": lambda: default_rig(WIDE_BASELINE_MM),
+        "narrow": lambda: default_rig(NARROW_BASELINE_MM),
+    }
     if name not in rigs:
         raise ValueError(f"rig must be one of {', '.join(rigs)}, got {name!r}")
     return rigs[name]()

@@ -24,6 +24,7 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.reconstruction import StereoCloud
 
 VIEW_MARGIN_PX = 40  # a random sole keeps this far from the edges of both images
+OFF_IMAGE_PX = 100  # SceneLook placement "off-image": an end crosses an image's edge by at most this much (~40 mm)
 PLACEMENT_ATTEMPTS = 200
 # Soles whose toe and heel halves differ by less than this (fraction of the area; the measurement refuses
 # below 4 %) are drawn again: a scene should be measurable, and toe and heel tellable apart, by design.
@@ -64,11 +65,17 @@ class SoleScene:
             if upright.truth().half_area_difference >= MEASURABLE_HALF_AREA_DIFFERENCE:
                 break
         camera_pose = rig_pose(calib)
+        half_turn = 180.0 if look.heading == "any" else 35.0
+        off_image = look.placement == "off-image"
         for _ in range(PLACEMENT_ATTEMPTS):
-            yaw = rng.uniform(-35.0, 35.0) + (180.0 if rng.random() < 0.5 else 0.0)
-            pose = SolePose(rng.uniform(-60.0, 60.0), rng.uniform(-50.0, 50.0), yaw, bool(rng.random() < 0.5))
+            yaw = rng.uniform(-half_turn, half_turn) + (180.0 if rng.random() < 0.5 else 0.0)
+            # Off the image: the sole's centre drawn far enough out that an end may cross an image's edge.
+            x = rng.uniform(-60.0, 60.0) if not off_image else rng.choice([-1.0, 1.0]) * rng.uniform(60.0, 200.0)
+            pose = SolePose(x, rng.uniform(-50.0, 50.0), yaw, bool(rng.random() < 0.5))
             scene = cls(seed, color, calib, camera_pose, SoleModel(shape, pose), look)
-            if scene.in_view(VIEW_MARGIN_PX):
+            if off_image and not scene.in_view(0.0) and scene.in_view(-OFF_IMAGE_PX):
+                return scene
+            if not off_image and scene.in_view(VIEW_MARGIN_PX):
                 return scene
         raise ValueError(
             f"no pose of sole {seed} ({shape.length:.0f} mm) fits in both images of this rig: "

@@ -251,6 +251,42 @@ def test_faint_texture_is_the_same_pattern_fainter() -> None:
     assert plain is SOLE_MATERIALS["black"]  # the default look renders exactly as before the variation existed
 
 
+def test_any_heading_turns_the_sole_across_the_image_rows() -> None:
+    """The matrix's soles lie along the image rows (within 35 degrees, either way round); any-heading draws the
+    whole circle, so some lie across them. Out of the matrix, judged like any entry."""
+
+    def off_rows(look: SceneLook) -> np.ndarray:
+        yaws = [SoleScene.random(seed, "white", half_size_rig(), look).sole.pose.yaw_deg for seed in range(24)]  # type: ignore[union-attr]
+        return np.abs((np.asarray(yaws) + 90.0) % 180.0 - 90.0)  # 0: along the rows, 90: across
+
+    assert off_rows(SceneLook()).max() <= 35.0
+    across = off_rows(look_for(("any-heading",), 0))
+    assert across.max() > 60.0 and "any-heading" not in MATRIX_ENTRIES and not fair_refusals(("any-heading",))
+
+
+def test_other_rigs_keep_the_cameras_and_change_the_baseline() -> None:
+    from cellctl.sim.rig import BASELINE_MM, NARROW_BASELINE_MM, WIDE_BASELINE_MM, default_rig, rig_for
+
+    baseline = {name: float(np.linalg.norm(rig_for(name).T)) for name in ("default", "wide", "narrow")}
+    assert baseline == pytest.approx({"default": BASELINE_MM, "wide": WIDE_BASELINE_MM, "narrow": NARROW_BASELINE_MM})
+    np.testing.assert_array_equal(rig_for("wide").K1, default_rig().K1)
+    assert look_for(("wide-rig",), 0).rig == "wide" and look_for(("narrow-rig",), 0).rig == "narrow"
+    assert fair_refusals(("narrow-rig",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
+
+
+def test_off_image_sole_is_cut_by_an_image_edge_and_refused_for_it() -> None:
+    """An end of the sole crosses an image's edge (by at most OFF_IMAGE_PX): no valid length exists, and the only
+    right answer is the border refusal, which the measurement gives."""
+    from cellctl.sim.scene import OFF_IMAGE_PX
+
+    look = look_for(("off-image",), 5)
+    scene = SoleScene.random(5, "white", half_size_rig(), look)
+    assert not scene.in_view(0.0) and scene.in_view(-OFF_IMAGE_PX)
+    assert fair_refusals(("off-image",)) == {FailureKind.SOLE_AT_BORDER}
+    (result,) = bench_matrix([MatrixSole(5, "white", ("off-image",))], half_size_rig())
+    assert result.verdict == "fair refusal" and result.row.failure == FailureKind.SOLE_AT_BORDER.value
+
+
 def test_patterned_table_has_strong_contrast() -> None:
     rng = np.random.default_rng(0)
     from cellctl.sim.appearance import table_texture
