@@ -187,3 +187,19 @@ def test_a_sole_without_measured_depth_is_too_few_points_not_no_sole(taught_scen
     # The same table without the sole is "no sole in view".
     empty = taught_scene[1].render_empty(shot=3)
     assert reconstructor.reconstruct(empty.left, empty.right).failure is FailureKind.NO_SOLE
+
+
+def test_flatness_reads_the_tables_shape_not_one_points_noise() -> None:
+    """A flat table measured with 1 mm of depth noise per point (a 40 mm-baseline rig) is flat; a 3 mm step
+    under a fifth of the view is not, however little noise the points have."""
+    from cellctl.vision.teach import MIN_FLAT_FRACTION, flat_fraction
+
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:480:2, 0:640:2]
+    pixels = np.column_stack([x.ravel(), y.ravel()]).astype(np.float64)
+    noisy_flat = rng.normal(0.0, 1.0, len(pixels))
+    assert np.mean(np.abs(noisy_flat) < 1.5) < MIN_FLAT_FRACTION  # what a point-by-point band refused
+    assert flat_fraction(pixels, noisy_flat, (640, 480)) >= MIN_FLAT_FRACTION
+    stepped = rng.normal(0.0, 0.2, len(pixels)) + np.where(pixels[:, 0] < 128, 3.0, 0.0)
+    assert flat_fraction(pixels, stepped, (640, 480)) < MIN_FLAT_FRACTION
+    assert flat_fraction(pixels[:10], noisy_flat[:10], (640, 480)) == 0.0  # too few points for any block
