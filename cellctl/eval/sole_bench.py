@@ -70,10 +70,24 @@ def bench_soles(
     for seed, color in soles:
         scene = SoleScene.random(seed, color, calib)
         chosen = taught_reconstructor(calib, scene, cache) if taught else reconstructor
-        rows.append(measure_scene(chosen, scene, cache=cache))
+        rows.append(measure_scene(chosen, scene, "plain" + fallback_note(taught, chosen), cache))
         if progress:
             progress(_row_text(rows[-1]))
     return rows
+
+
+def fallback_note(taught: bool, reconstructor: SoleReconstructor) -> str:
+    """ "+untaught" for a row asked to be taught whose table could not be (`taught_reconstructor`): the result is
+    the untaught cell's, and a reader of the table must see that."""
+    return "+untaught" if taught and reconstructor.taught is None else ""
+
+
+def untaught_note(rows: list[SoleBenchRow]) -> str:
+    """A sentence for a report whose rows include soles measured untaught although asked taught (`fallback_note`)."""
+    fallen = [str(r.seed) for r in rows if r.variations.endswith("+untaught")]
+    if not fallen:
+        return ""
+    return f" {len(fallen)} of them measured untaught, their empty table not taught: {', '.join(fallen)}."
 
 
 TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellctl teach` takes several pairs
@@ -90,7 +104,7 @@ def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCach
     """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise).
 
     If the table cannot be taught (e.g. too noisy to match), the reconstructor is an untaught one, as the
-    service runs without a taught table.
+    service runs without a taught table; the row's variations then say "+untaught" (`fallback_note`).
     """
     left, right = empty_table_pair(scene, cache)
     try:
@@ -234,7 +248,8 @@ def to_markdown(rows: list[SoleBenchRow], command: str) -> str:
     measured = sum(r.valid for r in rows)
     lines = [
         f"{measured} of {len(rows)} simulated soles measured "
-        f"({sum(r.color == 'white' for r in rows)} white, {sum(r.color == 'black' for r in rows)} black). Command: `{command}`",
+        f"({sum(r.color == 'white' for r in rows)} white, {sum(r.color == 'black' for r in rows)} black). Command: `{command}`"
+        + untaught_note(rows),
         "",
         "| Error (measured - true) | mean abs | max abs | mean (signed) |",
         "| :-- | --: | --: | --: |",

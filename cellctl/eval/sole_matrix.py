@@ -22,7 +22,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import CRASHED, SoleBenchRow, measure_scene, taught_reconstructor
+from cellctl.eval.sole_bench import (
+    CRASHED,
+    SoleBenchRow,
+    fallback_note,
+    measure_scene,
+    taught_reconstructor,
+    untaught_note,
+)
 from cellctl.sim.matrix import MatrixSole
 from cellctl.sim.render_cache import RenderCache
 from cellctl.sim.rig import rig_for
@@ -112,7 +119,8 @@ def bench_matrix(
         scene = SoleScene.random(sole.seed, sole.color, reconstructor.calib, look)
         if taught:
             reconstructor = taught_reconstructor(reconstructor.calib, scene, cache)
-        result = judge(sole, measure_scene(reconstructor, scene, sole.label, cache))
+        label = sole.label + fallback_note(taught, reconstructor)
+        result = judge(sole, measure_scene(reconstructor, scene, label, cache))
         rows.append(result)
         if progress:
             progress(_progress_text(result))
@@ -220,7 +228,7 @@ def matrix_markdown(results: list[MatrixRow], command: str) -> str:
         f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason "
         f"({acc.missed_outline_off} of them as outline_inconsistent with the outline truly more than "
         f"{OUTLINE_TRULY_OFF_MM:.1f} mm off the sole's edge: the segmentation missed, the check's claim is true), "
-        f"{acc.crashed} crashed. "
+        f"{acc.crashed} crashed.{untaught_note([r.row for r in results])} "
         f"Acceptance {'met' if acc.passed else 'NOT met'}.",
         "",
         "A row per variation over every sole that has it (soles mix variations, so a sole counts in several "

@@ -380,6 +380,18 @@ def test_matrix_bench_runs_on_a_tiny_set() -> None:
     )
 
 
+def test_a_sole_asked_taught_but_measured_untaught_says_so(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where the empty table cannot be taught the bench measures as an untaught cell would; its row and the report
+    must say so, or a reader takes the untaught cell's figures for the taught one's."""
+    import cellctl.eval.sole_matrix as sole_matrix
+    from cellctl.vision.reconstruction import SoleReconstructor
+
+    monkeypatch.setattr(sole_matrix, "taught_reconstructor", lambda calib, scene, cache=None: SoleReconstructor(calib))
+    results = bench_matrix([MatrixSole(21, "white", ("plain",))], half_size_rig(), taught=True)
+    assert results[0].row.variations == "plain+untaught"
+    assert "1 of them measured untaught, their empty table not taught: 21." in sole_matrix.matrix_markdown(results, "x")
+
+
 def test_bench_sole_matrix_command_lists_and_rejects(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench-sole", "--matrix", "--variations", "list"]) == 0
     out = capsys.readouterr().out
