@@ -433,12 +433,16 @@ def depth_silent(ring: np.ndarray, outward: np.ndarray, table_points: Footprint)
 def blob_length_mm(reconstruction: Reconstruction) -> float:
     """The longest stretch of depth beyond the edge an inward move takes for a local mismatch: BLOB_CENSUS_WINDOWS
     census windows (the sole matcher's width in pixels) at the left camera's height above the table."""
-    calib = reconstruction.calibration
-    assert calib is not None
     window_px = SOLE_MATCHER_PARAMS["census_window"]
     assert isinstance(window_px, tuple)
-    mm_per_px = abs(float(reconstruction.camera_to_table[2, 3])) / calib.focal_px
-    return BLOB_CENSUS_WINDOWS * float(window_px[0]) * mm_per_px
+    return BLOB_CENSUS_WINDOWS * float(window_px[0]) * mm_per_pixel(reconstruction)
+
+
+def mm_per_pixel(reconstruction: Reconstruction) -> float:
+    """Millimetres on the table per rectified pixel, at the left camera's height above the table."""
+    calib = reconstruction.calibration
+    assert calib is not None
+    return abs(float(reconstruction.camera_to_table[2, 3])) / calib.focal_px
 
 
 def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:

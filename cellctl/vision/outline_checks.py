@@ -14,6 +14,7 @@ from cellctl.stereo.pointgrid import PointGrid
 from cellctl.vision import rounded_edge
 from cellctl.vision.checks import (
     OUTLINE_OUTSIDE_MM,
+    UNTAUGHT_OUTSIDE_PX,
     CheckFailure,
     check_outline_depth,
     check_outline_right,
@@ -30,6 +31,7 @@ from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
     blob_length_mm,
     edge_heights,
+    mm_per_pixel,
     projections,
     smeared_stretches,
     stereo_offsets,
@@ -48,15 +50,28 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
     outward = outward_normals(ring)
     heights = height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
-        hidden = None
-        if reconstruction.camera_to_table is not None:
-            left_centre = reconstruction.camera_to_table[:3, 3]
-            hidden = hidden_from(ring + OUTLINE_OUTSIDE_MM * outward, left_centre, heights)
-        problem = check_outline_depth(
-            ring, outward, reconstruction.raised, reconstruction.measured_cells, reconstruction.footprint, hidden
-        )
-        if problem is not None:
-            return problem
+        # Untaught, the colour test's edge is also held to the nearer distance (checks.UNTAUGHT_OUTSIDE_PX).
+        distances = [OUTLINE_OUTSIDE_MM]
+        stereo = reconstruction.calibration is not None and reconstruction.camera_to_table is not None
+        if reconstruction.taught is None and stereo:  # (a true depth map has no pixels, and no fattening)
+            distances.append(UNTAUGHT_OUTSIDE_PX * mm_per_pixel(reconstruction))
+        for outside_mm in distances:
+            hidden = None
+            if reconstruction.camera_to_table is not None:
+                left_centre = reconstruction.camera_to_table[:3, 3]
+                hidden = hidden_from(ring + outside_mm * outward, left_centre, heights)
+            problem = check_outline_depth(
+                ring,
+                outward,
+                reconstruction.raised,
+                reconstruction.measured_cells,
+                reconstruction.footprint,
+                hidden,
+                outside_mm,
+                supplementary=outside_mm != OUTLINE_OUTSIDE_MM,
+            )
+            if problem is not None:
+                return problem
     problem = check_edge_profile(
         ring, outward, heights, lambda: rounded_edge.detail(reconstruction, ring, outward, heights)
     )

@@ -108,6 +108,21 @@ def test_outline_on_the_depth_step_passes_one_inside_it_is_refused() -> None:
     assert "still raised" in problem.reason
 
 
+def test_untaught_the_outline_is_also_held_to_the_nearer_distance() -> None:
+    """A 5 mm band the colour test read as table (a dark rim, a wall leaning out) is raised beyond the outline all
+    round: inside the 7 mm fattening allowance, outside the untaught 3 mm one (8 px on the default rig)."""
+    raised, measured = _disc_footprint(60.0), _disc_footprint(75.0)
+    short, short_out = _ring(55.0)
+    assert check_outline_depth(short, short_out, raised, measured) is None
+    problem = check_outline_depth(short, short_out, raised, measured, outside_mm=3.0, supplementary=True)
+    assert problem is not None and "still raised 3 mm outside" in problem.reason
+    edge, edge_out = _ring(58.0)  # the edge with 2 mm of fattening beyond it passes at both distances
+    assert check_outline_depth(edge, edge_out, raised, measured, outside_mm=3.0, supplementary=True) is None
+    occluded = _disc_footprint(59.0)  # no depth 3 mm out (a tall wall hides the table): no evidence either way
+    assert check_outline_depth(edge, edge_out, raised, occluded, outside_mm=3.0) is not None
+    assert check_outline_depth(edge, edge_out, raised, occluded, outside_mm=3.0, supplementary=True) is None
+
+
 def test_table_hidden_behind_a_tall_sole_does_not_count_against_its_outline() -> None:
     raised = _disc_footprint(60.0)
     outline, outward = _ring(57.0)
