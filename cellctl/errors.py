@@ -29,6 +29,7 @@ class FailureKind(enum.Enum):
     GLUE_PATH_INCONSISTENT = "glue_path_inconsistent"  #: glue path heights or normals disagree with the sole's surface
     CALIBRATION_MISMATCH = "calibration_mismatch"  #: the images do not match the calibration
     CALIBRATION_MISSING = "calibration_missing"  #: no usable calibration is loaded
+    TABLE_NOT_TAUGHT = "table_not_taught"  #: the cell requires a taught table and has no usable one
     CAMERA_MISSING = "camera_missing"  #: a camera is not connected or cannot be opened
     FRAME_TIMEOUT = "frame_timeout"  #: a camera delivered no frame in time
     CAMERAS_OUT_OF_SYNC = "cameras_out_of_sync"  #: the two frames were taken too far apart

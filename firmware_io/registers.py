@@ -147,6 +147,7 @@ class ErrorCode(enum.IntEnum):
     CAMERAS_OUT_OF_SYNC = 12
     CALIBRATION_MISSING = 20
     CALIBRATION_MISMATCH = 21
+    TABLE_NOT_TAUGHT = 22
     NO_SOLE = 30
     SOLE_AT_BORDER = 31
     TOO_FEW_POINTS = 32
@@ -197,6 +198,10 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ErrorCode.CALIBRATION_MISMATCH: (
         "The calibration does not match the cameras (image size or camera identity).",
         "Re-calibrate the rig, or restore the calibration made for these cameras.",
+    ),
+    ErrorCode.TABLE_NOT_TAUGHT: (
+        "The cell measures against a taught empty table and has none it can use.",
+        "Clear the fixture and teach the empty table (cellctl teach), then restart the service.",
     ),
     ErrorCode.NO_SOLE: (
         "No sole was found in view.",

@@ -13,7 +13,9 @@ from cellctl.vision.calibration import Calibration
 # (white soles 0.96-1.79 mm off): with the default its cycles are refused as measured too coarsely
 # (checks.check_glue_precision), so its cells and measurements allow 2 mm.
 HALF_RIG_GLUE_TOLERANCE_MM = 2.0
-HALF_RIG_MEASURE = f"[measure]\nglue_height_tolerance_mm = {HALF_RIG_GLUE_TOLERANCE_MM}\n"
+# The tests' cells measure plain simulated soles without a taught table (tests/vision/test_teach.py teaches).
+UNTAUGHT_MEASURE = "[measure]\nrequire_taught_table = false\n"
+HALF_RIG_MEASURE = f"[measure]\nglue_height_tolerance_mm = {HALF_RIG_GLUE_TOLERANCE_MM}\nrequire_taught_table = false\n"
 
 
 def half_size_rig() -> Calibration:

@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     context: dict[str, Any] = {}
     checks: list[tuple[str, Callable[[CellConfig, dict[str, Any]], str]]] = [
         ("calibration", _calibration),
+        ("taught table", _taught_table),
         ("state dir", _state_dir),
         ("plc", _plc),
         ("station", _station),
@@ -83,6 +84,23 @@ def _calibration(config: CellConfig, context: dict[str, Any]) -> str:
     rms = "RMS not recorded" if calib.rms is None else f"RMS {calib.rms:.3f} px"
     width, height = calib.image_size
     return f"{config.calibration.path}: {width}x{height}, {rms}, baseline {calib.baseline_mm:.1f} mm"
+
+
+def _taught_table(config: CellConfig, context: dict[str, Any]) -> str:
+    """The empty fixture taught beside the calibration: loaded, or what the cell does without it."""
+    from cellctl.vision.teach import TeachError, load_taught
+
+    if "calib" not in context:
+        raise CheckFailed("skipped: needs the calibration")
+    try:
+        taught = load_taught(config.calibration.path, context["calib"])
+    except TeachError as exc:
+        raise CheckFailed(f"{exc}") from None
+    if taught is not None:
+        return "loaded: the sole is found against the taught empty fixture"
+    if config.measure.require_taught_table:
+        raise CheckFailed("none, and [measure] require_taught_table refuses every cycle: teach it (cellctl teach)")
+    return "none: measuring with the colour test (plain one-colour soles on a plain table; cellctl teach for the rest)"
 
 
 def _state_dir(config: CellConfig, context: dict[str, Any]) -> str:

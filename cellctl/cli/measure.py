@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -92,6 +93,12 @@ def run(args: argparse.Namespace) -> int:
         taught = load_taught(args.calib, calib)
     except TeachError as exc:
         raise UserError(str(exc)) from None
+    if taught is None:  # a note, not an error: plain soles on a plain table measure right without one
+        print(
+            f"note: no taught table beside {args.calib}: the edge comes from the colour test, checked by depth only; "
+            "for soles with rims, pointed ends or on a textured fixture teach the empty table first (cellctl teach)",
+            file=sys.stderr,
+        )
     reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right)
     result = measure_sole(reconstruction, offset, spacing, tolerance)
     if args.ply:

@@ -51,6 +51,10 @@ class MeasureConfig:
     glue_offset_mm: float = GLUE_OFFSET_MM
     glue_spacing_mm: float = GLUE_SPACING_MM
     glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM
+    # Refuse every cycle without a usable taught table. Untaught, only the colour test finds the edge and only
+    # depth checks it: on the matrix sets 9-12 of 84 results were valid and wrong that way (docs/sole-benchmark.md,
+    # thirteenth round). A cell that measures only plain one-colour soles on a plain table may set it false.
+    require_taught_table: bool = True
 
 
 @dataclass(frozen=True)
@@ -247,6 +251,7 @@ def _measure(t: Table) -> MeasureConfig:
             low=GLUE_HEIGHT_TOLERANCE_RANGE_MM[0],
             high=GLUE_HEIGHT_TOLERANCE_RANGE_MM[1],
         ),
+        require_taught_table=t.get("require_taught_table", bool, MeasureConfig.require_taught_table),
     )
     t.finish()
     return config

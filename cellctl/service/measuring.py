@@ -42,13 +42,11 @@ class CellMeasurer:
         one_blas_thread()
         keep_freed_memory()  # the memory a cycle frees stays for the next: no page faults (same module)
         self.calib, self.calibration_problem = load_calibration(config)
-        self.reconstructor = (
-            None
-            if self.calib is None
-            else SoleReconstructor(
-                self.calib, config.measure.depth_range_mm, taught=load_taught_table(config, self.calib)
-            )
-        )
+        self.taught_problem = "no calibration"
+        self.reconstructor = None
+        if self.calib is not None:
+            taught, self.taught_problem = load_taught_table(config, self.calib)
+            self.reconstructor = SoleReconstructor(self.calib, config.measure.depth_range_mm, taught=taught)
         self._recipe_reconstructor: SoleReconstructor | None = None
         self.warmed_up = False
 
@@ -105,6 +103,12 @@ class CellMeasurer:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self.calibration_problem}")
         if problem := identity_problem(self.calib.cameras, frame.info):
             raise CycleFailed.of(FailureKind.CALIBRATION_MISMATCH, problem)
+        if self.config.measure.require_taught_table and self.taught_problem:
+            raise CycleFailed.of(
+                FailureKind.TABLE_NOT_TAUGHT,
+                f"this cell measures against a taught table: {self.taught_problem}; clear the fixture and teach "
+                "the empty table (cellctl teach), then restart the service",
+            )
         reconstructor = self.reconstructor
         if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
             reconstructor = self._reconstructor_for(recipe.depth_range_mm)
@@ -144,12 +148,18 @@ def load_calibration(config: CellConfig) -> tuple[Calibration | None, str | None
         return None, str(exc)
 
 
-def load_taught_table(config: CellConfig, calib: Calibration) -> TaughtTable | None:
-    """The table taught beside the calibration (`cellctl teach`), None if none or unusable (logged)."""
+def load_taught_table(config: CellConfig, calib: Calibration) -> tuple[TaughtTable | None, str]:
+    """The table taught beside the calibration (`cellctl teach`), or None and why not ("" when loaded; logged)."""
     try:
         taught = load_taught(config.calibration.path, calib)
     except TeachError as exc:
         log.error("taught table not used: %s", exc)
-        return None
-    log.info("taught table %s", "loaded" if taught is not None else "absent: measuring without (cellctl teach)")
-    return taught
+        return None, f"the taught table is not usable ({exc})"
+    if taught is None:
+        if config.measure.require_taught_table:
+            log.warning("taught table absent: every cycle refused until the empty table is taught (cellctl teach)")
+        else:
+            log.info("taught table absent: measuring without (cellctl teach)")
+        return None, "no table has been taught beside the calibration"
+    log.info("taught table loaded")
+    return taught, ""

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from cellctl.service.journal import CycleRecord, Journal
-from tests.sim_rig import half_size_rig
+from tests.sim_rig import UNTAUGHT_MEASURE, half_size_rig
 
 pytestmark = pytest.mark.slow  # one process per case (~2-10 s each on the loaded test machine)
 
@@ -89,7 +89,7 @@ def config(d: Path, name: str, plc: str, state: str = "state") -> str:
     path = d / f"{name}.toml"
     path.write_text(
         f'[cameras]\nbackend = "replay"\nreplay_dir = "replay"\n[calibration]\npath = "calib.yaml"\n'
-        f'[plc]\n{plc}\n[journal]\nstate_dir = "{state}"\n[station]\nenabled = false\n'
+        f'[plc]\n{plc}\n[journal]\nstate_dir = "{state}"\n[station]\nenabled = false\n{UNTAUGHT_MEASURE}'
     )
     return str(path)
 

@@ -13,10 +13,12 @@ import pytest
 from cellctl.calib.board import Checkerboard
 from cellctl.cli import main
 from cellctl.sim.checkerboard import CheckerboardSimulator, write_pairs
-from tests.sim_rig import half_size_rig, write_half_size_rig
+from tests.sim_rig import UNTAUGHT_MEASURE, half_size_rig, write_half_size_rig
 
 
-def sim_config(tmp_path: Path, extra: str = "", cameras: str = '[cameras]\nbackend = "simulated"\n') -> Path:
+def sim_config(
+    tmp_path: Path, extra: str = UNTAUGHT_MEASURE, cameras: str = '[cameras]\nbackend = "simulated"\n'
+) -> Path:
     calib = write_half_size_rig(tmp_path)
     path = tmp_path / "cell.toml"
     path.write_text(
@@ -40,7 +42,7 @@ def test_check_passes_on_a_working_cell_and_names_a_busy_port(
     assert main(["check", "--config", str(path)]) == 0
     lines = capsys.readouterr().out.splitlines()
     names = [line.split()[1] for line in lines]
-    assert names == ["config", "calibration", "state", "plc", "station", "cameras", "frames", "rectification"]
+    assert names == ["config", "calibration", "taught", "state", "plc", "station", "cameras", "frames", "rectification"]
     assert all(line.startswith("ok") for line in lines)
     plc_port = int(path.read_text().split("[plc]\nport = ")[1].split()[0])
     with socket.socket() as busy:
@@ -49,6 +51,19 @@ def test_check_passes_on_a_working_cell_and_names_a_busy_port(
         assert main(["check", "--config", str(path)]) == 1
     plc_line = next(line for line in capsys.readouterr().out.splitlines() if " plc " in line)
     assert plc_line.startswith("FAIL") and "already running" in plc_line
+
+
+def test_check_says_a_cell_that_requires_a_taught_table_has_none(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = sim_config(
+        tmp_path,
+        extra="[measure]\nrequire_taught_table = true\n",
+        cameras='[cameras]\nbackend = "v4l2"\nleft = "/dev/null-left"\nright = "/dev/null-right"\n',
+    )
+    assert main(["check", "--config", str(path)]) == 1
+    line = next(line for line in capsys.readouterr().out.splitlines() if " taught " in line)
+    assert line.startswith("FAIL") and "require_taught_table refuses every cycle" in line and "cellctl teach" in line
 
 
 def test_check_refuses_a_bad_config_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

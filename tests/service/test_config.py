@@ -33,6 +33,7 @@ def test_sim_config_loads_with_its_calibration_and_tcp_5020() -> None:
     assert config.cameras.backend == "simulated"
     assert config.calibration.path == DEPLOY / "sim-calib.yaml"
     assert config.plc.endpoint() == TcpEndpoint("127.0.0.1", 5020)
+    assert not config.measure.require_taught_table  # the demo's plain soles, measured without teaching
 
 
 def test_line_example_is_complete_apart_from_the_calibration_file(tmp_path: Path) -> None:
@@ -42,6 +43,7 @@ def test_line_example_is_complete_apart_from_the_calibration_file(tmp_path: Path
     config = CellConfig.load(write(tmp_path, text.replace("/etc/cellctl/calib.yaml", str(calib))))
     assert config.cameras.backend == "v4l2"
     assert config.cameras.size == (1280, 1024)
+    assert config.measure.require_taught_table
     with pytest.raises(
         ConfigError, match=r"\[calibration\] path: calibration file /etc/cellctl/calib.yaml does not exist"
     ):
@@ -53,6 +55,7 @@ def test_defaults_and_relative_paths(tmp_path: Path) -> None:
     assert config.journal.state_dir == tmp_path / "state"
     assert config.plc.word_order is WordOrder.HIGH_FIRST
     assert config.measure.depth_range_mm == (450.0, 650.0)
+    assert config.measure.require_taught_table  # safe by default: cycles refused until the table is taught
 
 
 def test_rtu_endpoint(tmp_path: Path) -> None:
@@ -83,6 +86,7 @@ def test_rtu_endpoint(tmp_path: Path) -> None:
         ("[measure]\ndepth_range_mm = [650, 450]\n", r"depth_range_mm: .* need 0 < near < far"),
         ("[measure]\nglue_spacing_mm = 0\n", r"glue_spacing_mm: 0 is impossible"),
         ("[measure]\nglue_height_tolerance_mm = 0\n", r"glue_height_tolerance_mm: 0 is impossible: must be in 0.1..10"),
+        ('[measure]\nrequire_taught_table = "yes"\n', r"require_taught_table"),
     ],
 )
 def test_mistakes_are_refused_naming_the_key(tmp_path: Path, extra: str, message: str) -> None:

@@ -9,6 +9,7 @@ doubles and heights drift by up to ~1.6 mm). It is the slow test here (~3 s per 
 
 from __future__ import annotations
 
+import dataclasses
 import socket
 import threading
 import time
@@ -31,7 +32,7 @@ from cellctl.vision.reconstruction import ReconstructionRefused, ReconstructionR
 from firmware_io.endpoints import TcpEndpoint
 from firmware_io.plc_sim import ModbusRequestError, PlcSimulator, TriggerRefused
 from firmware_io.registers import ErrorCode, Register, StatusBit
-from tests.sim_rig import HALF_RIG_MEASURE, write_half_size_rig
+from tests.sim_rig import HALF_RIG_MEASURE, UNTAUGHT_MEASURE, write_half_size_rig
 
 pytestmark = pytest.mark.slow  # real service cycles on rendered scenes (see the module docstring)
 
@@ -46,7 +47,7 @@ def write_config(
     directory: Path, seeds: list[int], state_dir: Path, calib: Path | None = None, cycle_timeout_s: float = 60.0
 ) -> CellConfig:
     # cycle_timeout_s: generous by default, as a cycle on the shared loaded test machine may take several s.
-    measure = HALF_RIG_MEASURE if calib is None else ""
+    measure = HALF_RIG_MEASURE if calib is None else UNTAUGHT_MEASURE
     calib = write_half_size_rig(directory) if calib is None else calib
     path = directory / "cell.toml"
     path.write_text(
@@ -272,6 +273,7 @@ EXPECTED_CODES = {
     FailureKind.GLUE_PATH_INCONSISTENT: ErrorCode.GLUE_PATH_INCONSISTENT,
     FailureKind.CALIBRATION_MISMATCH: ErrorCode.CALIBRATION_MISMATCH,
     FailureKind.CALIBRATION_MISSING: ErrorCode.CALIBRATION_MISSING,
+    FailureKind.TABLE_NOT_TAUGHT: ErrorCode.TABLE_NOT_TAUGHT,
     FailureKind.CAMERA_MISSING: ErrorCode.CAMERA_MISSING,
     FailureKind.FRAME_TIMEOUT: ErrorCode.FRAME_TIMEOUT,
     FailureKind.CAMERAS_OUT_OF_SYNC: ErrorCode.CAMERAS_OUT_OF_SYNC,
@@ -316,6 +318,22 @@ def test_each_failure_kind_reaches_the_plc_as_its_error_code(
     assert record is not None and record.error_code == EXPECTED_CODES[kind]
     expected_text = "calibration is for" if kind is FailureKind.CALIBRATION_MISMATCH else failing.reason
     assert expected_text in record.reason  # the words go to the journal with the code
+
+
+def test_a_cell_that_requires_a_taught_table_refuses_every_cycle_without_one(tmp_path: Path) -> None:
+    """[measure] require_taught_table: untaught, the colour test's edge is checked by depth alone, so such a cell
+    answers TABLE_NOT_TAUGHT with the remedy rather than measure."""
+    config = write_config(tmp_path, [1], tmp_path / "state")
+    config = dataclasses.replace(config, measure=dataclasses.replace(config.measure, require_taught_table=True))
+    service = Service(config)
+    try:
+        with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as plc:
+            reading = plc.run_cycle()
+        assert reading.error_code == ErrorCode.TABLE_NOT_TAUGHT
+        record = Journal.open(config.journal.state_dir, readonly=True).find(reading.cycle)
+        assert record is not None and "cellctl teach" in record.reason and "no table has been taught" in record.reason
+    finally:
+        service.stop()
 
 
 class StuckReconstructor:

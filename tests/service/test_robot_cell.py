@@ -36,6 +36,7 @@ from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.robot_frame import RigidTransform, load_robot_frame
 from firmware_io.plc_sim import CycleReading, PlcSimulator
 from firmware_io.registers import ErrorCode, FeatureBit, GlueFrame, StatusBit
+from tests.sim_rig import UNTAUGHT_MEASURE
 from tests.vision.test_robot_frame import rotation
 
 pytestmark = pytest.mark.slow  # real service cycles on rendered scenes
@@ -116,7 +117,7 @@ class Cell:
             f'[recipes]\ndir = "{recipes}"\n[robot]\npublish_frame = "robot"\n'
             f'[opcua]\nenabled = true\nendpoint = "opc.tcp://127.0.0.1:0/cellctl/"\ncell_name = "cell-3"\n'
             f"allow_anonymous = true\n"
-            f'[journal]\nstate_dir = "{directory / "state"}"\nkeep_artifacts = 3\n'
+            f'[journal]\nstate_dir = "{directory / "state"}"\nkeep_artifacts = 3\n{UNTAUGHT_MEASURE}'
         )
         return path
 
