@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -62,6 +61,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--png", type=Path, metavar="overlay.png", help="write the left image with edge, glue path and points"
     )
+    parser.add_argument(
+        "--untaught",
+        action="store_true",
+        help="measure without a taught table (`cellctl teach`): the colour test finds the edge, reliable only for "
+        "a plain one-colour sole on a plain table (docs/measurements.md)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -93,11 +98,10 @@ def run(args: argparse.Namespace) -> int:
         taught = load_taught(args.calib, calib)
     except TeachError as exc:
         raise UserError(str(exc)) from None
-    if taught is None:  # a note, not an error: plain soles on a plain table measure right without one
-        print(
-            f"note: no taught table beside {args.calib}: the edge comes from the colour test, checked by depth only; "
-            "for soles with rims, pointed ends or on a textured fixture teach the empty table first (cellctl teach)",
-            file=sys.stderr,
+    if taught is None and not args.untaught:  # as the service's require_taught_table (docs/service.md)
+        raise UserError(
+            f"no taught table beside {args.calib}: teach the empty fixture first (cellctl teach --calib "
+            f"{args.calib} LEFT RIGHT), or pass --untaught for a plain one-colour sole on a plain table"
         )
     reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right)
     result = measure_sole(reconstruction, offset, spacing, tolerance)

@@ -138,9 +138,13 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         "not a camera matrix",
     ),
     "measure: black pair": lambda d, _: Case(
-        ["measure", "--calib", str(d / "calib.yaml"), str(d / "black.png"), str(d / "black.png")],
+        ["measure", "--untaught", "--calib", str(d / "calib.yaml"), str(d / "black.png"), str(d / "black.png")],
         "too few measured points",
         exit_code=1,
+    ),
+    "measure: no taught table": lambda d, _: Case(
+        ["measure", "--calib", str(d / "calib.yaml"), str(d / "grey.png"), str(d / "grey.png")],
+        "teach the empty fixture first",
     ),
     "measure: image bomb": lambda d, _: Case(
         ["measure", "--calib", str(d / "calib.yaml"), str(d / "bomb.png"), str(d / "grey.png")],
@@ -174,6 +178,9 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         ["plc-sim", "--serial", "/dev/ttyNOPE9", "--cycles", "1"], "cannot connect to the controller", exit_code=1
     ),
     "plc-sim: no cycles": lambda d, _: Case(["plc-sim", "--cycles", "0"], "--cycles 0 must be at least 1"),
+    "simulate: too many empty-table exposures": lambda d, _: Case(
+        ["simulate", "sole", "--out", str(d / "scene"), "--empty", "12"], "must be 0..9"
+    ),
     "simulate: output under a file": lambda d, _: Case(
         ["simulate", "sole", "--out", str(d / "grey.png" / "x")], "Not a directory"
     ),

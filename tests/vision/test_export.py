@@ -90,7 +90,7 @@ def test_measure_export_writes_the_three_files_of_one_pair(tmp_path: Path) -> No
     calib = write_half_size_rig(tmp_path)
     out = tmp_path / "export"
     out.mkdir()
-    args = ["measure", "--calib", str(calib), str(tmp_path / "left.png"), str(tmp_path / "right.png")]
+    args = ["measure", "--untaught", "--calib", str(calib), str(tmp_path / "left.png"), str(tmp_path / "right.png")]
     args += ["--glue-height-tolerance", str(HALF_RIG_GLUE_TOLERANCE_MM)]
     assert main([*args, "--export", str(out)]) == 0
     table = np.loadtxt(out / "glue-path.csv", delimiter=",", skiprows=1)

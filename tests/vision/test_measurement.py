@@ -268,7 +268,8 @@ def test_implausible_results_are_refused_not_reported(
 def test_measure_command_json(tmp_path: Path, stereo_results, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001
     scene, pair, _, expected = stereo_results[2]
     scene.write(tmp_path, pair)
-    args = ["measure", "--calib", str(tmp_path / "calib.yaml"), str(tmp_path / "left.png"), str(tmp_path / "right.png")]
+    args = ["measure", "--untaught", "--calib", str(tmp_path / "calib.yaml"), str(tmp_path / "left.png")]
+    args.append(str(tmp_path / "right.png"))
     code = main([*args, "--json", "--ply", str(tmp_path / "sole.ply"), "--png", str(tmp_path / "overlay.png")])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
