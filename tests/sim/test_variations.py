@@ -401,6 +401,25 @@ def test_bench_sole_matrix_command_lists_and_rejects(capsys: pytest.CaptureFixtu
     assert main(["bench-sole", "--variations", "rim"]) == 2
 
 
+@pytest.mark.slow  # a full-size scene and four empty-table exposures (the half-size rig is too coarse to teach)
+def test_a_simulated_scene_is_taught_then_measured(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The cell's workflow on a simulated scene: its empty table taught, then the sole measured against it;
+    without the taught table (or --untaught) measure stops with the remedy."""
+    scene = tmp_path / "scene"
+    args = ["simulate", "sole", "--out", str(scene), "--seed", "6", "--empty", "4"]
+    assert main(args) == 0 and (scene / "empty_4_left.png").exists() and (scene / "empty_4_right.png").exists()
+    pair = [str(scene / "left.png"), str(scene / "right.png")]
+    assert main(["measure", "--calib", str(scene / "calib.yaml"), *pair]) == 2
+    assert "teach the empty fixture first" in capsys.readouterr().err
+    empties = sorted(str(path) for path in scene.glob("empty_*.png"))  # as `DIR/empty_*.png` lists them
+    assert main(["teach", "--calib", str(scene / "calib.yaml"), *empties]) == 0
+    capsys.readouterr()
+    assert main(["measure", "--calib", str(scene / "calib.yaml"), "--json", *pair]) == 0
+    out = json.loads(capsys.readouterr().out)
+    truth = json.loads((scene / "truth.json").read_text())
+    assert out["valid"] and abs(out["length_mm"] - truth["length_mm"]) < 1.0  # measured against the taught table
+
+
 def test_simulate_sole_applies_variations(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     calib = write_half_size_rig(tmp_path)
     args = ["simulate", "sole", "--out", str(tmp_path / "scene"), "--seed", "6", "--color", "grey"]
