@@ -34,6 +34,7 @@ TABLES: dict[str, Material] = {
     "dark": Material((0.16, 0.15, 0.14), _TABLE_OCTAVES, 0.01, 8.0),
     "grey": Material((0.42, 0.42, 0.41), _TABLE_OCTAVES, 0.01, 8.0),
     "patterned": Material((0.40, 0.41, 0.40), _TABLE_OCTAVES, 0.01, 8.0),  # plus the cutting-mat pattern
+    "light": Material((0.78, 0.79, 0.78), _TABLE_OCTAVES, 0.01, 8.0),  # a white fixture plate
 }
 TABLE = TABLES["dark"]
 _SOLE_OCTAVES = ((8.0, 0.04), (2.5, 0.035), (0.9, 0.035))

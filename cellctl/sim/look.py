@@ -13,7 +13,7 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"wide-rig" and "narrow-rig" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"light-table", "wide-rig" and "narrow-rig" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from cellctl.errors import FailureKind
 END_KINDS = ("round", "pointed", "square", "cusped")
 HEIGHT_CLASSES = ("normal", "flat", "tall")
 COLOUR_SCHEMES = ("plain", "rim", "logo", "patches")
-TABLE_LOOKS = ("dark", "grey", "patterned")
+TABLE_LOOKS = ("dark", "grey", "patterned", "light")
 NOISE_LEVELS = ("normal", "heavy")
 RIGS = ("default", "distorted", "wide", "narrow")  # cellctl.sim.rig.rig_for
 HEADINGS = ("along", "any")
@@ -184,6 +184,16 @@ VARIATIONS: dict[str, Variation] = {
             "the sole at any heading on the table, across the image rows too",
             ("heading",),
             _set(heading="any"),
+            in_matrix=False,
+        ),
+        # Outside the matrix for the same reason: a white fixture plate. A black or grey sole stands out on it; a white
+        # one is nearly its colour (0.70-0.73 against 0.78 albedo) and may be refused for that.
+        Variation(
+            "light-table",
+            "a white fixture plate (albedo 0.78)",
+            ("table",),
+            _set(table="light"),
+            frozenset({FailureKind.COLOURS_TOO_SIMILAR}),
             in_matrix=False,
         ),
         # Other rigs than the simulated one: a longer baseline (finer depth, larger occlusions at the walls) and a

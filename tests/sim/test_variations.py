@@ -287,6 +287,16 @@ def test_off_image_sole_is_cut_by_an_image_edge_and_refused_for_it() -> None:
     assert result.verdict == "fair refusal" and result.row.failure == FailureKind.SOLE_AT_BORDER.value
 
 
+def test_light_table_is_a_white_plate_outside_the_matrix() -> None:
+    from cellctl.sim.appearance import SOLE_MATERIALS, TABLES
+
+    look = look_for(("light-table",), 2)
+    assert look.table == "light" and "light-table" not in MATRIX_ENTRIES
+    assert min(TABLES["light"].albedo_bgr) > max(SOLE_MATERIALS["white"].albedo_bgr)  # brighter than any sole
+    left = grey(SoleScene.random(2, "black", half_size_rig(), look).render().left)
+    assert np.median(left) > 150  # the plate fills most of the view
+
+
 def test_patterned_table_has_strong_contrast() -> None:
     rng = np.random.default_rng(0)
     from cellctl.sim.appearance import table_texture
