@@ -110,6 +110,7 @@ def test_history_csv_has_iso_times_and_every_page_answers(cell: StationService) 
         assert datetime.fromisoformat(row["time"]).utcoffset() is not None
     for page in ("/", "/history", "/history?status=error&code=32", "/cameras", "/calibration", "/cameras/left.jpg"):
         assert cell.get(page)[0] == 200, page
+    assert b"measuring with the colour test" in cell.get("/calibration")[1]  # the test cell is not taught
     assert cell.get("/cycle/999999")[0] == 404
 
 

@@ -66,6 +66,8 @@ class Station:
             active_recipe=lambda: (
                 None if daemon.active_recipe is None else (daemon.active_recipe.number, daemon.active_recipe.name)
             ),
+            taught_problem=daemon.measurer.taught_problem,
+            taught_required=config.measure.require_taught_table,
         )
         server = None
         if config.station.enabled:

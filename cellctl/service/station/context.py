@@ -34,6 +34,8 @@ class StationContext:
     plc: Any  # firmware_io PlcLink (connected clients, heartbeat), or None
     cell_name: str
     active_recipe: Callable[[], tuple[int, str] | None] | None = None  # (number, name) the cell measures with
+    taught_problem: str = ""  # why the cell has no taught table ("": loaded; cellctl.service.measuring)
+    taught_required: bool = True  # [measure] require_taught_table: without one every cycle is refused
 
     def cell_view(self) -> dict[str, Any]:
         """The state panel's and last result's facts, as the pages and /api/state show them."""

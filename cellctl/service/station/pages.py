@@ -107,7 +107,8 @@ class Pages:
     async def calibration(self, request: Request) -> Response:
         facts = calibration_facts(self.ctx.hub.calib, self.ctx.calibration_path)
         check = self.ctx.actions.last_rectification
-        return self.page(request, "calibration.html", active="calibration", facts=facts, check=check)
+        taught = (self.ctx.taught_problem, self.ctx.taught_required)
+        return self.page(request, "calibration.html", active="calibration", facts=facts, check=check, taught=taught)
 
     async def calibration_chart(self, request: Request) -> Response:
         chart = calibration_facts(self.ctx.hub.calib, self.ctx.calibration_path).chart
