@@ -34,12 +34,14 @@ class CameraHealth:
         self.lock = threading.Lock()  # held for every grab
         self.ok = False
         self.identity_problem: str | None = None  # the calibration was made with other cameras
+        # The set-up the cell requires beside the calibration and lacks (its taught table): not calibrated either.
+        self.setup_problem: str | None = None
         self._log = RepeatQuietLog(log, CAMERA_LOG_REPEAT_S)
         self._last_probe = 0.0
 
     @property
     def calibration_ok(self) -> bool:
-        return self.calib is not None and self.identity_problem is None
+        return self.calib is not None and self.identity_problem is None and self.setup_problem is None
 
     def probe(self, force: bool = False) -> bool:
         """Open the cameras if they are not known to work (at start, and every few s while failing);

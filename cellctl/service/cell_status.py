@@ -45,12 +45,12 @@ class CellStatus:
         self.link.set_status(cameras_ok=self.cameras.ok, calibration_ok=self.cameras.calibration_ok)
 
     def publish_state(self, phase: str | None = None) -> None:
-        ok, calibrated = self.cameras.ok, self.cameras.calib is not None
+        ok, calibrated = self.cameras.ok, self.cameras.calibration_ok  # as the PLC's CALIBRATION_OK bit
         if phase is None:
             phase = "busy" if self.busy_cycle is not None else "ready" if ok and calibrated else "error"
         self.events.publish(CellState(phase, ok, calibrated, self.cycles_done, self.busy_cycle))
 
     def text(self) -> str:
         cameras = "cameras ok" if self.cameras.ok else "CAMERAS NOT OK"
-        calibration = "calibration ok" if self.cameras.calib is not None else "NO CALIBRATION"
+        calibration = "calibration ok" if self.cameras.calibration_ok else "CALIBRATION NOT OK"
         return f"waiting for trigger; {self.cycles_done} cycles; {cameras}; {calibration}"

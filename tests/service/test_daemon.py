@@ -330,6 +330,7 @@ def test_a_cell_that_requires_a_taught_table_refuses_every_cycle_without_one(tmp
         with PlcSimulator(service.endpoint, heartbeat_limit_s=1.5) as plc:
             reading = plc.run_cycle()
         assert reading.error_code == ErrorCode.TABLE_NOT_TAUGHT
+        assert not reading.status & StatusBit.CALIBRATION_OK and not reading.status & StatusBit.READY
         record = Journal.open(config.journal.state_dir, readonly=True).find(reading.cycle)
         assert record is not None and "cellctl teach" in record.reason and "no table has been taught" in record.reason
     finally:

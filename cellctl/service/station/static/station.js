@@ -19,7 +19,7 @@
     if (badge) { badge.textContent = s.phase.toUpperCase(); badge.className = "badge phase-" + s.phase; }
     setTile("t-phase", s.phase.toUpperCase() + (s.cycle ? " · cycle " + s.cycle : ""), "phase-text phase-" + s.phase);
     setTile("t-cameras", s.cameras_ok ? "OK" : "NOT OK", s.cameras_ok ? "ok" : "bad");
-    setTile("t-calibration", s.calibration_ok ? "LOADED" : "MISSING", s.calibration_ok ? "ok" : "bad");
+    setTile("t-calibration", s.calibration_ok ? "OK" : "NOT OK", s.calibration_ok ? "ok" : "bad");  // why: the calibration page
     if (s.plc_clients !== null) setTile("t-plc", s.plc_clients ? "CONNECTED (" + s.plc_clients + ")" : "NO CLIENT", s.plc_clients ? "ok" : "warn");
     if (s.heartbeat_ok !== null) setTile("t-heartbeat", s.heartbeat_ok ? "RUNNING" : "STALLED", s.heartbeat_ok ? "ok" : "bad");
     setTile("t-cycles", String(s.cycles_done), "");
