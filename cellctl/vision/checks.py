@@ -97,7 +97,7 @@ def check_outline_depth(
 ) -> CheckFailure | None:
     """The outline (N x 2, table mm) against the depth step (cells where most points rise above the table):
     raised OUTLINE_INSIDE_MM inside it, not `outside_mm` outside, over the whole outline and along every stretch
-    of it. A `supplementary` test (UNTAUGHT_OUTSIDE_MM after the main one) reads the whole outline only, and
+    of it. A `supplementary` test (UNTAUGHT_OUTSIDE_PX, untaught, after the main one) reads the whole outline only, and
     too few points with depth on both sides (near a tall sole's wall the table 3 mm out is often occluded) is
     no evidence against the outline there: the main test has already asked for enough.
 

@@ -51,11 +51,11 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
     heights = height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
         # Untaught, the colour test's edge is also held to the nearer distance (checks.UNTAUGHT_OUTSIDE_PX).
-        distances = [OUTLINE_OUTSIDE_MM]
+        tests = [(OUTLINE_OUTSIDE_MM, False)]  # (distance outside, supplementary)
         stereo = reconstruction.calibration is not None and reconstruction.camera_to_table is not None
         if reconstruction.taught is None and stereo:  # (a true depth map has no pixels, and no fattening)
-            distances.append(UNTAUGHT_OUTSIDE_PX * mm_per_pixel(reconstruction))
-        for outside_mm in distances:
+            tests.append((UNTAUGHT_OUTSIDE_PX * mm_per_pixel(reconstruction), True))
+        for outside_mm, supplementary in tests:
             hidden = None
             if reconstruction.camera_to_table is not None:
                 left_centre = reconstruction.camera_to_table[:3, 3]
@@ -68,7 +68,7 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
                 reconstruction.footprint,
                 hidden,
                 outside_mm,
-                supplementary=outside_mm != OUTLINE_OUTSIDE_MM,
+                supplementary=supplementary,
             )
             if problem is not None:
                 return problem
