@@ -81,8 +81,7 @@ class Daemon:
             )
         self.source = source if source is not None else open_frame_source(config.cameras, self.calib)
         self.cameras = CameraHealth(self.source, self.calib)
-        if config.measure.require_taught_table and self.measurer.taught_problem:
-            self.cameras.setup_problem = self.measurer.taught_problem  # CALIBRATION_OK (and READY) stay off
+        self.cameras.setup_problem = self.measurer.setup_problem or None  # set: CALIBRATION_OK (and READY) stay off
         self.camera_lock = self.cameras.lock  # held for every grab: the station's live view grabs between cycles
         self.link = _plc_link(config)
         self.status = CellStatus(self.link, self.cameras, notifier if notifier is not None else SystemdNotifier())

@@ -50,6 +50,11 @@ class CellMeasurer:
         self._recipe_reconstructor: SoleReconstructor | None = None
         self.warmed_up = False
 
+    @property
+    def setup_problem(self) -> str:
+        """Why this cell refuses every cycle for want of its taught table ([measure] require_taught_table), or ""."""
+        return self.taught_problem if self.config.measure.require_taught_table else ""
+
     def warm_up(self, source: FrameSource, recipes: Iterable[Recipe] = ()) -> None:
         """One cycle's work on a grabbed pair (not locked: nothing else grabs before READY), with the cell's
         reconstructor and then with each other depth range the recipes ask for."""
@@ -103,10 +108,10 @@ class CellMeasurer:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self.calibration_problem}")
         if problem := identity_problem(self.calib.cameras, frame.info):
             raise CycleFailed.of(FailureKind.CALIBRATION_MISMATCH, problem)
-        if self.config.measure.require_taught_table and self.taught_problem:
+        if self.setup_problem:
             raise CycleFailed.of(
                 FailureKind.TABLE_NOT_TAUGHT,
-                f"this cell measures against a taught table: {self.taught_problem}; clear the fixture and teach "
+                f"this cell measures against a taught table: {self.setup_problem}; clear the fixture and teach "
                 "the empty table (cellctl teach), then restart the service",
             )
         reconstructor = self.reconstructor
