@@ -18,6 +18,7 @@ cost time but never change a refusal into a wrong value.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from cellctl.errors import FailureKind, MeasurementInputError
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud, cloud_from_disparity, disparity_range
 from cellctl.vision.defaults import DEPTH_RANGE_MM
+from cellctl.vision.depth_hint import depth_range_hint, view_distance_mm
 from cellctl.vision.search_region import SearchRegion, coarse_pair, coarse_range, find_region
 from cellctl.vision.segmentation import (
     MIN_HEIGHT_MM,
@@ -34,7 +36,7 @@ from cellctl.vision.segmentation import (
     Segmentation,
 )
 from cellctl.vision.table import TablePlane
-from cellctl.vision.teach import TaughtTable, teach_table
+from cellctl.vision.teach import TaughtTable, TeachError, teach_table
 
 __all__ = [
     "DEFAULT_DEPTH_RANGE_MM",
@@ -124,7 +126,12 @@ class SoleReconstructor:
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
-        return self.segment(self._cloud(rect_left, rect_right, timings, None))
+        result = self.segment(self._cloud(rect_left, rect_right, timings, None))
+        if isinstance(result, ReconstructionRefused):
+            hint = self._range_hint(rect_left, rect_right, result)
+            if hint:
+                result = replace(result, reason=f"{result.reason}; {hint}")
+        return result
 
     def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
         """Rectify, match the whole pair and reproject: every really measured pixel as a 3-D point."""
@@ -188,7 +195,37 @@ class SoleReconstructor:
 
     def teach(self, left: np.ndarray, right: np.ndarray) -> TaughtTable:
         """The taught table from a raw pair of the EMPTY fixture (cellctl.vision.teach); TeachError if not empty."""
-        return teach_table(self.points_from_disparity(left, right), self.calib)
+        cloud = self.points_from_disparity(left, right)
+        try:
+            taught = teach_table(cloud, self.calib)
+        except TeachError as exc:
+            hint = "" if cloud.rectified is None else self._range_hint(*cloud.rectified)
+            if not hint:
+                raise
+            raise TeachError(f"{exc}; {hint}") from None
+        # A table taught at the range's near end would leave no depth for the sole: say so now, not every cycle.
+        hint = depth_range_hint(taught.plane.offset, self.depth_range_mm)
+        if hint:
+            raise TeachError(hint)
+        return taught
+
+    def _range_hint(
+        self, rect_left: np.ndarray, rect_right: np.ndarray, refused: ReconstructionRefused | None = None
+    ) -> str:
+        """The remedy when the table does not fit the depth range (cellctl.vision.depth_hint), else "": its
+        distance from the plane the refused run found, else from a wide match when too little was measured
+        (the usual sign of a table outside the range)."""
+        from cellctl.stereo import to_float
+
+        if refused is not None and refused.table_plane is not None:
+            return depth_range_hint(refused.table_plane.offset, self.depth_range_mm)
+        if refused is not None and refused.failure is not FailureKind.TOO_FEW_POINTS:
+            return ""
+
+        def match(low: int, num: int, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            return to_float(self._stereo_matcher(low, num, coarse=True).compute_fixed(left, right))
+
+        return depth_range_hint(view_distance_mm(self.calib, rect_left, rect_right, match), self.depth_range_mm)
 
     def _stereo_matcher(self, low: int, num: int, coarse: bool = False):  # noqa: ANN202 - lazily imported core
         """One matcher per disparity range, kept: its buffers stay allocated between cycles of one size."""

@@ -26,12 +26,37 @@ from cellctl.vision.teach import TaughtTable, TeachError, calibration_fingerprin
 
 
 @pytest.fixture(scope="module")
-def taught_scene():  # noqa: ANN201
+def empty_scene():  # noqa: ANN201
     rig = default_rig()
     scene = SoleScene.random(2, "white", rig)
-    empty = scene.render_empty()
+    return rig, scene, scene.render_empty()
+
+
+@pytest.fixture(scope="module")
+def taught_scene(empty_scene):  # noqa: ANN001, ANN201
+    rig, scene, empty = empty_scene
     taught = SoleReconstructor(rig).teach(empty.left, empty.right)
     return rig, scene, scene.render(), taught
+
+
+@pytest.mark.parametrize(
+    "depth_range",
+    [(300.0, 480.0), (520.0, 700.0)],
+    ids=["table beyond the range", "no room above the table"],
+)
+def test_teaching_outside_the_depth_range_names_the_range_that_fits(empty_scene, depth_range) -> None:  # noqa: ANN001
+    """The simulated table lies ~551 mm from the left camera: a range that misses it, or leaves no room for a sole
+    above it, is a set-up error whose remedy is the range, not the lights."""
+    rig, _, empty = empty_scene
+    with pytest.raises(TeachError, match=r"the table lies about 5[45]\d mm .* set the depth range to about 450 650"):
+        SoleReconstructor(rig, depth_range).teach(empty.left, empty.right)
+
+
+def test_a_cycle_refused_for_a_table_outside_the_depth_range_names_the_range_that_fits(taught_scene) -> None:  # noqa: ANN001
+    rig, _, pair, _ = taught_scene
+    result = SoleReconstructor(rig, (300.0, 480.0)).reconstruct(pair.left, pair.right)
+    assert not result.valid
+    assert "set the depth range to about 450 650" in result.reason, result.reason
 
 
 def test_a_sole_on_the_taught_table_is_measured_within_tolerance(taught_scene) -> None:  # noqa: ANN001
