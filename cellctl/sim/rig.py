@@ -1,7 +1,7 @@
 """The simulated stereo rig: the "true" cameras behind every simulated image.
 
-Two 1280x1024 cameras 60 mm apart looking down at the table from about 550 mm, with a focal length chosen
-so that a 300 mm sole covers about 60 % of the image width (300 mm * 1400 px / 550 mm = 764 px), and the
+Two 1280x1024 cameras 60 mm apart looking down at the table from about 550 mm (cellctl.sim.render.RIG_HEIGHT_MM),
+with a focal length chosen so that a 300 mm sole covers about 60 % of the image width (300 mm * 1400 px / 550 mm = 764 px), and the
 small imperfections a real rig has: slightly different intrinsics, a tilt of under a degree between the
 cameras and mild barrel distortion. Calibrating simulated checkerboard pairs must recover these values.
 """
@@ -17,7 +17,6 @@ IMAGE_SIZE: tuple[int, int] = (1280, 1024)  # (width, height) px
 BASELINE_MM: float = 60.0
 WIDE_BASELINE_MM: float = 100.0  # the `wide` rig (SceneLook.rig): the same cameras further apart
 NARROW_BASELINE_MM: float = 40.0  # the `narrow` rig: closer together
-WORKING_DISTANCE_MM: float = 550.0  # camera to table
 
 
 def default_rig(baseline_mm: float = BASELINE_MM) -> Calibration:
