@@ -229,7 +229,8 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ),
     ErrorCode.NO_TABLE: (
         "The table was not found below the sole (view blocked, or the table is not at the configured distance).",
-        "Clear the table and the camera view of other objects; if it repeats, check the camera mount and depth range.",
+        "Clear the table and the camera view of other objects; if it repeats, check the camera mount and depth range"
+        " (the reason names the range that fits a table outside it).",
     ),
     ErrorCode.TABLE_MOVED: (
         "The table no longer lies where it was taught: the table, fixture or cameras moved.",
