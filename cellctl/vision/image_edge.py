@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -302,7 +303,21 @@ def notch_fill(
     silent: Callable[[np.ndarray], np.ndarray],
     raised: Footprint,
 ) -> np.ndarray:
-    """How far to move each outline point out (0 where not) to fill a notch one camera's change mask left.
+    """How far to move each outline point out (0 where not) to fill a notch one camera's change mask left
+    (`notch_fills`)."""
+    return notch_fills(ring, outward, inner, outer, silent, raised)[0]
+
+
+def notch_fills(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    inner: tuple[np.ndarray, np.ndarray],
+    outer: tuple[np.ndarray, np.ndarray],
+    silent: Callable[[np.ndarray], np.ndarray],
+    raised: Footprint,
+) -> tuple[np.ndarray, np.ndarray]:
+    """How far to move each outline point out (0 where not) to fill a notch one camera's change mask left, and per
+    point the camera whose edge it was moved to (0 left, 1 right; -1 where not moved).
 
     The depth outline keeps only the sole's points that the left camera's change mask marks
     (sole_region.change_split). Where that mask misses edge pixels, because the table behind them in the left
@@ -324,11 +339,13 @@ def notch_fill(
       short of the new edge: the points were dropped by the mask, not missing from depth) and no point at the
       table's height (`silent`: a contact shadow on a textured table is measured there).
 
-    The checks then judge the moved outline against both masks as before; the edge-offset check reads the other
-    camera's miss as an error of half its depth (a mean of both cameras), so a notch much deeper than twice its
-    0.8 mm limit over its 5 mm window stays refused."""
+    The checks then judge the moved outline against both masks, except that the edge-offset check reads the
+    filled points by the camera that filled them (`PlacedOutline.one_camera`): the other camera's mask has the
+    notch there, which is why it was filled, and the mean of both read the miss as an error of half its depth (std20
+    sole 9 taught: a notch 2 mm deep filled to within 0.2 mm of the true edge, refused for "1.1 mm inside")."""
     n = len(ring)
     move = np.zeros(n)
+    by = np.full(n, -1)
     with warnings.catch_warnings():  # NaN readings compare False
         warnings.simplefilter("ignore", RuntimeWarning)
         for this in (0, 1):
@@ -356,8 +373,10 @@ def notch_fill(
                     continue
                 fill[idx] = reading[idx]
             # Where both cameras fill, the nearer of their edges.
-            move = np.where((move > 0) & (fill > 0), np.minimum(move, fill), np.maximum(move, fill))
-    return move
+            nearer = (fill > 0) & ((move == 0) | (fill < move))
+            by = np.where(nearer, this, by)
+            move = np.where(nearer, fill, move)
+    return move, by
 
 
 def _rim(ring: np.ndarray, idx: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
@@ -445,17 +464,40 @@ def mm_per_pixel(reconstruction: Reconstruction) -> float:
     return abs(float(reconstruction.camera_to_table[2, 3])) / calib.focal_px
 
 
-def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> np.ndarray:
+@dataclass(frozen=True)
+class PlacedOutline:
+    """The outline placed on the images' edge (`onto_image_edge`) and, per point, the camera whose silhouette alone
+    placed it (0 left, 1 right: a notch the other camera's change mask left, `notch_fills`; -1 elsewhere)."""
+
+    outline: np.ndarray  # closed, table mm
+    one_camera: np.ndarray
+
+    @classmethod
+    def unmoved(cls, outline: np.ndarray) -> PlacedOutline:
+        return cls(outline, np.full(len(outline), -1))
+
+    def cameras_at(self, points: np.ndarray, within_mm: float = 0.5) -> np.ndarray:
+        """Per point (table mm), `one_camera` of the outline point nearest it, -1 if none lies within `within_mm`."""
+        if not np.any(self.one_camera >= 0):
+            return np.full(len(points), -1)
+        placed = np.flatnonzero(self.one_camera >= 0)
+        distance = np.linalg.norm(points[:, None, :] - self.outline[None, placed, :], axis=2)
+        nearest = np.argmin(distance, axis=1)
+        close = distance[np.arange(len(points)), nearest] <= within_mm
+        return np.where(close, self.one_camera[placed[nearest]], -1)
+
+
+def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> PlacedOutline:
     """The outline (closed, table mm) moved onto the edge both cameras show (1 mm spacing), or as it was."""
     changed_left, changed_right = reconstruction.changed_left, reconstruction.changed_right
     if not PLACE_EDGE_FROM_IMAGES or changed_left is None or changed_right is None:
-        return outline
+        return PlacedOutline.unmoved(outline)
     if reconstruction.calibration is None or reconstruction.table_points is None:
-        return outline  # no guard without the raw depth cells: the check judges the outline as it is
+        return PlacedOutline.unmoved(outline)  # no guard without the raw depth cells: the check judges it as it is
     ring = resample_closed(outline, 1.0)
     outward = outward_normals(ring)
     if not np.any(np.isfinite(surface.coarse_heights(ring - 3.0 * outward, 3.0))):
-        return outline
+        return PlacedOutline.unmoved(outline)
     edge_height = edge_heights(surface, ring, outward)
     level = table_level(reconstruction)
     (left_pixel, left_centre), (right_pixel, right_centre) = projections(reconstruction)
@@ -463,9 +505,12 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)
     silent = depth_silent(ring, outward, reconstruction.table_points)
     shift = edge_shift(inner[0], inner[1], silent, outer, PLACE_EDGE_INWARD, blob_length_mm(reconstruction))
+    one_camera = np.full(len(ring), -1)
     if FILL_NOTCHES and reconstruction.raised is not None:
-        fill = notch_fill(ring, outward, inner, outer, silent, reconstruction.raised)
-        shift = np.where((shift == 0) & (fill > 0), fill, shift)
+        fill, by = notch_fills(ring, outward, inner, outer, silent, reconstruction.raised)
+        filled = (shift == 0) & (fill > 0)
+        shift = np.where(filled, fill, shift)
+        one_camera = np.where(filled, by, -1)
     if not np.any(shift):
-        return outline
-    return ring + shift[:, None] * outward
+        return PlacedOutline.unmoved(outline)
+    return PlacedOutline(ring + shift[:, None] * outward, one_camera)

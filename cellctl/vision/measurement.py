@@ -41,7 +41,7 @@ from cellctl.vision.defaults import (
 from cellctl.vision.edge_checks import MIN_CONCAVE_RADIUS_MM
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.glue_path import glue_path
-from cellctl.vision.image_edge import onto_image_edge
+from cellctl.vision.image_edge import PlacedOutline, onto_image_edge
 from cellctl.vision.outline_checks import outline_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
@@ -110,7 +110,8 @@ def measure_sole(
     footprint = reconstruction.footprint
     smoothing = OUTLINE_SMOOTHING_MM if reconstruction.taught is not None else COLOUR_OUTLINE_SMOOTHING_MM
     surface = SoleSurface(reconstruction)  # one per reconstruction: its neighbour grid serves every query below
-    outline = onto_image_edge(reconstruction, smooth_closed(footprint.outline(), smoothing), surface)
+    placed = onto_image_edge(reconstruction, smooth_closed(footprint.outline(), smoothing), surface)
+    outline = placed.outline
     # The glue line needs only the footprint and the outline: its rasters are drawn on a second thread from
     # here, beside the axis, the half areas, the outline checks and the heights (numpy, OpenCV and the C kernels
     # release the GIL); the glue path on it follows on the same thread once the axis is known. The refusals keep
@@ -134,7 +135,7 @@ def measure_sole(
             )
         glue = worker("glue-path").submit(_glue, line, surface, centroid, axis, glue_spacing_mm)
         try:
-            checked = _outline_and_heights(reconstruction, outline, surface, centroid, axis, lo, hi, base)
+            checked = _outline_and_heights(reconstruction, placed, surface, centroid, axis, lo, hi, base)
             timings["measure"] = time.perf_counter() - start
             if isinstance(checked, MeasurementRefused):
                 return checked  # as before: whatever the glue path came to does not matter
@@ -172,7 +173,7 @@ def measure_sole(
 
 def _outline_and_heights(
     reconstruction: Reconstruction,
-    outline: np.ndarray,
+    placed: PlacedOutline,
     surface: SoleSurface,
     centroid: np.ndarray,
     axis: np.ndarray,
@@ -181,7 +182,7 @@ def _outline_and_heights(
     base: dict[str, Any],
 ) -> tuple[float, float] | MeasurementRefused:
     """The outline's self-checks, then the heel and toe heights (added to `base`), or the refusal."""
-    problem = outline_problem(reconstruction, outline, surface)
+    problem = outline_problem(reconstruction, placed, surface)
     if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
         # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
         return _invalid(

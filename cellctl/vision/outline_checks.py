@@ -29,6 +29,7 @@ from cellctl.vision.edge_checks import (
 )
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
+    PlacedOutline,
     blob_length_mm,
     edge_heights,
     mm_per_pixel,
@@ -44,9 +45,11 @@ from cellctl.vision.surface import SoleSurface
 SHADOW_CLEARED = True  # the edge-offset check reads the masks without detached shadow slivers (vision.shadow)
 
 
-def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface: SoleSurface) -> CheckFailure | None:
-    """The outline's self-checks: against the depth step, and against the right image when a table is taught."""
-    ring = resample_closed(outline, 1.0)
+def outline_problem(reconstruction: Reconstruction, placed: PlacedOutline, surface: SoleSurface) -> CheckFailure | None:
+    """The outline's self-checks: against the depth step, and against the right image when a table is taught.
+    The placed outline (image_edge.onto_image_edge) also says where one camera alone placed it (a notch the
+    other's mask left): the edge-offset check reads those points by that camera."""
+    ring = resample_closed(placed.outline, 1.0)
     outward = outward_normals(ring)
     heights = height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
@@ -77,7 +80,7 @@ def outline_problem(reconstruction: Reconstruction, outline: np.ndarray, surface
     )
     if problem is not None:
         return problem
-    problem = _check_outline_images(reconstruction, ring, outward, surface, heights)
+    problem = _check_outline_images(reconstruction, ring, outward, surface, heights, placed.cameras_at(ring))
     if problem is not None:
         return problem
     # A wall the checks above let through (measured all the way down to its foot) still puts the glue line on
@@ -95,8 +98,10 @@ def _check_outline_images(
     outward: np.ndarray,
     surface: SoleSurface,
     heights: Callable[[np.ndarray], np.ndarray],
+    one_camera: np.ndarray | None = None,
 ) -> CheckFailure | None:
-    """The outline against both cameras' change masks (taught table only): the right image, then the edge."""
+    """The outline against both cameras' change masks (taught table only): the right image, then the edge.
+    one_camera: per ring point the camera whose reading alone counts for the edge offsets there (-1: both)."""
     changed_right = reconstruction.changed_right
     if changed_right is None or reconstruction.calibration is None:
         return None
@@ -116,6 +121,8 @@ def _check_outline_images(
         (changed_right, right_pixel, right_centre),
     )
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
+    if one_camera is not None:
+        inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
     # The stretches beyond both silhouettes too long for the placement to move in (image_edge.edge_shift's rule):
     # there the cameras' agreed readings count point by point too (edge_checks.agreed_offsets).
     smeared = smeared_stretches(inner[0], inner[1], blob_length_mm(reconstruction))
@@ -133,9 +140,22 @@ def _check_outline_images(
         )
     )
     inner_cleared, outer_cleared = stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
+    if one_camera is not None:
+        inner_cleared, outer_cleared = (
+            by_one_camera(inner_cleared, one_camera),
+            by_one_camera(outer_cleared, one_camera),
+        )
     return _edge_offsets_problem(
         one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared), smeared
     )
+
+
+def by_one_camera(readings: tuple[np.ndarray, np.ndarray], one_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Both cameras' readings with the other camera's unknown (NaN) where one camera alone placed the outline
+    (`one_camera` per point: 0 left, 1 right, -1 neither): a notch that camera filled (image_edge.notch_fills),
+    which the other camera's mask shows because its mask has the notch."""
+    left, right = readings
+    return np.where(one_camera == 1, np.nan, left), np.where(one_camera == 0, np.nan, right)
 
 
 def _edge_offsets_problem(

@@ -13,12 +13,15 @@ from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
     EDGE_MOVE_MAX_MM,
     EDGE_MOVE_MIN_MM,
+    PlacedOutline,
     _paired,
     depth_silent,
     edge_shift,
     notch_fill,
+    notch_fills,
     stereo_offsets,
 )
+from cellctl.vision.outline_checks import by_one_camera
 
 RADIUS = 50.0
 HEIGHT = 20.0
@@ -277,6 +280,25 @@ def test_one_camera_fills_a_notch_the_other_cameras_mask_left() -> None:
     assert np.allclose(move[inside], dent[inside]) and np.all(move[~inside] == 0.0)
     both = notch_fill(ring, outward, (right - 0.2, right), (right - 0.2, right), always, disc_depth(RADIUS))
     assert np.allclose(both[inside], dent[inside] - 0.2)
+    _, by = notch_fills(ring, outward, (left, right), (left, right), always, disc_depth(RADIUS))
+    assert np.all(by[inside] == 1) and np.all(by[~inside] == -1)  # the right camera filled it
+    _, by = notch_fills(ring, outward, (right - 0.2, right), (right - 0.2, right), always, disc_depth(RADIUS))
+    assert np.all(by[inside] == 0)  # both could: the nearer edge, the left camera's
+
+
+def test_a_filled_notch_is_judged_by_the_camera_that_filled_it() -> None:
+    """A notch 2.5 mm deep filled from the right camera: the left camera's mask has the notch and reads the edge up
+    to 2.5 mm inside the filled outline over 5 points; the mean of both (0.9 mm over the edge-offset check's window)
+    would refuse an outline that lies on the edge. Read by the right camera alone there, it passes; a notch point
+    mapped by position onto the check's own resampled ring."""
+    ring, outward, dent = notched(2.5)
+    placed = PlacedOutline(ring + dent[:, None] * outward, np.where(dent > EDGE_MOVE_MIN_MM, 1, -1))
+    left, right = -dent, np.zeros(len(ring))
+    assert check_edge_offsets([left, right]) is not None
+    one_camera = placed.cameras_at(placed.outline + 0.1)
+    assert np.array_equal(one_camera, placed.one_camera)
+    assert check_edge_offsets(list(by_one_camera((left, right), one_camera))) is None
+    assert np.all(PlacedOutline.unmoved(ring).cameras_at(ring) == -1)
 
 
 @pytest.mark.parametrize("case", ["no notch", "shallow", "overshoot", "no depth", "table in the gap", "ambiguous"])
