@@ -302,19 +302,6 @@ def notch_fill(
     outer: tuple[np.ndarray, np.ndarray],
     silent: Callable[[np.ndarray], np.ndarray],
     raised: Footprint,
-) -> np.ndarray:
-    """How far to move each outline point out (0 where not) to fill a notch one camera's change mask left
-    (`notch_fills`)."""
-    return notch_fills(ring, outward, inner, outer, silent, raised)[0]
-
-
-def notch_fills(
-    ring: np.ndarray,
-    outward: np.ndarray,
-    inner: tuple[np.ndarray, np.ndarray],
-    outer: tuple[np.ndarray, np.ndarray],
-    silent: Callable[[np.ndarray], np.ndarray],
-    raised: Footprint,
 ) -> tuple[np.ndarray, np.ndarray]:
     """How far to move each outline point out (0 where not) to fill a notch one camera's change mask left, and per
     point the camera whose edge it was moved to (0 left, 1 right; -1 where not moved).
@@ -467,7 +454,7 @@ def mm_per_pixel(reconstruction: Reconstruction) -> float:
 @dataclass(frozen=True)
 class PlacedOutline:
     """The outline placed on the images' edge (`onto_image_edge`) and, per point, the camera whose silhouette alone
-    placed it (0 left, 1 right: a notch the other camera's change mask left, `notch_fills`; -1 elsewhere)."""
+    placed it (0 left, 1 right: a notch the other camera's change mask left, `notch_fill`; -1 elsewhere)."""
 
     outline: np.ndarray  # closed, table mm
     one_camera: np.ndarray
@@ -507,7 +494,7 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
     shift = edge_shift(inner[0], inner[1], silent, outer, PLACE_EDGE_INWARD, blob_length_mm(reconstruction))
     one_camera = np.full(len(ring), -1)
     if FILL_NOTCHES and reconstruction.raised is not None:
-        fill, by = notch_fills(ring, outward, inner, outer, silent, reconstruction.raised)
+        fill, by = notch_fill(ring, outward, inner, outer, silent, reconstruction.raised)
         filled = (shift == 0) & (fill > 0)
         shift = np.where(filled, fill, shift)
         one_camera = np.where(filled, by, -1)

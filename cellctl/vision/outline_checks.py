@@ -98,7 +98,7 @@ def _check_outline_images(
     outward: np.ndarray,
     surface: SoleSurface,
     heights: Callable[[np.ndarray], np.ndarray],
-    one_camera: np.ndarray | None = None,
+    one_camera: np.ndarray,
 ) -> CheckFailure | None:
     """The outline against both cameras' change masks (taught table only): the right image, then the edge.
     one_camera: per ring point the camera whose reading alone counts for the edge offsets there (-1: both)."""
@@ -121,8 +121,7 @@ def _check_outline_images(
         (changed_right, right_pixel, right_centre),
     )
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
-    if one_camera is not None:
-        inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
+    inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
     # The stretches beyond both silhouettes too long for the placement to move in (image_edge.edge_shift's rule):
     # there the cameras' agreed readings count point by point too (edge_checks.agreed_offsets).
     smeared = smeared_stretches(inner[0], inner[1], blob_length_mm(reconstruction))
@@ -139,12 +138,10 @@ def _check_outline_images(
             cameras, reconstruction.rectified, (reconstruction.taught.left, reconstruction.taught.right), strict=True
         )
     )
-    inner_cleared, outer_cleared = stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
-    if one_camera is not None:
-        inner_cleared, outer_cleared = (
-            by_one_camera(inner_cleared, one_camera),
-            by_one_camera(outer_cleared, one_camera),
-        )
+    inner_cleared, outer_cleared = (
+        by_one_camera(readings, one_camera)
+        for readings in stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
+    )
     return _edge_offsets_problem(
         one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared), smeared
     )
@@ -152,7 +149,7 @@ def _check_outline_images(
 
 def by_one_camera(readings: tuple[np.ndarray, np.ndarray], one_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Both cameras' readings with the other camera's unknown (NaN) where one camera alone placed the outline
-    (`one_camera` per point: 0 left, 1 right, -1 neither): a notch that camera filled (image_edge.notch_fills),
+    (`one_camera` per point: 0 left, 1 right, -1 neither): a notch that camera filled (image_edge.notch_fill),
     which the other camera's mask shows because its mask has the notch."""
     left, right = readings
     return np.where(one_camera == 1, np.nan, left), np.where(one_camera == 0, np.nan, right)

@@ -215,14 +215,14 @@ class SoleReconstructor:
         """The remedy when the table does not fit the depth range (cellctl.vision.depth_hint), else "": its
         distance from the plane the refused run found, else from a wide match when too little was measured
         (the usual sign of a table outside the range)."""
-        from cellctl.stereo import to_float
-
         if refused is not None and refused.table_plane is not None:
             return depth_range_hint(refused.table_plane.offset, self.depth_range_mm)
         if refused is not None and refused.failure is not FailureKind.TOO_FEW_POINTS:
             return ""
 
         def match(low: int, num: int, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            from cellctl.stereo import to_float
+
             return to_float(self._stereo_matcher(low, num, coarse=True).compute_fixed(left, right))
 
         return depth_range_hint(view_distance_mm(self.calib, rect_left, rect_right, match), self.depth_range_mm)

@@ -18,7 +18,6 @@ from cellctl.vision.image_edge import (
     depth_silent,
     edge_shift,
     notch_fill,
-    notch_fills,
     stereo_offsets,
 )
 from cellctl.vision.outline_checks import by_one_camera
@@ -275,14 +274,14 @@ def test_one_camera_fills_a_notch_the_other_cameras_mask_left() -> None:
     reading is taken."""
     ring, outward, dent = notched(1.5)
     right, left = dent.copy(), np.zeros(len(ring))
-    move = notch_fill(ring, outward, (left, right), (left, right), always, disc_depth(RADIUS))
+    move, _ = notch_fill(ring, outward, (left, right), (left, right), always, disc_depth(RADIUS))
     inside = dent > EDGE_MOVE_MIN_MM
     assert np.allclose(move[inside], dent[inside]) and np.all(move[~inside] == 0.0)
-    both = notch_fill(ring, outward, (right - 0.2, right), (right - 0.2, right), always, disc_depth(RADIUS))
+    both, _ = notch_fill(ring, outward, (right - 0.2, right), (right - 0.2, right), always, disc_depth(RADIUS))
     assert np.allclose(both[inside], dent[inside] - 0.2)
-    _, by = notch_fills(ring, outward, (left, right), (left, right), always, disc_depth(RADIUS))
+    _, by = notch_fill(ring, outward, (left, right), (left, right), always, disc_depth(RADIUS))
     assert np.all(by[inside] == 1) and np.all(by[~inside] == -1)  # the right camera filled it
-    _, by = notch_fills(ring, outward, (right - 0.2, right), (right - 0.2, right), always, disc_depth(RADIUS))
+    _, by = notch_fill(ring, outward, (right - 0.2, right), (right - 0.2, right), always, disc_depth(RADIUS))
     assert np.all(by[inside] == 0)  # both could: the nearer edge, the left camera's
 
 
@@ -318,5 +317,5 @@ def test_no_fill_without_a_notch_depth_and_one_clear_edge(case: str) -> None:
     raised = disc_depth(RADIUS - (depth if case == "no depth" else 0.0))
     silent = (lambda p: np.zeros(len(p), bool)) if case == "table in the gap" else always
     zero = np.zeros(len(ring))
-    move = notch_fill(ring, outward, (zero, inner), (zero, outer), silent, raised)
+    move, _ = notch_fill(ring, outward, (zero, inner), (zero, outer), silent, raised)
     assert np.all(move == 0.0)
