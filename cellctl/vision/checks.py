@@ -52,7 +52,11 @@ CLAIMED_CELL_MM = 0.5  # raster of the outline's interior for the right camera's
 HIDDEN_STEP_MM = 1.0  # the ray to the camera is followed in these steps of height...
 HIDDEN_MAX_MM = 60.0  # ...up to the tallest sole
 GLUE_HEIGHT_MARGIN_MM = 1.5  # glue heights beyond the sole's own height range by more than this: not on it
-GLUE_MAX_SLOPE = 0.6  # height change per mm along the path between neighbouring points
+# Height change per mm along the path between neighbouring glue points. A sole's top under the glue path rises at
+# most ~0.5 (a short sole's toe spring: 0.52 on a 167 mm simulated sole) and the fitted heights' steps scatter by up
+# to ~0.4 mm over 2 mm on black rubber; a top steeper than 45 degrees along the path is no gluing surface (the
+# normals' own bound, MIN_GLUE_NZ, is 60 degrees), so a steeper step is a jump of the fit, not of the sole.
+GLUE_MAX_SLOPE = 1.0
 # Smoothed path against its own raw samples (after lone outliers are repaired): a patch's height noise on a
 # black sole reaches ~1.4 mm at worst; a failed fit is off by tens of mm.
 GLUE_MAX_DEVIATION_MM = 2.5

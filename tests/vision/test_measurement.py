@@ -238,6 +238,35 @@ def test_toe_and_heel_too_close_to_call(rig, reconstructor) -> None:  # noqa: AN
     assert isinstance(result, MeasurementRefused)  # no heights: the type has none
 
 
+def test_a_short_sole_with_a_steep_toe_spring_is_measured(rig, reconstructor) -> None:  # noqa: ANN001
+    """The glue path's checks bound what a sole's top can be, not what the standard soles happen to be: a 185 mm
+    sole whose toe rises steeply has glue points above its points' 99th percentile and steps of 0.7 mm per mm along
+    the path, and its right result is published (the checks once refused both)."""
+    from cellctl.vision.checks import GLUE_HEIGHT_MARGIN_MM
+
+    scene = SoleScene.random(2, "white", rig)
+    shape = scene.sole.shape
+    scale = 185.0 / shape.length
+    lengths = ("length", "heel_half_width", "ball_half_width", "medial_arch", "lateral_arch", "heel_cap", "toe_cap")
+    short = dataclasses.replace(
+        shape, **{name: getattr(shape, name) * scale for name in (*lengths, "toe_shift")}, toe_spring=40.0
+    )
+    scene = dataclasses.replace(scene, sole=SoleModel(short, scene.sole.pose))
+    pair = scene.render()
+    reconstruction = reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left))
+    result = measure_sole(reconstruction)
+    length, heel, toe = errors(scene, result)
+    assert abs(length) < 0.5 and abs(heel) < 0.1 and abs(toe) < 0.1
+    assert isinstance(result, SoleMeasurement)
+    z = result.glue_path.points[:, 2]
+    # What the old bounds refused: heights beyond the 99th percentile's margin, steps steeper than 0.6 per mm.
+    assert z.max() > np.quantile(reconstruction.sole_points[:, 2], 0.99) + GLUE_HEIGHT_MARGIN_MM
+    assert np.abs(np.diff(z)).max() > 0.6 * 2.0
+    transform = scene.table_from_measured(result.camera_to_table)
+    points = result.glue_path.points @ transform[:3, :3].T + transform[:3, 3]
+    assert np.abs(points[:, 2] - scene.sole.top_height_at(points[:, :2])).max() < 0.3
+
+
 # ---- the command ---------------------------------------------------------------------------------------
 
 
