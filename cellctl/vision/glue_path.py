@@ -8,10 +8,27 @@ from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.local_fit import disc_overlap, slope_gradients
 from cellctl.vision.sole_result import GluePath
-from cellctl.vision.surface import PATH_NOISE_LAG, PATH_SMOOTHING_MM, SoleSurface, path_heights, path_noise
+from cellctl.vision.surface import (
+    PATH_NOISE_LAG,
+    PATH_SMOOTHING_MM,
+    RingSamples,
+    SoleSurface,
+    path_heights,
+    path_noise,
+)
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
+# Rings of height samples this far inside the path that the heights' planes may span as well (surface.path_heights:
+# chosen where their expected error, bias against the path's own fit included, is the smallest). The glue points'
+# own patches, 2 mm from the edge, scatter ~1.5 x as much as those a few mm further in on black soles (0.43-0.54 vs
+# 0.29-0.38 mm rms, 16 standard soles; /work/notes/s15/rings.py) and their errors run along the edge; a plane
+# across the path and these rings averages them with nearly independent ones (6 mm apart, the 4 mm patches
+# barely overlap). The 6 mm ring is sampled at every other glue point (GLUE_RING_STRIDE): the planes are 6-12 mm
+# wide, and each sample is a patch fit the cycle pays for. A rounded top edge falls towards the path, which bends
+# a plane across the rings: there the bias against the path's own fit rules it out.
+GLUE_HEIGHT_RINGS_MM = (6.0, GLUE_NORMAL_BASE_MM)
+GLUE_RING_STRIDE = 2
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
 GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
 # The patch-overlap noise model (sample_variance) against the slopes' true errors: over the 113 measured soles of
@@ -49,9 +66,14 @@ def glue_path(
     path_xy = np.roll(path_xy, -start, axis=0)
     path_inward = -outward_normals(path_xy)
     inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
+    n = len(path_xy)
+    every = slice(None, None, GLUE_RING_STRIDE)
+    ring_xy = [
+        (path_xy + offset * path_inward)[every] for offset in GLUE_HEIGHT_RINGS_MM if offset != GLUE_NORMAL_BASE_MM
+    ]
     # The patch fits on two threads (SoleSurface.sample(parallel=True)): the same samples as on one.
-    samples = surface.sample(np.vstack([path_xy, inner_xy]), GLUE_FIT_RADIUS_MM, parallel=True)
-    missing = np.flatnonzero(~np.isfinite(samples.z[: len(path_xy)]))
+    samples = surface.sample(np.vstack([path_xy, inner_xy, *ring_xy]), GLUE_FIT_RADIUS_MM, parallel=True)
+    missing = np.flatnonzero(~np.isfinite(samples.z[:n]))
     if missing.size:
         x, y = path_xy[missing[0]]
         return None, (
@@ -63,14 +85,22 @@ def glue_path(
     # for a sloping surface also where the path turns round a pointed end), of the width and shape whose
     # expected error (the samples' noise, the fit's bias on a curved top) is smallest (surface.path_heights).
     sigma = PATH_SMOOTHING_MM / spacing_mm
-    raw = without_single_outliers(samples.z[: len(path_xy)])
-    inner = without_single_outliers(samples.z[len(path_xy) :])
+    raw = without_single_outliers(samples.z[:n])
+    inner = without_single_outliers(samples.z[n : 2 * n])
     path_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(path_xy, raw, spacing_mm)
+    inner_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(inner_xy, inner, spacing_mm)
+    rings = [(inner_xy, inner, inner_variance)] if GLUE_NORMAL_BASE_MM in GLUE_HEIGHT_RINGS_MM else []
+    start = 2 * n
+    for xy in ring_xy:
+        z = without_single_outliers(samples.z[start : start + len(xy)])
+        rings.append((xy, z, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(xy, z, GLUE_RING_STRIDE * spacing_mm)))
+        start += len(xy)
+    ring = RingSamples(*(np.concatenate(parts) for parts in zip(*rings, strict=True))) if rings else None
     # One after the other on this thread: beside each other on two threads (tried) they are two Python threads
     # making hundreds of short numpy calls each, handing the GIL back and forth, and the demo's glue path then
     # stalled for 200-350 ms in some cycles (max / median worse in 9 of 10 A/B pairs, docs/benchmarks.md).
-    z, height_sd = path_heights(path_xy, raw, path_variance)
-    normals = _slopes(path_xy, path_inward, inner_xy, raw, inner, path_variance, spacing_mm)
+    z, height_sd = path_heights(path_xy, raw, path_variance, ring)
+    normals = _slopes(path_xy, path_inward, inner_xy, raw, inner, path_variance, inner_variance, spacing_mm)
     patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals, height_sd), None
@@ -83,6 +113,7 @@ def _slopes(
     raw: np.ndarray,
     inner: np.ndarray,
     path_variance: np.ndarray,
+    inner_variance: np.ndarray,
     spacing_mm: float,
 ) -> np.ndarray:
     """The glue path's unit normals from its samples' heights (raw, on path_xy) and the inner ring's (inner)."""
@@ -95,7 +126,7 @@ def _slopes(
     # Where the slope changes along the path within the fit (a tall sole's heel seat running into its waist)
     # the plane takes up the slope a few mm away; there the fit adds the slope's change along the path, where
     # that lowers the expected error (cellctl.vision.local_fit.slope_gradients).
-    variance = np.concatenate([path_variance, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(inner_xy, inner, spacing_mm)])
+    variance = np.concatenate([path_variance, inner_variance])
     gradient, _ = slope_gradients(
         path_xy,
         np.column_stack([path_inward[:, 1], -path_inward[:, 0]]),  # the tangent

@@ -217,7 +217,19 @@ def path_noise(z: np.ndarray, lag: int = PATH_NOISE_LAG, window: int = PATH_NOIS
     return np.where(count > 0, np.sqrt(total / np.maximum(count, 1)), np.nan)
 
 
-def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class RingSamples:
+    """Patch heights off the path (rings further inside the sole): table points (M x 2), heights (M, NaN:
+    unknown) and their noise variances counted like path_heights' `variance`."""
+
+    xy: np.ndarray
+    z: np.ndarray
+    variance: np.ndarray
+
+
+def path_heights(
+    xy: np.ndarray, z: np.ndarray, variance: np.ndarray, ring: RingSamples | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Heights at the samples (xy K x 2, heights z K, NaN: unknown) of a closed path, each from the local fit of
     smallest expected error (see PATH_SMOOTHING_STEPS_MM), and that expected error (K, mm, an sd: the fit's noise
     and its estimated bias): `variance` (K, mm^2) is each sample's noise variance counted with its correlation to
@@ -227,7 +239,10 @@ def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> tuple[n
     The reference for the bias is the plane plus the curve along the path at the widest width: no bias from the
     top's curve along the path and the least noise of such fits. Where the path turns more than
     local_fit.FOLD_TURN_DEG within that fit's reach (round a pointed end) the distance along one tangent means
-    nothing: there only planes compete and the narrowest is the reference."""
+    nothing: there only planes compete and the narrowest is the reference.
+
+    With a `ring` of samples further inside, planes over the path's and the ring's samples together compete too
+    (glue_path.GLUE_HEIGHT_RINGS_MM says why), judged against the same reference."""
     result, expected = np.full(len(z), np.nan), np.full(len(z), np.nan)
     finite = np.isfinite(z)
     if not finite.any():
@@ -236,19 +251,36 @@ def path_heights(xy: np.ndarray, z: np.ndarray, variance: np.ndarray) -> tuple[n
     tangent = np.roll(xy, -1, axis=0) - np.roll(xy, 1, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     samples, noise = z[finite], known[finite]
+    across: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    if ring is not None and np.isfinite(ring.z).any():
+        inside = np.isfinite(ring.z)
+        across = (
+            np.vstack([xy[finite], ring.xy[inside]]),
+            np.concatenate([samples, ring.z[inside]]),
+            np.concatenate([noise, known_variance(ring.variance)[inside]]),
+        )
     straight = unfolded(tangent, PATH_SMOOTHING_STEPS_MM[-1], _median_spacing(xy))
     for part in query_chunks(len(z)):  # a few queries at a time: the same values (local_fit.QUERY_CHUNK)
         result[part], expected[part] = _least_error_heights(
-            _RowGeometry(xy[part], xy[finite], tangent[part]), samples, noise, straight[part]
+            _RowGeometry(xy[part], xy[finite], tangent[part]),
+            samples,
+            noise,
+            straight[part],
+            None if across is None else (_RowGeometry(xy[part], across[0], None), across[1], across[2]),
         )
     return result, np.sqrt(expected)
 
 
 def _least_error_heights(
-    geometry: _RowGeometry, samples: np.ndarray, noise: np.ndarray, straight: np.ndarray
+    geometry: _RowGeometry,
+    samples: np.ndarray,
+    noise: np.ndarray,
+    straight: np.ndarray,
+    across: tuple[_RowGeometry, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """path_heights at the queries of `geometry` (whose fits along the path are unfolded where `straight`), and
-    their expected squared errors."""
+    their expected squared errors; `across`: the geometry, heights and noise of the path's samples followed by a
+    ring's, for the planes over both."""
     # The planes narrow to wide, then the curved fit at the widest width: the reference where the path is straight.
     # A narrower curved fit cannot win there but by a rounding: its expected error is at least its variance, which
     # exceeds the reference's own (the fit of the same shape over more samples). Over the 135 valid results of the
@@ -266,9 +298,35 @@ def _least_error_heights(
         difference *= difference
         error[i] = np.maximum((estimates[i] - reference_estimate) ** 2 - difference @ noise, 0.0) + variances[i]
     error[planes:, ~straight] = np.inf
+    if across is not None:
+        estimates, error = _with_ring_planes(estimates, error, reference, reference_estimate, across)
     best = np.argmin(error, axis=0)
     pick = np.arange(len(straight))
     return estimates[best, pick], error[best, pick]
+
+
+def _with_ring_planes(
+    estimates: np.ndarray,
+    error: np.ndarray,
+    reference: np.ndarray,
+    reference_estimate: np.ndarray,
+    across: tuple[_RowGeometry, np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The candidates' estimates and expected squared errors with the planes over the path and the ring added at
+    each width, their bias judged against the path's own reference fit (whose rows `reference` weigh the path's
+    samples, the first of `across`'s)."""
+    geometry, samples, noise = across
+    path_count = reference.shape[1]
+    ring_estimates, ring_errors = [], []
+    for width in PATH_SMOOTHING_STEPS_MM:
+        rows = geometry.rows(width, False)
+        difference = rows.copy()
+        difference[:, :path_count] -= reference
+        estimate = rows @ samples
+        bias = np.maximum((estimate - reference_estimate) ** 2 - (difference * difference) @ noise, 0.0)
+        ring_estimates.append(estimate)
+        ring_errors.append(bias + (rows * rows) @ noise)
+    return np.vstack([estimates, *ring_estimates]), np.vstack([error, *ring_errors])
 
 
 def height_rows(at: np.ndarray, xy: np.ndarray, sigma_mm: float, tangent: np.ndarray | None = None) -> np.ndarray:
