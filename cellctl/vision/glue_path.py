@@ -90,11 +90,11 @@ def glue_path(
     path_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(path_xy, raw, spacing_mm)
     inner_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(inner_xy, inner, spacing_mm)
     rings = [(inner_xy, inner, inner_variance)] if GLUE_NORMAL_BASE_MM in GLUE_HEIGHT_RINGS_MM else []
-    start = 2 * n
+    first = 2 * n  # the rings' samples follow the path's and the inner ring's
     for xy in ring_xy:
-        z = without_single_outliers(samples.z[start : start + len(xy)])
+        z = without_single_outliers(samples.z[first : first + len(xy)])
         rings.append((xy, z, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(xy, z, GLUE_RING_STRIDE * spacing_mm)))
-        start += len(xy)
+        first += len(xy)
     ring = RingSamples(*(np.concatenate(parts) for parts in zip(*rings, strict=True))) if rings else None
     # One after the other on this thread: beside each other on two threads (tried) they are two Python threads
     # making hundreds of short numpy calls each, handing the GIL back and forth, and the demo's glue path then
