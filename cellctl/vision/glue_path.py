@@ -19,15 +19,16 @@ from cellctl.vision.surface import (
 
 GLUE_FIT_RADIUS_MM = 4.0
 GLUE_NORMAL_BASE_MM = 15.0  # second ring of height samples this far inside the path, for the normals (see below)
-# Rings of height samples this far inside the path that the heights' planes may span as well (surface.path_heights:
-# chosen where their expected error, bias against the path's own fit included, is the smallest). The glue points'
-# own patches, 2 mm from the edge, scatter ~1.5 x as much as those a few mm further in on black soles (0.43-0.54 vs
-# 0.29-0.38 mm rms, 16 standard soles; /work/notes/s15/rings.py) and their errors run along the edge; a plane
-# across the path and these rings averages them with nearly independent ones (6 mm apart, the 4 mm patches
-# barely overlap). The 6 mm ring is sampled at every other glue point (GLUE_RING_STRIDE): the planes are 6-12 mm
-# wide, and each sample is a patch fit the cycle pays for. A rounded top edge falls towards the path, which bends
-# a plane across the rings: there the bias against the path's own fit rules it out.
-GLUE_HEIGHT_RINGS_MM = (6.0, GLUE_NORMAL_BASE_MM)
+# A ring of height samples this far inside the path that the heights' planes may span, with the normals' ring
+# (surface.path_heights: chosen where their expected error, bias against the path's own fit included, is the
+# smallest). The glue points' own patches, 2 mm from the edge, scatter ~1.5 x as much as those a few mm further in
+# on black soles (0.43-0.54 vs 0.29-0.38 mm rms, 16 standard soles; /work/notes/s15/rings.py) and their errors run
+# along the edge; a plane across the path and the two rings averages them with nearly independent ones (6 mm
+# apart, the 4 mm patches barely overlap; a plane through the path and one ring alone passes through the path's own
+# mean). This ring is sampled at every GLUE_RING_STRIDE-th glue point: the planes are 6-12 mm wide, and each sample
+# is a patch fit the cycle pays for. A rounded top edge falls towards the path, which bends a plane across the
+# rings: there the bias against the path's own fit rules it out.
+GLUE_HEIGHT_RING_MM = 6.0
 GLUE_RING_STRIDE = 2
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
 GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
@@ -66,19 +67,15 @@ def glue_path(
     path_xy = np.roll(path_xy, -start, axis=0)
     path_inward = -outward_normals(path_xy)
     inner_xy = path_xy + GLUE_NORMAL_BASE_MM * path_inward
+    ring_xy = (path_xy + GLUE_HEIGHT_RING_MM * path_inward)[::GLUE_RING_STRIDE]
     n = len(path_xy)
-    every = slice(None, None, GLUE_RING_STRIDE)
-    ring_xy = [
-        (path_xy + offset * path_inward)[every] for offset in GLUE_HEIGHT_RINGS_MM if offset != GLUE_NORMAL_BASE_MM
-    ]
     # The patch fits on two threads (SoleSurface.sample(parallel=True)): the same samples as on one.
-    samples = surface.sample(np.vstack([path_xy, inner_xy, *ring_xy]), GLUE_FIT_RADIUS_MM, parallel=True)
+    samples = surface.sample(np.vstack([path_xy, inner_xy, ring_xy]), GLUE_FIT_RADIUS_MM, parallel=True)
     missing = np.flatnonzero(~np.isfinite(samples.z[:n]))
     if missing.size:
         x, y = path_xy[missing[0]]
         return None, (
-            f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm "
-            f"({missing.size} of {len(path_xy)} path points)"
+            f"glue path: no top surface measured near ({x:.1f}, {y:.1f}) mm ({missing.size} of {n} path points)"
         )
     # Neighbouring patches overlap but their noise does not all average out; the surface is smooth, so a
     # local fit to the path's samples around each point takes the rest (cellctl.vision.local_fit: unbiased
@@ -89,19 +86,17 @@ def glue_path(
     inner = without_single_outliers(samples.z[n : 2 * n])
     path_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(path_xy, raw, spacing_mm)
     inner_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(inner_xy, inner, spacing_mm)
-    rings = [(inner_xy, inner, inner_variance)] if GLUE_NORMAL_BASE_MM in GLUE_HEIGHT_RINGS_MM else []
-    first = 2 * n  # the rings' samples follow the path's and the inner ring's
-    for xy in ring_xy:
-        z = without_single_outliers(samples.z[first : first + len(xy)])
-        rings.append((xy, z, GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(xy, z, GLUE_RING_STRIDE * spacing_mm)))
-        first += len(xy)
-    ring = RingSamples(*(np.concatenate(parts) for parts in zip(*rings, strict=True))) if rings else None
+    ring_z = without_single_outliers(samples.z[2 * n :])
+    ring_variance = GLUE_SLOPE_NOISE_RATIO**2 * sample_variance(ring_xy, ring_z, GLUE_RING_STRIDE * spacing_mm)
+    rings = RingSamples(
+        np.vstack([inner_xy, ring_xy]), np.concatenate([inner, ring_z]), np.concatenate([inner_variance, ring_variance])
+    )
     # One after the other on this thread: beside each other on two threads (tried) they are two Python threads
     # making hundreds of short numpy calls each, handing the GIL back and forth, and the demo's glue path then
     # stalled for 200-350 ms in some cycles (max / median worse in 9 of 10 A/B pairs, docs/benchmarks.md).
-    z, height_sd = path_heights(path_xy, raw, path_variance, ring)
+    z, height_sd = path_heights(path_xy, raw, path_variance, rings)
     normals = _slopes(path_xy, path_inward, inner_xy, raw, inner, path_variance, inner_variance, spacing_mm)
-    patch_normals = smooth_along(samples.normals[: len(path_xy)], sigma)
+    patch_normals = smooth_along(samples.normals[:n], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals, height_sd), None
 

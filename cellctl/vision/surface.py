@@ -242,7 +242,7 @@ def path_heights(
     nothing: there only planes compete and the narrowest is the reference.
 
     With a `ring` of samples further inside, planes over the path's and the ring's samples together compete too
-    (glue_path.GLUE_HEIGHT_RINGS_MM says why), judged against the same reference."""
+    (glue_path.GLUE_HEIGHT_RING_MM says why), judged against the same reference."""
     result, expected = np.full(len(z), np.nan), np.full(len(z), np.nan)
     finite = np.isfinite(z)
     if not finite.any():

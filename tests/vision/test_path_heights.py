@@ -5,7 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from cellctl.vision.glue_path import GLUE_SLOPE_NOISE_RATIO, sample_variance
+from cellctl.vision.glue_path import (
+    GLUE_HEIGHT_RING_MM,
+    GLUE_NORMAL_BASE_MM,
+    GLUE_RING_STRIDE,
+    GLUE_SLOPE_NOISE_RATIO,
+    sample_variance,
+)
 from cellctl.vision.local_fit import local_planes
 from cellctl.vision.surface import PATH_SMOOTHING_MM, PATH_SMOOTHING_STEPS_MM, height_rows, path_heights
 
@@ -139,23 +145,24 @@ def test_heights_in_passes_of_a_few_queries_are_those_of_one_pass(monkeypatch) -
 
 
 def _rings(xy: np.ndarray) -> np.ndarray:
-    """The rings glue_path samples for the heights: 6 mm inside the path at every other point, 15 mm at each."""
+    """The rings glue_path samples for the heights: the normals' ring at each point, then the heights' own ring at
+    every GLUE_RING_STRIDE-th."""
     from cellctl.vision.closed_path import outward_normals
 
     inward = -outward_normals(xy)
-    return np.vstack([(xy + 6.0 * inward)[::2], xy + 15.0 * inward])
+    return np.vstack([xy + GLUE_NORMAL_BASE_MM * inward, (xy + GLUE_HEIGHT_RING_MM * inward)[::GLUE_RING_STRIDE]])
 
 
 def _with_rings(xy: np.ndarray, z: np.ndarray, ring_xy: np.ndarray, ring_z: np.ndarray) -> np.ndarray:
-    """path_heights with the rings' samples, with the noise model glue_path gives them."""
+    """path_heights with the rings' samples (_rings), with the noise model glue_path gives them."""
     from cellctl.vision.surface import RingSamples
 
     ratio = GLUE_SLOPE_NOISE_RATIO**2
-    half = len(xy) // 2 + len(xy) % 2
+    n = len(xy)
     variance = np.concatenate(
         [
-            sample_variance(ring_xy[:half], ring_z[:half], 2 * SPACING),
-            sample_variance(ring_xy[half:], ring_z[half:], SPACING),
+            sample_variance(ring_xy[:n], ring_z[:n], SPACING),
+            sample_variance(ring_xy[n:], ring_z[n:], GLUE_RING_STRIDE * SPACING),
         ]
     )
     return path_heights(xy, z, ratio * sample_variance(xy, z, SPACING), RingSamples(ring_xy, ring_z, ratio * variance))[
