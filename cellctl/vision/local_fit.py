@@ -22,6 +22,11 @@ GRADIENT_RIDGE_MM2 = 1.0
 # of them) went to memory: measured 26 -> 9 ms for slope_gradients on that path. Every query's arithmetic is the
 # same in any pass (each row of the work arrays is its own), so the results are bit for bit those of one pass.
 QUERY_CHUNK = 32
+# A pass's fits read only the samples within this many widths (Gaussian sigma) of its queries' bounding box: one
+# further from every query weighs < exp(-18) = 2e-8 of a sample at the query, so leaving it out moves a fit by
+# ~1e-8 of the heights' spread, while a pass of 32 consecutive points of a sole's path then reads about a third
+# of the path's and rings' samples instead of all of them (glue path stage 130 -> ~100 ms: issue 11, session 16).
+FIT_REACH_SIGMAS = 6.0
 
 
 def local_planes(at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float) -> tuple[np.ndarray, np.ndarray]:
@@ -143,17 +148,27 @@ def slope_gradients(
     known = known_variance(variance[finite])
     gradient, better = np.empty((len(at), 2)), unfolded(tangent, sigma_mm, spacing_mm)
 
-    def fit_variance(rows: np.ndarray) -> np.ndarray:
-        return np.sum(rows * rows * known, axis=(1, 2))
+    def fit_variance(rows: np.ndarray, noise: np.ndarray) -> np.ndarray:
+        return np.sum(rows * rows * noise, axis=(1, 2))
 
     for part in query_chunks(len(at)):
-        plane, plane_rows, cubic, cubic_rows = _plane_and_cubic(at[part], xy, z, sigma_mm, tangent[part])
-        plane_var, cubic_var = fit_variance(plane_rows), fit_variance(cubic_rows)
-        difference_var = fit_variance(cubic_rows - plane_rows)
+        near = within_reach(at[part], xy, sigma_mm)
+        plane, plane_rows, cubic, cubic_rows = _plane_and_cubic(at[part], xy[near], z[near], sigma_mm, tangent[part])
+        noise = known[near]
+        plane_var, cubic_var = fit_variance(plane_rows, noise), fit_variance(cubic_rows, noise)
+        difference_var = fit_variance(cubic_rows - plane_rows, noise)
         bias_and_noise = np.sum((cubic - plane) ** 2, axis=1)
         better[part] &= bias_and_noise - difference_var + plane_var > cubic_var
         gradient[part] = np.where(better[part, None], cubic, plane)
     return gradient, better
+
+
+def within_reach(at: np.ndarray, xy: np.ndarray, sigma_mm: float) -> np.ndarray:
+    """Indices of the samples xy (M x 2) a pass of fits of width `sigma_mm` at the queries `at` reads: those in the
+    queries' bounding box grown by FIT_REACH_SIGMAS widths (every sample that near a query, and a few more)."""
+    reach = FIT_REACH_SIGMAS * sigma_mm
+    low, high = at.min(axis=0) - reach, at.max(axis=0) + reach
+    return np.flatnonzero(np.all((xy >= low) & (xy <= high), axis=1))
 
 
 def query_chunks(count: int) -> list[slice]:

@@ -110,9 +110,9 @@ def test_sample_variance_counts_the_patches_overlap() -> None:
     assert 6.5 < ratio[0] < 7.5  # 3.44 / (1 - 4/3 x 0.39)
 
 
-def test_gradients_in_passes_of_a_few_queries_are_those_of_one_pass(monkeypatch) -> None:  # noqa: ANN001
-    """slope_gradients works through the queries QUERY_CHUNK at a time: bit for bit the gradients and choices of
-    one pass over all of them."""
+def test_gradients_in_passes_over_the_samples_within_reach_are_those_over_all(monkeypatch) -> None:  # noqa: ANN001
+    """slope_gradients works through the queries QUERY_CHUNK at a time, each pass over the samples within
+    FIT_REACH_SIGMAS widths: the gradients of one pass over every sample to ~1e-7 and the same choices."""
     import cellctl.vision.local_fit as local_fit
 
     path, ring, tangent = _straight_path_with_ring()
@@ -121,9 +121,25 @@ def test_gradients_in_passes_of_a_few_queries_are_those_of_one_pass(monkeypatch)
     z[5] = np.nan
     variance = np.full(len(xy), 0.2**2)
     assert len(path) > 2 * local_fit.QUERY_CHUNK and len(path) % local_fit.QUERY_CHUNK
+    # the path is longer than a pass's reach: the passes leave samples out
+    assert np.ptp(path[:, 0]) > 2.0 * local_fit.FIT_REACH_SIGMAS * 12.0
     in_passes = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
     monkeypatch.setattr(local_fit, "QUERY_CHUNK", len(path))
+    monkeypatch.setattr(local_fit, "FIT_REACH_SIGMAS", np.inf)
     one_pass = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
-    for a, b in zip(in_passes, one_pass, strict=True):
-        np.testing.assert_array_equal(a, b)
+    np.testing.assert_allclose(in_passes[0], one_pass[0], rtol=0.0, atol=1e-6)
+    np.testing.assert_array_equal(in_passes[1], one_pass[1])
     assert in_passes[1].any() and not in_passes[1].all()
+
+
+def test_within_reach_keeps_every_sample_near_a_query() -> None:
+    """within_reach: every sample within FIT_REACH_SIGMAS widths of a query is read, and far ones are not."""
+    from cellctl.vision.local_fit import FIT_REACH_SIGMAS, within_reach
+
+    rng = np.random.default_rng(4)
+    at, xy = rng.uniform(0.0, 40.0, (32, 2)), rng.uniform(-300.0, 300.0, (5000, 2))
+    distance = np.min(np.linalg.norm(xy[:, None] - at[None], axis=2), axis=1)
+    chosen = np.zeros(len(xy), bool)
+    chosen[within_reach(at, xy, 8.0)] = True
+    assert np.all(chosen[distance <= FIT_REACH_SIGMAS * 8.0])
+    assert not np.any(chosen[distance > FIT_REACH_SIGMAS * 8.0 * np.sqrt(2.0) + 60.0])  # the box grown

@@ -130,18 +130,23 @@ def test_unknown_heights_are_left_out() -> None:
     assert np.max(np.abs(result - top(xy))) < 1.0
 
 
-def test_heights_in_passes_of_a_few_queries_are_those_of_one_pass(monkeypatch) -> None:  # noqa: ANN001
-    """path_heights works through the queries QUERY_CHUNK at a time (arrays that stay in the cache): every query's
-    arithmetic is its own, so the heights are bit for bit those of one pass over all of them."""
+def test_heights_in_passes_over_the_samples_within_reach_are_those_over_all(monkeypatch) -> None:  # noqa: ANN001
+    """path_heights works through the queries QUERY_CHUNK at a time (arrays that stay in the cache), each pass over
+    the samples within local_fit.FIT_REACH_SIGMAS widths: the heights of one pass over every sample to ~1e-8 mm."""
     import cellctl.vision.local_fit as local_fit
 
     xy = ellipse_path(301)  # not a multiple of the pass size
     z = top(xy) + correlated_noise(len(xy), 0.3, 5, 2)
     z[[7, 150]] = np.nan
-    in_passes = heights(xy, z)
+    ring_xy = _rings(xy)
+    ring_z = top(ring_xy) + correlated_noise(len(ring_xy), 0.3, 6, 2)
+    in_passes = heights(xy, z), _with_rings(xy, z, ring_xy, ring_z)
     assert len(xy) > 2 * local_fit.QUERY_CHUNK
+    assert np.ptp(xy[:, 0]) > 2.0 * local_fit.FIT_REACH_SIGMAS * PATH_SMOOTHING_STEPS_MM[-1]  # some are left out
     monkeypatch.setattr(local_fit, "QUERY_CHUNK", len(xy))
-    np.testing.assert_array_equal(in_passes, heights(xy, z))
+    monkeypatch.setattr(local_fit, "FIT_REACH_SIGMAS", np.inf)
+    for passes, one_pass in zip(in_passes, (heights(xy, z), _with_rings(xy, z, ring_xy, ring_z)), strict=True):
+        np.testing.assert_allclose(passes, one_pass, rtol=0.0, atol=1e-6)
 
 
 def _rings(xy: np.ndarray) -> np.ndarray:
