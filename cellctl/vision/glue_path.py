@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
@@ -41,6 +42,12 @@ GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local pl
 # the cubic, up to +1 degree on a plain black sole). The heights' choice of fit (surface.path_heights) takes the
 # noise the same way.
 GLUE_SLOPE_NOISE_RATIO = 1.75
+# The glue normals' consistency check's second reference (checks.check_glue_path): the plane of the depth's own points
+# this far round a glue point, smoothed along the path like the patches' normals. Independent of the image fits, whose
+# tilts a colour edge on the sole pulls (matrix sole 2057's rim: 55 degrees from a glue normal 2.2 degrees from the
+# truth, where the depth's plane was 10 degrees off); 6 mm: the depth's noise at 4 mm left 25 degrees at the worst of
+# the matrix's black soles, this 18 (sets 2000 and 4000, 86 valid results; /work/notes/s16/normdiag.py).
+GLUE_DEPTH_NORMAL_RADIUS_MM = 6.0
 
 
 def glue_path(
@@ -99,6 +106,23 @@ def glue_path(
     patch_normals = smooth_along(samples.normals[:n], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals, height_sd), None
+
+
+def depth_normals(surface: SoleSurface, path_xy: np.ndarray, index: np.ndarray, spacing_mm: float) -> np.ndarray:
+    """Unit normals (len(index) x 3; NaN where the cloud has too few points) of the depth's planes
+    (SoleSurface.cloud_planes, GLUE_DEPTH_NORMAL_RADIUS_MM) at the glue points `index` of the closed path path_xy,
+    smoothed along it as the patches' normals are (closed_path.smooth_along, PATH_SMOOTHING_MM); only the points
+    the smoothing reads are fitted (the check asks for a few)."""
+    sigma = PATH_SMOOTHING_MM / spacing_mm
+    radius = min(int(np.ceil(3 * sigma)), len(path_xy) // 2)
+    around = (np.asarray(index)[:, None] + np.arange(-radius, radius + 1)[None]) % len(path_xy)
+    fitted, inverse = np.unique(around, return_inverse=True)
+    z, planes = surface.cloud_planes(path_xy[fitted], GLUE_DEPTH_NORMAL_RADIUS_MM)
+    weights = cv2.getGaussianKernel(2 * radius + 1, sigma).ravel()[None] * np.isfinite(z)[inverse.reshape(around.shape)]
+    summed = np.einsum("kw,kwc->kc", weights, planes[inverse.reshape(around.shape)])
+    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(length > 0.0, summed / length, np.nan)
 
 
 def _slopes(

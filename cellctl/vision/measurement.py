@@ -40,7 +40,7 @@ from cellctl.vision.defaults import (
 )
 from cellctl.vision.edge_checks import MIN_CONCAVE_RADIUS_MM
 from cellctl.vision.footprint import Footprint, snap_to_inset
-from cellctl.vision.glue_path import glue_path
+from cellctl.vision.glue_path import depth_normals, glue_path
 from cellctl.vision.image_edge import PlacedOutline, onto_image_edge
 from cellctl.vision.outline_checks import outline_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
@@ -163,8 +163,15 @@ def measure_sole(
     sole_z = np.quantile(points[:, 2], SOLE_HEIGHT_QUANTILES)
     raw_z = path.points[:, 2] if path.raw_z is None else path.raw_z
     patch_normals = path.normals if path.surface_normals is None else path.surface_normals
+    glue_xy = path.points[:, :2]
     problem = check_glue_path(
-        path.points, path.normals, raw_z, patch_normals, (float(sole_z[0]), float(sole_z[1])), glue_spacing_mm
+        path.points,
+        path.normals,
+        raw_z,
+        patch_normals,
+        (float(sole_z[0]), float(sole_z[1])),
+        glue_spacing_mm,
+        lambda index: depth_normals(surface, glue_xy, index, glue_spacing_mm),
     )
     if problem is None and path.height_sd is not None:
         problem = check_glue_precision(path.height_sd, glue_height_tolerance_mm)

@@ -57,7 +57,7 @@ class SoleSurface:
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
         refined = np.zeros(len(xy), bool)
         if self.rec.rectified is None:
-            z, normals = self._from_cloud(xy, radius_mm)
+            z, normals = self.cloud_planes(xy, radius_mm)
             return SurfaceSamples(z, normals, refined)
         half = len(xy) // 2
         parts = (np.arange(half), np.arange(half, len(xy))) if parallel and half > 0 else (np.arange(len(xy)),)
@@ -68,7 +68,7 @@ class SoleSurface:
         # Where the images gave no fit (too few pixels, no convergence), fall back to the cloud.
         rest = np.flatnonzero(~refined)
         if rest.size:
-            z[rest], normals[rest] = self._from_cloud(xy[rest], radius_mm)
+            z[rest], normals[rest] = self.cloud_planes(xy[rest], radius_mm)
         return SurfaceSamples(z, normals, refined)
 
     def coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
@@ -76,7 +76,9 @@ class SoleSurface:
         counts, medians = self.grid.radius_medians(xy, radius_mm)
         return np.where(counts >= MIN_CLOUD_POINTS, medians, np.nan)
 
-    def _from_cloud(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    def cloud_planes(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """Height and unit normal at table points xy (K x 2) of a plane through the cloud's points within the radius
+        (trimmed of the highest and lowest residuals); NaN height and an upright normal where too few points."""
         points = self.rec.sole_points
         z = np.full(len(xy), np.nan)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))

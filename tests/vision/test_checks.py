@@ -19,6 +19,11 @@ def _ring(radius: float, count: int = 200) -> tuple[np.ndarray, np.ndarray]:
     return radius * outward, outward
 
 
+def _upright(index: np.ndarray) -> np.ndarray:
+    """The depth's normals at the glue points `index` of a flat top."""
+    return np.tile([0.0, 0.0, 1.0], (len(index), 1))
+
+
 def _glue(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     xy, _ = _ring(50.0, len(z))
     normals = np.tile([0.0, 0.0, 1.0], (len(z), 1))
@@ -28,14 +33,14 @@ def _glue(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def test_a_smooth_glue_path_on_the_sole_passes() -> None:
     z = 20.0 + np.sin(np.linspace(0, 2 * np.pi, 150, endpoint=False))
     points, normals = _glue(z)
-    assert check_glue_path(points, normals, z + 0.3, normals, (15.0, 25.0), 2.0) is None
+    assert check_glue_path(points, normals, z + 0.3, normals, (15.0, 25.0), 2.0, _upright) is None
 
 
 def test_a_glue_point_below_the_table_is_refused() -> None:
     z = np.full(150, 20.0)
     z[40:60] = -15.0 + np.abs(np.arange(20) - 10.0)  # what a 200 mm patch fit spread by smoothing looks like
     points, normals = _glue(z)
-    problem = check_glue_path(points, normals, z, normals, (15.0, 25.0), 2.0)
+    problem = check_glue_path(points, normals, z, normals, (15.0, 25.0), 2.0, _upright)
     assert problem is not None and problem.kind is FailureKind.GLUE_PATH_INCONSISTENT
     assert "outside the sole's heights" in problem.reason
 
@@ -44,13 +49,13 @@ def test_a_height_jump_and_a_path_off_its_samples_are_refused() -> None:
     z = np.full(150, 20.0)
     z[70:] = 22.5
     points, normals = _glue(z)
-    problem = check_glue_path(points, normals, z, normals, (15.0, 25.0), 2.0)
+    problem = check_glue_path(points, normals, z, normals, (15.0, 25.0), 2.0, _upright)
     assert problem is not None and "jumps" in problem.reason
     smooth = np.full(150, 20.0)
     raw = smooth.copy()
     raw[30] = 24.0
     points, normals = _glue(smooth)
-    problem = check_glue_path(points, normals, raw, normals, (15.0, 25.0), 2.0)
+    problem = check_glue_path(points, normals, raw, normals, (15.0, 25.0), 2.0, _upright)
     assert problem is not None and "from the surface measured there" in problem.reason
 
 
@@ -71,13 +76,40 @@ def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
     assert unknown is not None and unknown.kind is FailureKind.SURFACE_NOT_MEASURED
 
 
+def _tilted(normals: np.ndarray, index: int | slice, degrees: float) -> np.ndarray:
+    tilted = normals.copy()
+    tilted[index] = [np.sin(np.radians(degrees)), 0.0, np.cos(np.radians(degrees))]
+    return tilted
+
+
 def test_a_glue_normal_against_the_surface_is_refused() -> None:
+    """A glue normal 40 degrees from both the patches' normals and the depth's plane is refused, with both angles."""
     z = np.full(150, 20.0)
     points, normals = _glue(z)
-    tilted = normals.copy()
-    tilted[10] = [np.sin(np.radians(40)), 0.0, np.cos(np.radians(40))]
-    problem = check_glue_path(points, tilted, z, normals, (15.0, 25.0), 2.0)
-    assert problem is not None and "degrees from the surface" in problem.reason
+    problem = check_glue_path(points, _tilted(normals, 10, 40.0), z, normals, (15.0, 25.0), 2.0, _upright)
+    assert problem is not None and problem.kind is FailureKind.GLUE_PATH_INCONSISTENT
+    assert "glue normal 10 is 40 degrees from the surface fitted around it and 40 from the depth's plane" in (
+        problem.reason
+    )
+
+
+def test_patch_normals_a_colour_edge_tilted_do_not_refuse_a_glue_normal_the_depth_confirms() -> None:
+    """The patches' normals tilted 50 degrees along a stretch (a rim's colour edge pulls their image fits) while
+    the depth's plane agrees with the glue normals: not refused, and the depth is asked only there. Where the
+    depth has no plane (NaN), the patches' word stands."""
+    z = np.full(150, 20.0)
+    points, normals = _glue(z)
+    patches = _tilted(normals, slice(40, 46), 50.0)
+    asked: list[np.ndarray] = []
+
+    def depth(index: np.ndarray) -> np.ndarray:
+        asked.append(index)
+        return _upright(index)
+
+    assert check_glue_path(points, normals, z, patches, (15.0, 25.0), 2.0, depth) is None
+    np.testing.assert_array_equal(np.concatenate(asked), np.arange(40, 46))
+    unknown = check_glue_path(points, normals, z, patches, (15.0, 25.0), 2.0, lambda i: np.full((len(i), 3), np.nan))
+    assert unknown is not None and "50 degrees from the surface fitted around it and no depth there" in unknown.reason
 
 
 def test_a_lone_failed_patch_fit_is_repaired_two_in_a_row_are_kept() -> None:

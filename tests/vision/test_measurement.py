@@ -140,6 +140,26 @@ def test_surface_samples_on_two_threads_are_those_on_one(stereo_results) -> None
                 np.testing.assert_array_equal(a, b)
 
 
+def test_the_depths_normals_along_the_glue_path_are_the_tops(stereo_results) -> None:  # noqa: ANN001
+    """glue_path.depth_normals, the glue-normal check's second reference (the depth's own planes, not the image
+    patches'): on the stereo soles, within a few degrees of the true top's normal at the glue points, at the points
+    asked for only."""
+    from cellctl.vision.defaults import GLUE_SPACING_MM
+    from cellctl.vision.glue_path import depth_normals
+    from cellctl.vision.surface import SoleSurface
+
+    for scene, _, reconstruction, result in stereo_results:
+        path = result.glue_path.points
+        transform = scene.table_from_measured(reconstruction.camera_to_table)
+        true_xy = (path @ transform[:3, :3].T + transform[:3, 3])[:, :2]
+        index = np.arange(0, len(path), 3)
+        normals = depth_normals(SoleSurface(reconstruction), path[:, :2], index, GLUE_SPACING_MM)
+        assert normals.shape == (len(index), 3)
+        cosine = np.sum(normals @ transform[:3, :3].T * scene.sole.top_normal_at(true_xy[index]), axis=1)
+        angles = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+        assert np.median(angles) < 6.0 and angles.max() < 20.0, (scene.color, np.median(angles), angles.max())
+
+
 def test_no_sole_in_view(rig, reconstructor) -> None:  # noqa: ANN001
     empty = dataclasses.replace(SoleScene.random(0, "white", rig), sole=None)
     pair = empty.render()
