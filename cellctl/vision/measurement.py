@@ -44,6 +44,7 @@ from cellctl.vision.glue_path import depth_normals, glue_path
 from cellctl.vision.image_edge import PlacedOutline, onto_image_edge
 from cellctl.vision.outline_checks import outline_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
+from cellctl.vision.sole_region import MAX_IMAGE_NOISE_DN
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 from cellctl.vision.workers import worker
@@ -183,6 +184,18 @@ def measure_sole(
     return SoleMeasurement(length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, **base)
 
 
+def _depth_holes_cause(noise_dn: float | None) -> str:
+    """What leaves a sole's pixels without depth, with the image's noise where it was read: the simulator's normal
+    sensor reads 0.5-0.75 DN, and a camera with three times its noise (under the image-noise check's
+    limit, reads 1.2) left 21-22 % of black soles' pixels without depth (docs/sole-benchmark.md, sixteenth round)."""
+    if noise_dn is None:
+        return "glare, no texture or image noise"
+    return (
+        f"glare, no texture or image noise: the image's noise reads {noise_dn:.1f} DN, refused beyond "
+        f"{MAX_IMAGE_NOISE_DN:g}; a clean camera reads under 0.8"
+    )
+
+
 def _outline_and_heights(
     reconstruction: Reconstruction,
     placed: PlacedOutline,
@@ -199,8 +212,9 @@ def _outline_and_heights(
         # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
         return _invalid(
             FailureKind.SURFACE_NOT_MEASURED,
-            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth (glare "
-            f"or no texture), so its edge cannot be confirmed ({problem.reason})",
+            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth "
+            f"({_depth_holes_cause(reconstruction.image_noise_dn)}), so its edge cannot be confirmed "
+            f"({problem.reason})",
             **base,
         )
     if problem is not None:

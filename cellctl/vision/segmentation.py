@@ -96,6 +96,7 @@ class Reconstruction(_SolePoints):
     changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
     changed_left: np.ndarray | None = None  # the same for the left image
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
+    image_noise_dn: float | None = None  # the rectified left image's noise (sole_region.image_noise_dn), if read
 
     @property
     def valid(self) -> bool:
@@ -154,6 +155,7 @@ class _RunState:
         self.table_points: Footprint | None = None  # cells with a measured point at the table's height
         self.changed_right: np.ndarray | None = None
         self._changed_left: np.ndarray | None = None
+        self.image_noise: float | None = None  # image_noise_dn of the rectified left image, once read
 
     def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
         """A refusal with what this run found about the table and the cloud, plus the sole's points if any."""
@@ -188,6 +190,7 @@ class _RunState:
             taught=self.taught,
             changed_right=self.changed_right,
             changed_left=self._changed_left,
+            image_noise_dn=self.image_noise,
             **sole,
         )
 
@@ -203,7 +206,7 @@ class Segmentation(_RunState):
                 f"{100 * MIN_VALID_FRACTION:.0f} %); check lighting, focus, the calibration and the depth range",
             )
         if self.cloud.rectified is not None:
-            noise = image_noise_dn(self.cloud.rectified[0])
+            noise = self.image_noise = image_noise_dn(self.cloud.rectified[0])
             if noise > MAX_IMAGE_NOISE_DN:
                 return self._refused(
                     FailureKind.SURFACE_NOT_MEASURED,

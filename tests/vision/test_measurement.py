@@ -160,6 +160,20 @@ def test_the_depths_normals_along_the_glue_path_are_the_tops(stereo_results) -> 
         assert np.median(angles) < 6.0 and angles.max() < 20.0, (scene.color, np.median(angles), angles.max())
 
 
+def test_the_images_noise_is_kept_and_named_where_depth_has_holes(stereo_results) -> None:  # noqa: ANN001
+    """The segmentation's reading of the image noise stays on the reconstruction (a clean simulated camera reads
+    0.5-0.75 DN), and a refusal for pixels without depth names it beside glare and texture, with the limit."""
+    from cellctl.vision.measurement import _depth_holes_cause
+
+    for _, _, reconstruction, _ in stereo_results:
+        assert reconstruction.image_noise_dn is not None and 0.3 < reconstruction.image_noise_dn < 0.9
+    assert _depth_holes_cause(1.24) == (
+        "glare, no texture or image noise: the image's noise reads 1.2 DN, refused beyond 1.5; a clean camera reads "
+        "under 0.8"
+    )
+    assert _depth_holes_cause(None) == "glare, no texture or image noise"
+
+
 def test_no_sole_in_view(rig, reconstructor) -> None:  # noqa: ANN001
     empty = dataclasses.replace(SoleScene.random(0, "white", rig), sole=None)
     pair = empty.render()
