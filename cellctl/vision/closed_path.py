@@ -10,12 +10,19 @@ import cv2
 import numpy as np
 
 
+def along_kernel(sigma_samples: float, count: int) -> np.ndarray:
+    """The Gaussian weights smooth_along gives a point's neighbours -radius..radius on a closed path of `count`
+    points (3 sigma, at most half the path either side)."""
+    radius = min(int(np.ceil(3 * sigma_samples)), count // 2)
+    return cv2.getGaussianKernel(2 * radius + 1, sigma_samples).ravel()
+
+
 def smooth_along(values: np.ndarray, sigma_samples: float) -> np.ndarray:
     """Gaussian smoothing of per-point values (N or N x k) along a closed path."""
-    radius = min(int(np.ceil(3 * sigma_samples)), len(values) // 2)
+    kernel = along_kernel(sigma_samples, len(values))
+    radius = len(kernel) // 2
     if radius < 1:
         return values
-    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma_samples).ravel()
     padded = np.concatenate([values[-radius:], values, values[:radius]])
     if padded.ndim == 1:
         return np.convolve(padded, kernel, mode="valid")

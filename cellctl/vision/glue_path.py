@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
-from cellctl.vision.closed_path import outward_normals, resample_closed, smooth_along
+from cellctl.vision.closed_path import along_kernel, outward_normals, resample_closed, smooth_along
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
 from cellctl.vision.local_fit import disc_overlap, slope_gradients
 from cellctl.vision.sole_result import GluePath
@@ -113,13 +112,14 @@ def depth_normals(surface: SoleSurface, path_xy: np.ndarray, index: np.ndarray, 
     (SoleSurface.cloud_planes, GLUE_DEPTH_NORMAL_RADIUS_MM) at the glue points `index` of the closed path path_xy,
     smoothed along it as the patches' normals are (closed_path.smooth_along, PATH_SMOOTHING_MM); only the points
     the smoothing reads are fitted (the check asks for a few)."""
-    sigma = PATH_SMOOTHING_MM / spacing_mm
-    radius = min(int(np.ceil(3 * sigma)), len(path_xy) // 2)
+    kernel = along_kernel(PATH_SMOOTHING_MM / spacing_mm, len(path_xy))
+    radius = len(kernel) // 2
     around = (np.asarray(index)[:, None] + np.arange(-radius, radius + 1)[None]) % len(path_xy)
     fitted, inverse = np.unique(around, return_inverse=True)
     z, planes = surface.cloud_planes(path_xy[fitted], GLUE_DEPTH_NORMAL_RADIUS_MM)
-    weights = cv2.getGaussianKernel(2 * radius + 1, sigma).ravel()[None] * np.isfinite(z)[inverse.reshape(around.shape)]
-    summed = np.einsum("kw,kwc->kc", weights, planes[inverse.reshape(around.shape)])
+    which = inverse.reshape(around.shape)
+    weights = kernel[None] * np.isfinite(z)[which]
+    summed = np.einsum("kw,kwc->kc", weights, planes[which])
     length = np.linalg.norm(summed, axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(length > 0.0, summed / length, np.nan)

@@ -259,8 +259,8 @@ def path_heights(
     if ring is not None:
         inside = np.isfinite(ring.z)
         ring_xy, ring_z, ring_noise = ring.xy[inside], ring.z[inside], known_variance(ring.variance)[inside]
-    straight = unfolded(tangent, PATH_SMOOTHING_STEPS_MM[-1], _median_spacing(xy))
     widest = PATH_SMOOTHING_STEPS_MM[-1]
+    straight = unfolded(tangent, widest, _median_spacing(xy))
     for part in query_chunks(len(z)):  # a few queries at a time, over the samples within reach (local_fit)
         near, near_ring = within_reach(xy[part], path_xy, widest), within_reach(xy[part], ring_xy, widest)
         if not near.size:
