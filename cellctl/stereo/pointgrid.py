@@ -99,6 +99,14 @@ class PointGrid:
         """How many points lie within `radius` of each query point (K x 2)."""
         return self._radius(*self._queries(xy, radius), radius, None)[0]
 
+    def radius_members(self, xy: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per query point (K x 2) how many points lie within `radius`, and those points (indices) query after
+        query in one array (unordered within a query): for work done on all of them at once."""
+        qx, qy = self._queries(xy, radius)
+        counts = self._radius(qx, qy, radius, None)[0]
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return counts, self._radius(qx, qy, radius, offsets)[1]
+
     def radius_indices(self, xy: np.ndarray, radius: float) -> list[np.ndarray]:
         """The points (indices) within `radius` of each query point, nearest first (ties by index), as a k-d
         tree's radius search orders them."""

@@ -78,14 +78,20 @@ class SoleSurface:
 
     def cloud_planes(self, xy: np.ndarray, radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
         """Height and unit normal at table points xy (K x 2) of a plane through the cloud's points within the radius
-        (trimmed of the highest and lowest residuals); NaN height and an upright normal where too few points."""
-        points = self.rec.sole_points
+        (trimmed of the highest and lowest residuals, `robust_planes`); NaN height and an upright normal where too
+        few points."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
         z = np.full(len(xy), np.nan)
         normals = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
-        for k, (index, (x, y)) in enumerate(zip(self.grid.radius_indices(xy, radius_mm), xy, strict=True)):
-            if len(index) < MIN_CLOUD_POINTS:
-                continue
-            z[k], normals[k] = _robust_plane(points[index], np.array([x, y]))
+        counts, members = self.grid.radius_members(xy, radius_mm)
+        enough = np.flatnonzero(counts >= MIN_CLOUD_POINTS)
+        if enough.size:
+            query = np.repeat(np.arange(len(xy)), counts)
+            chosen = np.flatnonzero(counts[query] >= MIN_CLOUD_POINTS)
+            ids = np.searchsorted(enough, query[chosen])  # 0..len(enough)-1, ascending
+            z[enough], normals[enough] = robust_planes(
+                np.take(self.rec.sole_points, members[chosen], axis=0), xy[enough], ids
+            )
         return z, normals
 
     def _refine(
@@ -171,24 +177,69 @@ def heights_on_planes(planes: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, n
     return np.where(finite, z, np.nan), normals
 
 
-def _plane_at(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray]:
-    """Least-squares plane z = z0 + gx (x - x0) + gy (y - y0) through points: z0 and the unit normal."""
-    design = np.column_stack([np.ones(len(points)), points[:, 0] - xy[0], points[:, 1] - xy[1]])
-    coef = np.linalg.lstsq(design, points[:, 2], rcond=None)[0]
-    normal = np.array([-coef[1], -coef[2], 1.0])
-    return float(coef[0]), normal / np.linalg.norm(normal)
+def robust_planes(points: np.ndarray, at: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per query (at, K x 2) the plane z = z0 + gx (x - x0) + gy (y - y0) through its points (points N x 3, query
+    ids N, ascending, every query with 3 or more), fitted again after dropping the points whose residuals lie
+    below the TRIM or above the 1 - TRIM quantile of the query's (numpy's linear quantiles): z0 and the unit
+    normal per query. All queries at once on segmented sums (the depth's normals of a whole glue path are
+    hundreds of queries: ~0.8 ms each fitted one by one in Python)."""
+    count = len(at)
+    dx = points[:, 0] - at[ids, 0]
+    dy = points[:, 1] - at[ids, 1]
+    coef = _segment_planes(dx, dy, points[:, 2], ids, count, np.ones(len(ids), bool))
+    residual = points[:, 2] - (coef[ids, 0] + coef[ids, 1] * dx + coef[ids, 2] * dy)
+    low, high = _segment_quantiles(residual, ids, count, (TRIM, 1.0 - TRIM))
+    keep = (residual >= low[ids]) & (residual <= high[ids])
+    refit = np.bincount(ids, weights=keep, minlength=count) >= 3
+    coef = np.where(refit[:, None], _segment_planes(dx, dy, points[:, 2], ids, count, keep), coef)
+    normals = np.column_stack([-coef[:, 1], -coef[:, 2], np.ones(count)])
+    return coef[:, 0], normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
-def _robust_plane(points: np.ndarray, xy: np.ndarray) -> tuple[float, np.ndarray]:
-    """Plane through the points after trimming the highest and lowest TRIM of their residuals."""
-    z0, normal = _plane_at(points, xy)
-    predicted = z0 - ((points[:, 0] - xy[0]) * normal[0] + (points[:, 1] - xy[1]) * normal[1]) / normal[2]
-    residual = points[:, 2] - predicted
-    lo, hi = np.quantile(residual, [TRIM, 1.0 - TRIM])
-    keep = (residual >= lo) & (residual <= hi)
-    if keep.sum() >= 3:
-        z0, normal = _plane_at(points[keep], xy)
-    return z0, normal
+def _segment_planes(
+    dx: np.ndarray, dy: np.ndarray, z: np.ndarray, ids: np.ndarray, count: int, use: np.ndarray
+) -> np.ndarray:
+    """Least-squares (z0, gx, gy) per query over its points where `use` (K x 3): the normal equations, solved by
+    the pseudo-inverse (the least-norm solution, as np.linalg.lstsq gives, where the points are degenerate)."""
+    w = use.astype(np.float64)
+    wx, wy = w * dx, w * dy
+    terms = np.stack((w, wx, wy, wx * dx, wx * dy, wy * dy, w * z, wx * z, wy * z))
+    # One reduceat over the rows of all nine terms (ids ascending, no query empty): ~3 x faster than nine bincounts.
+    s1, sx, sy, sxx, sxy, syy, sz, sxz, syz = np.add.reduceat(terms, _segment_starts(ids, count), axis=1)
+    normal = np.stack([np.stack([s1, sx, sy], -1), np.stack([sx, sxx, sxy], -1), np.stack([sy, sxy, syy], -1)], -2)
+    rhs = np.stack([sz, sxz, syz], -1)
+    return np.einsum("kij,kj->ki", np.linalg.pinv(normal), rhs)
+
+
+def _segment_starts(ids: np.ndarray, count: int) -> np.ndarray:
+    """Where each query's values start in `ids` (ascending, every query 0..count-1 present)."""
+    sizes = np.bincount(ids, minlength=count)
+    return np.cumsum(sizes) - sizes
+
+
+def _segment_quantiles(
+    values: np.ndarray, ids: np.ndarray, count: int, quantiles: tuple[float, ...]
+) -> tuple[np.ndarray, ...]:
+    """Per query the `quantiles` of its values (ids ascending, every query with at least one value), interpolated
+    linearly between order statistics as np.quantile's default does."""
+    sizes = np.bincount(ids, minlength=count)
+    starts = np.cumsum(sizes) - sizes
+    # Each query's values in a row of their own, padded with +inf, sorted along the rows: the order statistics by
+    # (row, rank). A lexsort of (values, ids) over all of them took ~5 x as long.
+    table = np.full((count, int(sizes.max())), np.inf)
+    table[ids, np.arange(len(ids)) - starts[ids]] = values
+    table.sort(axis=1)
+    rows = np.arange(count)
+    result = []
+    for q in quantiles:
+        position = (sizes - 1) * q
+        below = np.floor(position).astype(np.int64)
+        above = np.minimum(below + 1, sizes - 1)
+        t = position - below
+        a, b = table[rows, below], table[rows, above]
+        # numpy's lerp: from the nearer end, so that a whole position gives the order statistic itself.
+        result.append(np.where(t >= 0.5, b - (b - a) * (1.0 - t), a + (b - a) * t))
+    return tuple(result)
 
 
 # Heights along a closed path (the glue path) from its patches' noisy heights: a local fit along the path, of a

@@ -317,6 +317,10 @@ def test_point_grid_finds_what_a_kd_tree_finds(cell: float) -> None:
         counts, medians = grid.radius_medians(queries, radius)
         found = grid.radius_indices(queries, radius)
         np.testing.assert_array_equal(grid.radius_counts(queries, radius), counts)
+        member_counts, members = grid.radius_members(queries, radius)  # the same sets, one flat array
+        np.testing.assert_array_equal(member_counts, counts)
+        for k, chunk in enumerate(np.split(members, np.cumsum(member_counts)[:-1])):
+            np.testing.assert_array_equal(np.sort(chunk), np.sort(found[k]))
         for k, (x, y) in enumerate(queries):
             index = np.asarray(tree.search_radius_vector_3d(np.array([x, y, 0.0]), radius)[1], np.int64)
             np.testing.assert_array_equal(found[k], index)
