@@ -77,16 +77,19 @@ GLUE_COVER_RADIUS_MM = 1.0
 MAX_GLUE_UNCOVERED = 0.05
 # The glue heights' precision: the median along the path of each height's expected error (the sd of the fit that
 # gave it: glue_path.sample_variance's noise model and the fit's bias, cellctl.vision.surface.path_heights), as a
-# share of the glue-height tolerance. A path's worst point lies ~2.3 x that median off (median ratio over the 185
-# valid results of the four matrix sets, 90th percentile 3.2), so beyond 0.45 x the tolerance its worst point is
-# more likely than not outside it: the top has too little texture, or the images too much noise, for heights that
-# fine. Measured (issue 11, session 12, docs/sole-benchmark.md), against the default 1 mm: the matrix's valid soles
-# read 0.11-0.55 mm (black 0.34 median); black soles with 50-60 % of the simulator's texture contrast read
-# 0.47-0.61 and those above 0.5 were published 1.1-1.2 mm off; white soles through a rig of half the resolution
-# read 0.57-0.64 and were published 1.0-1.8 mm off. Measured again with the heights' rings (session 16, the 223
-# valid results of the four matrix sets and both standard 20s): the worst point ~2.5 x the median (black soles,
-# where the limit bites, 2.2, 90th percentile 2.7; white soles 2.7 / 3.9 at medians of at most 0.24 mm).
-GLUE_TYPICAL_SD_SHARE = 0.45
+# share of the glue-height tolerance. Measured (issue 11, session 12, docs/sole-benchmark.md), against the default
+# 1 mm: the matrix's valid soles read 0.11-0.55 mm (black 0.34 median); black soles with 50-60 % of the simulator's
+# texture contrast read 0.47-0.61 and those above 0.5 were published 1.1-1.2 mm off; white soles through a rig of
+# half the resolution read 0.57-0.64 and were published 1.0-1.8 mm off. The share is where a path's worst point
+# stays within the tolerance on nine soles in ten *at the limit*: the worst point's multiple of the median,
+# measured on the black soles whose medians lie near it (where the check bites; session 17: the 22 black soles
+# of the four matrix sets, both standard 20s, the tilted-rig probes and probes of 70 and 80 % of the texture
+# contrast with medians of 0.33-0.48 mm), is 2.06 in the median and 2.33 at the 90th percentile (max 2.78), so
+# 0.40 x 2.33 = 0.93. At 0.45 (sessions 12-16, chosen from the median multiple over all valid soles, 2.2-2.5, which
+# low-noise soles dominate) a probe sole at 0.44 was published 1.03 mm off. The multiple is larger at low medians
+# (below 0.30 mm: 2.32, 90th percentile 2.77, up to 4.25 on a rig tilted 9 degrees): there the worst point is one
+# patch's luck, which no limit on the median separates (docs/sole-benchmark.md, seventeenth round).
+GLUE_TYPICAL_SD_SHARE = 0.40
 
 
 @dataclass(frozen=True)
