@@ -90,6 +90,14 @@ MAX_GLUE_UNCOVERED = 0.05
 # (below 0.30 mm: 2.32, 90th percentile 2.77, up to 4.25 on a rig tilted 9 degrees): there the worst point is one
 # patch's luck, which no limit on the median separates (docs/sole-benchmark.md, seventeenth round).
 GLUE_TYPICAL_SD_SHARE = 0.40
+# The multiple holds on rigs that look at the table within CALIBRATED_OBLIQUENESS_DEG of its normal (TablePlane.
+# obliqueness_deg: the simulator's rigs 2.5-3.3 degrees; the matrix multiple above). Probes of the standard soles
+# 7000-7015 on rigs tilted further, black soles, the worst point's multiple in the median: 2.26 at 5.0 degrees,
+# 2.23 at 6.8, 3.39 at 9.7 (two of eight black soles published 1.00 and 1.18 mm off with medians of 0.32 and
+# 0.28: the patches' errors run along the path over more of it); docs/sole-benchmark.md, seventeenth round. Beyond
+# it the limit shrinks by the ratio measured at 9.7 degrees, OBLIQUE_SD_SHARE_FACTOR.
+CALIBRATED_OBLIQUENESS_DEG = 7.0
+OBLIQUE_SD_SHARE_FACTOR = 0.66
 
 
 @dataclass(frozen=True)
@@ -285,18 +293,36 @@ def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:
     return None
 
 
-def check_glue_precision(height_sd: np.ndarray, tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM) -> CheckFailure | None:
+def glue_sd_limit(tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM, obliqueness_deg: float = 0.0) -> float:
+    """The most the glue heights' median expected error may be (mm) for `tolerance_mm`, on a rig that looks at the
+    table `obliqueness_deg` off its normal (GLUE_TYPICAL_SD_SHARE, less beyond CALIBRATED_OBLIQUENESS_DEG)."""
+    share = GLUE_TYPICAL_SD_SHARE
+    if obliqueness_deg > CALIBRATED_OBLIQUENESS_DEG:
+        share *= OBLIQUE_SD_SHARE_FACTOR
+    return share * tolerance_mm
+
+
+def check_glue_precision(
+    height_sd: np.ndarray, tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM, obliqueness_deg: float = 0.0
+) -> CheckFailure | None:
     """The glue heights' expected errors (per point, mm) against what a glue-height tolerance of `tolerance_mm`
-    allows (GLUE_TYPICAL_SD_SHARE of it, in the median along the path)."""
+    allows (`glue_sd_limit`, in the median along the path) on a rig looking at the table `obliqueness_deg` off its
+    normal."""
     if not np.any(np.isfinite(height_sd)):
         return CheckFailure(FailureKind.SURFACE_NOT_MEASURED, "the glue heights' expected error is unknown")
-    typical, limit = float(np.nanmedian(height_sd)), GLUE_TYPICAL_SD_SHARE * tolerance_mm
+    typical, limit = float(np.nanmedian(height_sd)), glue_sd_limit(tolerance_mm, obliqueness_deg)
     if typical > limit:
+        oblique = (
+            f" on a rig looking at the table {obliqueness_deg:.1f} degrees off its normal (beyond "
+            f"{CALIBRATED_OBLIQUENESS_DEG:g} the limit is smaller: mount the cameras square to the table)"
+            if obliqueness_deg > CALIBRATED_OBLIQUENESS_DEG
+            else ""
+        )
         return CheckFailure(
             FailureKind.SURFACE_NOT_MEASURED,
             f"the sole's top is measured too coarsely for its glue heights: their expected error is {typical:.2f} mm "
-            f"(median along the path; at most {limit:.2f} for the {tolerance_mm:g} mm tolerance): too little "
-            "texture on the top or too much image noise; light the sole more brightly or raise the exposure",
+            f"(median along the path; at most {limit:.2f} for the {tolerance_mm:g} mm tolerance{oblique}): too "
+            "little texture on the top or too much image noise; light the sole more brightly or raise the exposure",
         )
     return None
 

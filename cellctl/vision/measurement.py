@@ -175,7 +175,9 @@ def measure_sole(
         lambda index: depth_normals(surface, glue_xy, index, glue_spacing_mm),
     )
     if problem is None and path.height_sd is not None:
-        problem = check_glue_precision(path.height_sd, glue_height_tolerance_mm)
+        problem = check_glue_precision(
+            path.height_sd, glue_height_tolerance_mm, reconstruction.table_plane.obliqueness_deg()
+        )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)
     implausible = _implausible(length, heel_z, toe_z)

@@ -41,6 +41,11 @@ class TablePlane:
     def heights(self, points: np.ndarray) -> np.ndarray:
         return points @ self.normal + self.offset
 
+    def obliqueness_deg(self) -> float:
+        """The angle between the rectified cameras' viewing axis and the table's normal, in degrees (0: looking
+        straight down at it)."""
+        return float(np.degrees(np.arccos(min(abs(float(self.normal[2])), 1.0))))
+
     def camera_to_table(self) -> np.ndarray:
         """4 x 4 rigid transform from the rectified left camera frame to the table frame.
 

@@ -8,9 +8,17 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision import checks
-from cellctl.vision.checks import GLUE_TYPICAL_SD_SHARE, check_glue_path, check_glue_precision, check_outline_depth
+from cellctl.vision.checks import (
+    CALIBRATED_OBLIQUENESS_DEG,
+    GLUE_TYPICAL_SD_SHARE,
+    check_glue_path,
+    check_glue_precision,
+    check_outline_depth,
+    glue_sd_limit,
+)
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.glue_path import without_single_outliers
+from cellctl.vision.table import TablePlane
 
 
 def _ring(radius: float, count: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -77,6 +85,27 @@ def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
     assert check_glue_precision(sd, 2.0) is None  # a cell whose dispenser allows 2 mm takes it
     unknown = check_glue_precision(np.full(10, np.nan))
     assert unknown is not None and unknown.kind is FailureKind.SURFACE_NOT_MEASURED
+
+
+def test_a_rig_looking_at_the_table_more_obliquely_than_calibrated_asks_for_finer_glue_heights() -> None:
+    """Beyond CALIBRATED_OBLIQUENESS_DEG the worst glue points run further off their expected errors: the same path
+    passes on a rig looking nearly straight down and is refused on a tilted one, with the tilt and the remedy."""
+    sd = np.full(300, 0.9 * GLUE_TYPICAL_SD_SHARE)
+    assert check_glue_precision(sd, 1.0, 2.5) is None
+    assert check_glue_precision(sd, 1.0, CALIBRATED_OBLIQUENESS_DEG) is None
+    problem = check_glue_precision(sd, 1.0, 9.7)
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert "9.7 degrees off its normal" in problem.reason and "square to the table" in problem.reason
+    assert f"at most {glue_sd_limit(1.0, 9.7):.2f}" in problem.reason
+    assert glue_sd_limit(1.0, 9.7) < 0.9 * GLUE_TYPICAL_SD_SHARE < glue_sd_limit(1.0, 0.0)
+    assert glue_sd_limit(2.0, 0.0) == 2.0 * glue_sd_limit(1.0, 0.0)
+
+
+def test_a_table_planes_obliqueness_is_the_angle_of_its_normal_to_the_viewing_axis() -> None:
+    assert TablePlane(np.array([0.0, 0.0, 1.0]), 500.0).obliqueness_deg() == 0.0
+    tilt = np.radians(9.7)
+    tilted = TablePlane(np.array([np.sin(tilt) * 0.6, np.sin(tilt) * 0.8, -np.cos(tilt)]), 500.0)
+    assert abs(tilted.obliqueness_deg() - 9.7) < 1e-9
 
 
 def _tilted(normals: np.ndarray, index: int | slice, degrees: float) -> np.ndarray:
