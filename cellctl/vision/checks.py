@@ -82,22 +82,23 @@ MAX_GLUE_UNCOVERED = 0.05
 # texture contrast read 0.47-0.61 and those above 0.5 were published 1.1-1.2 mm off; white soles through a rig of
 # half the resolution read 0.57-0.64 and were published 1.0-1.8 mm off. The share is where a path's worst point
 # stays within the tolerance on nine soles in ten *at the limit*: the worst point's multiple of the median,
-# measured on the black soles whose medians lie near it (where the check bites; session 17: the 22 black soles
-# of the four matrix sets, both standard 20s, the tilted-rig probes and probes of 70 and 80 % of the texture
-# contrast with medians of 0.33-0.48 mm), is 2.06 in the median and 2.33 at the 90th percentile (max 2.78), so
-# 0.40 x 2.33 = 0.93. At 0.45 (sessions 12-16, chosen from the median multiple over all valid soles, 2.2-2.5, which
-# low-noise soles dominate) a probe sole at 0.44 was published 1.03 mm off. The multiple is larger at low medians
-# (below 0.30 mm: 2.32, 90th percentile 2.77, up to 4.25 on a rig tilted 9 degrees): there the worst point is one
-# patch's luck, which no limit on the median separates (docs/sole-benchmark.md, seventeenth round).
+# measured on the black soles whose medians lie near it (where the check bites; session 17: the 21 black soles
+# of the four matrix sets, both standard 20s and probes of rigs tilted to 6.8 degrees and of 70 and 80 % of the
+# texture contrast with medians of 0.33-0.48 mm), is 2.04 in the median and 2.42 at the 90th percentile (max
+# 2.78), so 0.40 x 2.42 = 0.97. At 0.45 (sessions 12-16, chosen from the median multiple over all valid soles,
+# 2.2-2.5, which low-noise soles dominate) a probe sole at 0.44 was published 1.03 mm off. The multiple is larger
+# at low medians (below 0.30 mm: 2.26, 90th percentile 2.70, max 3.51, none beyond the tolerance): there the worst
+# point is one stretch's luck, which no limit on the median separates (docs/sole-benchmark.md, seventeenth round).
 GLUE_TYPICAL_SD_SHARE = 0.40
-# The multiple holds on rigs that look at the table within CALIBRATED_OBLIQUENESS_DEG of its normal (TablePlane.
-# obliqueness_deg: the simulator's rigs 2.5-3.3 degrees; the matrix multiple above). Probes of the standard soles
-# 7000-7015 on rigs tilted further, black soles, the worst point's multiple in the median: 2.26 at 5.0 degrees,
-# 2.23 at 6.8, 3.39 at 9.7 (two of eight black soles published 1.00 and 1.18 mm off with medians of 0.32 and
-# 0.28: the patches' errors run along the path over more of it); docs/sole-benchmark.md, seventeenth round. Beyond
-# it the limit shrinks by the ratio measured at 9.7 degrees, OBLIQUE_SD_SHARE_FACTOR.
+# That calibration covers rigs that look at the table within CALIBRATED_OBLIQUENESS_DEG of its normal
+# (TablePlane.obliqueness_deg): the simulator's rigs (2.5-3.3 degrees) and probes of the standard soles 7000-7015 on
+# rigs tilted to 5.0 and 6.8 degrees (black soles' multiples up to 2.78; none published beyond the tolerance). On
+# probes at 9.7 and 12.2 degrees 3 of 15 black soles were published with glue heights 1.00-1.18 mm off at medians
+# of 0.28-0.34 mm (multiples 3.0-4.25; docs/sole-benchmark.md, seventeenth round). With that little evidence the
+# limit there takes the worst multiple seen, not a percentile: 1 / 4.25 = 0.235 of the tolerance, a factor
+# OBLIQUE_SD_SHARE_FACTOR of the calibrated share.
 CALIBRATED_OBLIQUENESS_DEG = 7.0
-OBLIQUE_SD_SHARE_FACTOR = 0.66
+OBLIQUE_SD_SHARE_FACTOR = 0.59
 
 
 @dataclass(frozen=True)
