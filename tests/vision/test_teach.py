@@ -7,6 +7,7 @@ the change test: a gain change, a sole of the table's own brightness and a shado
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import cv2
@@ -18,6 +19,7 @@ from cellctl.errors import FailureKind
 from cellctl.sim.look import look_for
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene
+from cellctl.vision import checks
 from cellctl.vision.change import ChangeTest
 from cellctl.vision.measurement import measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
@@ -122,11 +124,30 @@ def test_teach_command_writes_the_table_and_refuses_a_sole(
         cv2.imwrite(str(tmp_path / name), image)
     calib = str(tmp_path / "calib.yaml")
     assert main(["teach", "--calib", calib, str(tmp_path / "empty_l.png"), str(tmp_path / "empty_r.png")]) == 0
-    assert (tmp_path / "calib.table.json").exists() and "taught the empty table" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert (tmp_path / "calib.table.json").exists() and "taught the empty table" in out
+    # The simulated rig looks at the table ~2.5 degrees off its normal: said, no warning.
+    assert re.search(r"looking [1-4]\.\d degrees off it", out) and "warning" not in out
     cv2.imwrite(str(tmp_path / "r.png"), pair.right)
     assert main(["teach", "--calib", calib, str(tmp_path / "l.png"), str(tmp_path / "r.png")]) == 2
     err = capsys.readouterr().err
     assert "table not taught" in err and "remove everything" in err and "Traceback" not in err
+
+
+def test_teach_command_warns_of_a_rig_more_oblique_than_the_measurement_is_calibrated_for(
+    tmp_path: Path, taught_scene, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:  # noqa: ANN001
+    rig, scene, _, _ = taught_scene
+    rig.save(tmp_path / "calib.yaml")
+    empty = scene.render_empty(shot=2)
+    for name, image in (("empty_l.png", empty.left), ("empty_r.png", empty.right)):
+        cv2.imwrite(str(tmp_path / name), image)
+    monkeypatch.setattr(checks, "CALIBRATED_OBLIQUENESS_DEG", 1.0)  # the simulated rig's 2.5 degrees beyond it
+    calib = str(tmp_path / "calib.yaml")
+    assert main(["teach", "--calib", calib, str(tmp_path / "empty_l.png"), str(tmp_path / "empty_r.png")]) == 0
+    out = capsys.readouterr().out
+    assert "warning: the cameras look at the table more than 1 degrees off its normal" in out
+    assert "mount the cameras square to the table" in out and (tmp_path / "calib.table.json").exists()
 
 
 def test_a_sole_on_a_patterned_table_with_shadows_is_right_or_refused(taught_scene) -> None:  # noqa: ANN001
