@@ -13,7 +13,7 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "wide-rig" and "narrow-rig" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"light-table", "wide-rig", "narrow-rig" and "tilted-rig" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ class SceneLook:
     rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
     camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
     texture_contrast: float = 1.0  # the sole's texture contrast relative to its material's (1: as SOLE_MATERIALS)
+    rig_tilt_deg: float = 0.0  # the rig mounted this far off square to the table (0: the usual, render.RIG_TILT_DEG)
     heading: str = "along"  # HEADINGS: along = heel-toe axis within 35 degrees of the image rows, any = any heading
     placement: str = "in-view"  # PLACEMENTS: off-image = one end runs up to OFF_IMAGE_PX beyond an image's edge
 
@@ -78,6 +79,8 @@ class SceneLook:
             raise ValueError("right camera gain and gamma must be positive")
         if self.texture_contrast <= 0.0:
             raise ValueError("the sole's texture contrast must be positive")
+        if not 0.0 <= self.rig_tilt_deg < 30.0:
+            raise ValueError("the rig's tilt must be in [0, 30) degrees")
 
 
 @dataclass(frozen=True)
@@ -203,6 +206,17 @@ VARIATIONS: dict[str, Variation] = {
         ),
         Variation(
             "narrow-rig", "a rig with a 40 mm baseline", ("rig",), _set(rig="narrow"), _SURFACE_LOST, in_matrix=False
+        ),
+        # Outside the matrix for the same reason: a rig mounted well off square to the table. The glue heights'
+        # precision limit is calibrated up to 7 degrees and tighter beyond (checks.CALIBRATED_OBLIQUENESS_DEG), so
+        # dark soles may be refused for the surface, and refusing them for that is right.
+        Variation(
+            "tilted-rig",
+            "the rig mounted 8-12 degrees off square to the table",
+            ("rig_tilt_deg",),
+            _draw("rig_tilt_deg", 8.0, 12.0),
+            _SURFACE_LOST,
+            in_matrix=False,
         ),
         Variation(
             "off-image",

@@ -39,6 +39,15 @@ VIGNETTING = 0.12  # relative fall-off at the image corners
 SUPERSAMPLE = 4
 
 
+def mount_tilt(tilt_magnitude_deg: float) -> tuple[float, float]:
+    """The rig's tilt about the table's x and y axes: RIG_TILT_DEG, or with a magnitude (degrees, > 0) that
+    direction scaled to it (a rig mounted further off square in the same way)."""
+    if tilt_magnitude_deg <= 0.0:
+        return RIG_TILT_DEG
+    scale = tilt_magnitude_deg / float(np.hypot(*RIG_TILT_DEG))
+    return RIG_TILT_DEG[0] * scale, RIG_TILT_DEG[1] * scale
+
+
 def rig_pose(
     calib: Calibration, height_mm: float = RIG_HEIGHT_MM, tilt_deg: tuple[float, float] = RIG_TILT_DEG
 ) -> np.ndarray:

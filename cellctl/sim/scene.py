@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from cellctl.sim.look import SceneLook
-from cellctl.sim.render import SOLE_MATERIALS, RenderedPair, SceneRenderer, project, rig_pose
+from cellctl.sim.render import SOLE_MATERIALS, RenderedPair, SceneRenderer, mount_tilt, project, rig_pose
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.reconstruction import StereoCloud
@@ -64,7 +64,7 @@ class SoleScene:
             upright = SoleModel(shape, SolePose(0.0, 0.0, 0.0, False))
             if upright.truth().half_area_difference >= MEASURABLE_HALF_AREA_DIFFERENCE:
                 break
-        camera_pose = rig_pose(calib)
+        camera_pose = rig_pose(calib, tilt_deg=mount_tilt(look.rig_tilt_deg))
         half_turn = 180.0 if look.heading == "any" else 35.0
         off_image = look.placement == "off-image"
         for _ in range(PLACEMENT_ATTEMPTS):

@@ -493,3 +493,21 @@ def test_the_distorted_rigs_images_and_rectification_leave_no_vertical_disparity
     assert seen.sum() > 500
     dy = calib.rectify_points_left(left[seen])[:, 1] - calib.rectify_points_right(right[seen])[:, 1]
     assert np.abs(dy).max() < 0.01
+
+
+def test_the_tilted_rig_looks_at_the_table_as_far_off_square_as_drawn() -> None:
+    """tilted-rig mounts the rig 8-12 degrees off square (the usual tilt's direction, scaled), outside the matrix;
+    the plain scene keeps the usual 2 / -1 degrees."""
+    from cellctl.sim.render import RIG_TILT_DEG
+    from cellctl.sim.rig import default_rig
+    from cellctl.sim.scene import SoleScene
+
+    look = look_for(("tilted-rig",), 3)
+    assert 8.0 <= look.rig_tilt_deg <= 12.0 and "tilted-rig" not in MATRIX_ENTRIES
+    assert fair_refusals(("tilted-rig",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
+    for scene_look, angle in ((look, look.rig_tilt_deg), (look_for((), 3), float(np.hypot(*RIG_TILT_DEG)))):
+        scene = SoleScene.random(3, "black", default_rig(), scene_look)
+        down = scene.camera_pose[:3, 2] @ np.array([0.0, 0.0, -1.0])  # the left camera's axis against straight down
+        assert np.degrees(np.arccos(down)) == pytest.approx(angle, abs=1e-6)
+    with pytest.raises(ValueError, match="tilt"):
+        SceneLook(rig_tilt_deg=35.0)
