@@ -64,7 +64,6 @@ class PointGrid:
         self.rows, self.cols = (int(n) for n in (shape or _grid_shape(x, y, self.x0, self.y0, self.cell)))
         self.count = len(x)
         self.order, self.starts = _build(x, y, self._corner())
-        self.x, self.y = x, y
         self.gx, self.gy = x[self.order], y[self.order]
         self.gz: np.ndarray | None = None
         if values is not None:
@@ -106,20 +105,6 @@ class PointGrid:
         counts = self._radius(qx, qy, radius, None)[0]
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         return counts, self._radius(qx, qy, radius, offsets)[1]
-
-    def radius_indices(self, xy: np.ndarray, radius: float) -> list[np.ndarray]:
-        """The points (indices) within `radius` of each query point, nearest first (ties by index), as a k-d
-        tree's radius search orders them."""
-        qx, qy = self._queries(xy, radius)
-        counts = self._radius(qx, qy, radius, None)[0]
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        _, found = self._radius(qx, qy, radius, offsets)
-        out = []
-        for k in range(len(qx)):
-            index = found[offsets[k] : offsets[k + 1]]
-            squared = (qx[k] - self.x[index]) ** 2 + (qy[k] - self.y[index]) ** 2
-            out.append(index[np.lexsort((index, squared))])
-        return out
 
     def radius_medians(self, xy: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
         """Per query point (K x 2): how many points lie within `radius`, and the median of their values (NaN
