@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     import cv2
 
     from cellctl.vision.calibration import Calibration
-    from cellctl.vision.checks import CALIBRATED_OBLIQUENESS_DEG
+    from cellctl.vision.checks import CALIBRATED_OBLIQUENESS_DEG, too_oblique
     from cellctl.vision.defaults import DEPTH_RANGE_MM
     from cellctl.vision.reconstruction import SoleReconstructor
     from cellctl.vision.teach import TeachError, average_exposures, save_taught
@@ -65,13 +65,13 @@ def run(args: argparse.Namespace) -> int:
     except TeachError as exc:
         raise UserError(f"table not taught: {exc}") from None
     arrays, meta = save_taught(taught, args.calib)
-    normal = taught.plane.normal
+    normal, obliqueness = taught.plane.normal, taught.plane.obliqueness_deg()
     print(
         f"taught the empty table: {taught.plane.offset:.1f} mm from the left camera, normal "
         f"({normal[0]:+.4f}, {normal[1]:+.4f}, {normal[2]:+.4f}), the cameras looking "
-        f"{taught.plane.obliqueness_deg():.1f} degrees off it; wrote {meta} and {arrays}"
+        f"{obliqueness:.1f} degrees off it; wrote {meta} and {arrays}"
     )
-    if taught.plane.obliqueness_deg() > CALIBRATED_OBLIQUENESS_DEG:
+    if too_oblique(obliqueness):
         # Taught all the same: the table is where it is; the cycles say why they refuse (checks.glue_sd_limit).
         print(
             f"warning: the cameras look at the table more than {CALIBRATED_OBLIQUENESS_DEG:g} degrees off its "

@@ -294,11 +294,17 @@ def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:
     return None
 
 
+def too_oblique(obliqueness_deg: float) -> bool:
+    """Whether a rig looking at the table `obliqueness_deg` off its normal lies beyond the glue precision's
+    calibration (CALIBRATED_OBLIQUENESS_DEG)."""
+    return obliqueness_deg > CALIBRATED_OBLIQUENESS_DEG
+
+
 def glue_sd_limit(tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM, obliqueness_deg: float = 0.0) -> float:
     """The most the glue heights' median expected error may be (mm) for `tolerance_mm`, on a rig that looks at the
-    table `obliqueness_deg` off its normal (GLUE_TYPICAL_SD_SHARE, less beyond CALIBRATED_OBLIQUENESS_DEG)."""
+    table `obliqueness_deg` off its normal (GLUE_TYPICAL_SD_SHARE, less where `too_oblique`)."""
     share = GLUE_TYPICAL_SD_SHARE
-    if obliqueness_deg > CALIBRATED_OBLIQUENESS_DEG:
+    if too_oblique(obliqueness_deg):
         share *= OBLIQUE_SD_SHARE_FACTOR
     return share * tolerance_mm
 
@@ -316,7 +322,7 @@ def check_glue_precision(
         oblique = (
             f" on a rig looking at the table {obliqueness_deg:.1f} degrees off its normal (beyond "
             f"{CALIBRATED_OBLIQUENESS_DEG:g} the limit is smaller: mount the cameras square to the table)"
-            if obliqueness_deg > CALIBRATED_OBLIQUENESS_DEG
+            if too_oblique(obliqueness_deg)
             else ""
         )
         return CheckFailure(
