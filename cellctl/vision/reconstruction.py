@@ -59,6 +59,9 @@ SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7
 # The coarse match only has to say where something stands above the table: the default window and no
 # medians (a third of its time; search_region's opening and largest region take out its isolated errors).
 COARSE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "median": 0, "weighted_median": 0, **BINARY_CENSUS}
+# The sub-pixel fits' patches (up to ~6 mm, 15 px), their disparity steps and their bicubic samples stay within
+# this many pixels of the sole's measured pixels (left) and of where the right image sees them.
+SURFACE_GREY_MARGIN_PX = 32
 REGION_CUT_MM = 15.0  # a sole this close to a side of the search region may go on beyond it: match the whole pair
 
 
@@ -122,7 +125,7 @@ class SoleReconstructor:
                     why = "the sole reaches the search region's edge"
                 else:
                     self.last_region = region
-                    return result
+                    return self._with_surface_grey(result, left, right)
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
@@ -131,7 +134,26 @@ class SoleReconstructor:
             hint = self._range_hint(rect_left, rect_right, result)
             if hint:
                 result = replace(result, reason=f"{result.reason}; {hint}")
-        return result
+        return self._with_surface_grey(result, left, right)
+
+    def _with_surface_grey(
+        self, result: ReconstructionResult, left: np.ndarray, right: np.ndarray
+    ) -> ReconstructionResult:
+        """A found sole with its `surface_grey` pair: the sole's box (and SURFACE_GREY_MARGIN_PX round it) of
+        each image rectified from the raw pair without rounding (`Calibration.rectify_grey`), in copies of
+        the rectified grey pair. Only the sole's surface is fitted on the images; the whole pair would cost ~4
+        times as much."""
+        if not isinstance(result, Reconstruction) or result.rectified is None or len(result.sole_pixels) == 0:
+            return result
+        start = time.perf_counter()
+        boxes = _sole_boxes(result, self.calib, result.rectified[0].shape)
+        pair = []
+        for side, raw, grey, box in zip(("left", "right"), (left, right), result.rectified, boxes, strict=True):
+            fine = grey.copy()
+            fine[box] = self.calib.rectify_grey(raw, side, box)
+            pair.append(fine)
+        result.timings["surface_grey"] = time.perf_counter() - start
+        return replace(result, surface_grey=(pair[0], pair[1]))
 
     def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
         """Rectify, match the whole pair and reproject: every really measured pixel as a 3-D point."""
@@ -236,3 +258,24 @@ class SoleReconstructor:
             params = COARSE_MATCHER_PARAMS if coarse else self._matcher_params
             self._matchers[key] = StereoMatcher(low, num, **params)
         return self._matchers[key]
+
+
+def _sole_boxes(
+    sole: Reconstruction, calib: Calibration, shape: tuple[int, ...]
+) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+    """(rows, columns) of the left and right rectified images round the sole's pixels, SURFACE_GREY_MARGIN_PX
+    out; the right one shifted by the sole's disparities (d = f B / Z of its points in the camera frame)."""
+    height, width = shape[:2]
+    x, y = sole.sole_pixels[:, 0], sole.sole_pixels[:, 1]
+    to_camera = np.linalg.inv(sole.camera_to_table)[2]
+    depth = sole.sole_points @ to_camera[:3] + to_camera[3]
+    disparity = calib.focal_px * calib.baseline_mm / np.maximum(depth, 1e-6)
+    m = SURFACE_GREY_MARGIN_PX
+
+    def span(low: float, high: float, size: int) -> slice:
+        return slice(min(max(int(np.floor(low)) - m, 0), size), max(min(int(np.ceil(high)) + m + 1, size), 0))
+
+    rows = span(float(y.min()), float(y.max()), height)
+    left = span(float(x.min()), float(x.max()), width)
+    right = span(float((x - disparity).min()), float((x - disparity).max()), width)
+    return (rows, left), (rows, right)

@@ -86,6 +86,9 @@ class Reconstruction(_SolePoints):
     timings: dict[str, float] = field(default_factory=dict)
     calibration: Calibration | None = None  # None: not a stereo cloud (e.g. a true depth map)
     rectified: tuple[np.ndarray, np.ndarray] | None = None  # grey float32 rectified pair
+    # The same pair for the surface's image fits (cellctl.vision.surface): round the sole interpolated from the
+    # raw images without rounding (`Calibration.rectify_grey`), elsewhere `rectified`; None: `rectified` it is.
+    surface_grey: tuple[np.ndarray, np.ndarray] | None = None
     sole_mask: np.ndarray | None = None  # bool, rectified left pixels on the sole (off its very edge)
     # The depth step on the footprint's raster, for the outline's self-check (cellctl.vision.checks):
     raised: Footprint | None = None  # cells where most measured points rise above the table

@@ -104,7 +104,8 @@ class SoleSurface:
         parallel: bool = False,
     ) -> None:
         rec = self.rec
-        calib, rectified, to_table, mask = rec.calibration, rec.rectified, rec.camera_to_table, rec.sole_mask
+        calib, to_table, mask = rec.calibration, rec.camera_to_table, rec.sole_mask
+        rectified = rec.rectified if rec.surface_grey is None else rec.surface_grey
         if calib is None or rectified is None or to_table is None or mask is None:
             return  # not a stereo reconstruction: the cloud answers every query
         left, right = rectified

@@ -52,6 +52,58 @@ def test_rectify_moves_image_content_where_rectify_points_says(rig: Calibration)
     np.testing.assert_allclose(centroid, rig.rectify_points_left(spot)[0], atol=0.1)
 
 
+def _textured_raw(rig: Calibration, seed: int = 3) -> np.ndarray:
+    """A smooth random texture (a few DN per pixel, as a sole's): sampling positions 1/32 px apart differ by
+    a few hundredths of a DN on it, the 8-bit rounding by up to half a DN."""
+    width, height = rig.image_size
+    noise = np.random.default_rng(seed).random((height, width, 3)).astype(np.float32) * 255
+    smooth = cv2.GaussianBlur(noise, (0, 0), 3.0)
+    return np.clip((smooth - smooth.mean()) * 8 + 128, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_rectify_grey_is_rectify_without_the_rounding(rig: Calibration, side: str) -> None:
+    raw = _textured_raw(rig)
+    fine = rig.rectify_grey(raw, side)
+    # `rectify`'s own sampling positions (its fixed-point maps as float maps) on the float grey image.
+    map_x, map_y = cv2.convertMaps(*rig._rectify_map(side), cv2.CV_32FC1)
+    exact = cv2.remap(cv2.cvtColor(raw.astype(np.float32), cv2.COLOR_BGR2GRAY), map_x, map_y, cv2.INTER_LINEAR)
+    np.testing.assert_allclose(fine, exact, atol=1e-3)
+    # `rectify` then `grey` round twice: within a grey level of the fine values, and ~0.35 DN apart.
+    rounded = rig.rectify(raw, raw)[0 if side == "left" else 1]
+    difference = fine - cv2.cvtColor(rounded, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    assert np.abs(difference).max() <= 1.0 + 1e-3
+    assert 0.2 < float(np.std(difference)) < 0.5
+
+
+def test_rectify_grey_moves_image_content_where_rectify_points_says(rig: Calibration) -> None:
+    width, height = rig.image_size
+    raw = np.zeros((height, width), np.uint8)
+    spot = np.array([300.0, 800.0])
+    cv2.circle(raw, (int(spot[0]), int(spot[1])), 6, 255, -1)
+    moments = cv2.moments(rig.rectify_grey(raw, "right"))
+    centroid = np.array([moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]])
+    np.testing.assert_allclose(centroid, rig.rectify_points_right(spot)[0], atol=0.1)
+
+
+@pytest.mark.parametrize(
+    "box",
+    [(slice(100, 400), slice(200, 900)), (slice(0, 40), slice(0, 50)), (slice(990, 1024), slice(1230, 1280))],
+)
+def test_rectify_grey_of_a_box_is_that_box_of_the_whole(rig: Calibration, box: tuple[slice, slice]) -> None:
+    raw = _textured_raw(rig, 4)
+    for side in ("left", "right"):
+        np.testing.assert_allclose(rig.rectify_grey(raw, side, box), rig.rectify_grey(raw, side)[box], atol=1e-3)
+    assert rig.rectify_grey(raw, "left", (slice(5, 5), slice(0, 10))).shape == (0, 10)
+
+
+def test_rectify_grey_refuses_a_wrong_size_and_side(rig: Calibration) -> None:
+    with pytest.raises(ValueError, match="640x480"):
+        rig.rectify_grey(np.zeros((480, 640, 3), np.uint8), "left")
+    with pytest.raises(ValueError, match="'left' or 'right'"):
+        rig.rectify_grey(_textured_raw(rig), "middle")
+
+
 def test_baseline_and_focal_length_of_the_simulated_rig(rig: Calibration) -> None:
     assert rig.baseline_mm == pytest.approx(60.0)
     assert rig.focal_px == pytest.approx(rig.P2[0, 0])

@@ -140,6 +140,43 @@ def test_surface_samples_on_two_threads_are_those_on_one(stereo_results) -> None
                 np.testing.assert_array_equal(a, b)
 
 
+def test_the_surface_fits_read_the_sole_rectified_without_rounding(rig, stereo_results) -> None:  # noqa: ANN001
+    """The reconstruction's `surface_grey`: round the sole, the raw pair rectified in float (Calibration.rectify_grey);
+    elsewhere the rounded pair; and the surface's image fits read it."""
+    from cellctl.vision.surface import SoleSurface
+
+    for _, pair, reconstruction, result in stereo_results[:2]:
+        assert reconstruction.surface_grey is not None and reconstruction.rectified is not None
+        for side, raw, fine, rounded in zip(
+            ("left", "right"),
+            (pair.left, pair.right),
+            reconstruction.surface_grey,
+            reconstruction.rectified,
+            strict=True,
+        ):
+            changed = fine != rounded
+            rows, columns = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
+            box = (slice(rows[0], rows[-1] + 1), slice(columns[0], columns[-1] + 1))
+            np.testing.assert_array_equal(fine[box], rig.rectify_grey(raw, side, box))
+            assert np.abs(fine - rounded).max() <= 1.0 + 1e-3 and 0.2 < float(np.std((fine - rounded)[box])) < 0.5
+        # Both boxes hold the sole: its left pixels, and the right ones at x - d (d = f B / Z).
+        x, y = reconstruction.sole_pixels.T
+        to_camera = np.linalg.inv(reconstruction.camera_to_table)
+        depth = reconstruction.sole_points @ to_camera[2, :3] + to_camera[2, 3]
+        for image, column in enumerate((x, x - rig.focal_px * rig.baseline_mm / depth)):
+            at = (np.round(y).astype(int), np.round(column).astype(int))
+            assert np.mean(reconstruction.surface_grey[image][at] != reconstruction.rectified[image][at]) > 0.9
+        path = result.glue_path.points[:, :2]
+        fine_z = SoleSurface(reconstruction).sample(path, 4.0).z
+        rounded_z = SoleSurface(dataclasses.replace(reconstruction, surface_grey=None)).sample(path, 4.0).z
+        same_z = SoleSurface(dataclasses.replace(reconstruction, surface_grey=reconstruction.rectified)).sample(
+            path, 4.0
+        )
+        np.testing.assert_array_equal(same_z.z, rounded_z)
+        # The rounding's noise moves a patch's height by a few hundredths of a mm (a fit near its limits more).
+        assert 0.0 < np.nanmedian(np.abs(fine_z - rounded_z)) < 0.1
+
+
 def test_the_depths_normals_along_the_glue_path_are_the_tops(stereo_results) -> None:  # noqa: ANN001
     """glue_path.depth_normals, the glue-normal check's second reference (the depth's own planes, not the image
     patches'): on the stereo soles, within a few degrees of the true top's normal at the glue points, at the points
