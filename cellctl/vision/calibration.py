@@ -19,6 +19,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from cellctl.images import grey
+
 # Keys a calibration file must have; everything else can be derived from them.
 REQUIRED_KEYS: tuple[str, ...] = ("image_width", "image_height", "K1", "D1", "K2", "D2", "R", "T")
 # Keys derived by cv2.stereoRectify; read back only as a complete set so they always belong together.
@@ -28,7 +30,6 @@ MAX_FOCAL_PX = 1e6
 MIN_BASELINE_MM = 1.0
 # Numbers of distortion coefficients OpenCV's camera model accepts.
 _DISTORTION_SIZES = (4, 5, 8, 12, 14)
-_GREY = {3: cv2.COLOR_BGR2GRAY, 4: cv2.COLOR_BGRA2GRAY}  # colour channels -> cvtColor code (cellctl.images.grey's)
 
 
 @dataclass(eq=False)
@@ -156,7 +157,7 @@ class Calibration:
         rounding: the rectified pixels of `box` ((rows, columns) of the rectified image; all if None).
 
         `rectify` rounds the interpolated values to 8 bits again, and `grey` once more: ~0.35 DN of extra noise,
-        more than half the sensor's own on a black sole's faint texture, which the sub-pixel fits read. The
+        about half the sensor's own on a black sole's faint texture, which the sub-pixel fits read. The
         same sampling positions as `rectify` (OpenCV's fixed-point maps; only the raw pixels the box reads are
         converted), the same values before the rounding."""
         self.check_image(image)
@@ -174,10 +175,9 @@ class Calibration:
         if x1 <= x0 or y1 <= y0:  # the box samples nothing of the image: its border value, as `rectify` gives
             return np.zeros(map_xy.shape[:2], np.float32)
         raw = np.asarray(image)[y0:y1, x0:x1]
-        grey = raw.astype(np.float32) if raw.ndim == 2 else cv2.cvtColor(raw.astype(np.float32), _GREY[raw.shape[2]])
         # Positions in the crop (int16, far from saturating); a 4-vector is OpenCV's scalar, per channel.
         shifted = cv2.subtract(map_xy, np.array([x0, y0, 0.0, 0.0]))
-        return cv2.remap(grey, shifted, map_fraction, cv2.INTER_LINEAR)
+        return cv2.remap(grey(raw.astype(np.float32)), shifted, map_fraction, cv2.INTER_LINEAR)
 
     def camera(self, side: str) -> CameraModel:
         """One camera of the pair ("left" or "right"): the one place that picks K, D, R, P by side."""

@@ -59,8 +59,9 @@ SOLE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "census_window": (9, 7
 # The coarse match only has to say where something stands above the table: the default window and no
 # medians (a third of its time; search_region's opening and largest region take out its isolated errors).
 COARSE_MATCHER_PARAMS: dict[str, object] = {"fill": "none", "median": 0, "weighted_median": 0, **BINARY_CENSUS}
-# The sub-pixel fits' patches (up to ~6 mm, 15 px), their disparity steps and their bicubic samples stay within
-# this many pixels of the sole's measured pixels (left) and of where the right image sees them.
+# The sub-pixel fits' patches, their disparity steps and their bicubic samples stay within this many pixels of the
+# sole's measured pixels (left) and of where the right image sees them: a glue point's patch (up to 6 mm, ~15 px,
+# 2 mm inside the outline) reaches ~10 px beyond them; the heights' 10 mm patches lie well inside the sole.
 SURFACE_GREY_MARGIN_PX = 32
 REGION_CUT_MM = 15.0  # a sole this close to a side of the search region may go on beyond it: match the whole pair
 
@@ -141,7 +142,7 @@ class SoleReconstructor:
     ) -> ReconstructionResult:
         """A found sole with its `surface_grey` pair: the sole's box (and SURFACE_GREY_MARGIN_PX round it) of
         each image rectified from the raw pair without rounding (`Calibration.rectify_grey`), in copies of
-        the rectified grey pair. Only the sole's surface is fitted on the images; the whole pair would cost ~4
+        the rectified grey pair. Only the sole's surface is fitted on the images; the whole pair would cost ~4-5
         times as much."""
         if not isinstance(result, Reconstruction) or result.rectified is None or len(result.sole_pixels) == 0:
             return result
