@@ -78,8 +78,8 @@ def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings
 
 def outliving_the_cycle(reconstruction: Reconstruction) -> Reconstruction:
     """The reconstruction as the cycle's result keeps it: the sole's points, colours, pixels and footprint, without
-    the image-sized rasters only the measurement reads (the rectified pair, the sole and change masks, the
-    depth-step rasters).
+    the image-sized rasters only the measurement reads (the rectified pair and the surface fits' pair, the sole and
+    change masks, the depth-step rasters).
 
     The result outlives its cycle: the artifact writer holds it until its PLY and overlay are written, the
     operator station until the next cycle ends, the image log while it waits. The rasters are ~20 MB a cycle
@@ -89,6 +89,7 @@ def outliving_the_cycle(reconstruction: Reconstruction) -> Reconstruction:
     return replace(
         reconstruction,
         rectified=None,
+        surface_grey=None,
         sole_mask=None,
         raised=None,
         measured_cells=None,
