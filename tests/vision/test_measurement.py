@@ -157,7 +157,9 @@ def test_the_surface_fits_read_the_sole_rectified_without_rounding(rig, stereo_r
             changed = fine != rounded
             rows, columns = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
             box = (slice(rows[0], rows[-1] + 1), slice(columns[0], columns[-1] + 1))
-            np.testing.assert_array_equal(fine[box], rig.rectify_grey(raw, side, box))
+            np.testing.assert_allclose(
+                fine[box], rig.rectify_grey(raw, side, box), atol=1e-3
+            )  # another raw crop: ~1e-5
             assert np.abs(fine - rounded).max() <= 1.0 + 1e-3 and 0.2 < float(np.std((fine - rounded)[box])) < 0.5
         # Both boxes hold the sole: its left pixels, and the right ones at x - d (d = f B / Z).
         x, y = reconstruction.sole_pixels.T
