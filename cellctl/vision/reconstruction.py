@@ -35,6 +35,7 @@ from cellctl.vision.segmentation import (
     ReconstructionResult,
     Segmentation,
 )
+from cellctl.vision.sole_region import pixel_boxes
 from cellctl.vision.table import TablePlane
 from cellctl.vision.teach import TaughtTable, TeachError, teach_table
 
@@ -266,17 +267,8 @@ def _sole_boxes(
 ) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
     """(rows, columns) of the left and right rectified images round the sole's pixels, SURFACE_GREY_MARGIN_PX
     out; the right one shifted by the sole's disparities (d = f B / Z of its points in the camera frame)."""
-    height, width = shape[:2]
-    x, y = sole.sole_pixels[:, 0], sole.sole_pixels[:, 1]
     to_camera = np.linalg.inv(sole.camera_to_table)[2]
     depth = sole.sole_points @ to_camera[:3] + to_camera[3]
     disparity = calib.focal_px * calib.baseline_mm / np.maximum(depth, 1e-6)
-    m = SURFACE_GREY_MARGIN_PX
-
-    def span(low: float, high: float, size: int) -> slice:
-        return slice(min(max(int(np.floor(low)) - m, 0), size), max(min(int(np.ceil(high)) + m + 1, size), 0))
-
-    rows = span(float(y.min()), float(y.max()), height)
-    left = span(float(x.min()), float(x.max()), width)
-    right = span(float((x - disparity).min()), float((x - disparity).max()), width)
-    return (rows, left), (rows, right)
+    x, y = sole.sole_pixels[:, 0], sole.sole_pixels[:, 1]
+    return pixel_boxes(x, y, disparity, SURFACE_GREY_MARGIN_PX, shape)

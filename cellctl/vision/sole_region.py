@@ -183,13 +183,20 @@ def _change_boxes(
 ) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
     """(rows, columns) of the left and right images round the high points, CHANGE_MARGIN_PX out (the right
     one shifted by their disparities)."""
-    height, width = shape[:2]
     x, y = np.take(cloud.pixels, high, axis=0).T
-    d = cloud.disparity[high]
-    m = CHANGE_MARGIN_PX
-    rows = slice(max(int(y.min()) - m, 0), min(int(y.max()) + m + 1, height))
-    left = slice(max(int(x.min()) - m, 0), min(int(x.max()) + m + 1, width))
-    right = slice(max(int((x - d).min()) - m, 0), min(int((x - d).max()) + m + 1, width))
+    return pixel_boxes(x, y, cloud.disparity[high], CHANGE_MARGIN_PX, shape)
+
+
+def pixel_boxes(
+    x: np.ndarray, y: np.ndarray, disparity: np.ndarray, margin: int, shape: tuple[int, ...]
+) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+    """(rows, columns) of the left and right rectified images round left pixels (x, y) (at least one), `margin`
+    out and within the images; the right one round x - disparity."""
+    height, width = shape[:2]
+    rows = slice(max(int(y.min()) - margin, 0), min(int(y.max()) + margin + 1, height))
+    left = slice(max(int(x.min()) - margin, 0), min(int(x.max()) + margin + 1, width))
+    right_x = x - disparity
+    right = slice(max(int(right_x.min()) - margin, 0), min(int(right_x.max()) + margin + 1, width))
     return (rows, left), (rows, right)
 
 
