@@ -70,11 +70,11 @@ def test_a_height_jump_and_a_path_off_its_samples_are_refused() -> None:
 def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
     """The median expected error along the path decides: a few coarse points (a pointed end's narrow fits) pass,
     a path coarse over most of its length does not, with the reason and the remedy."""
-    sd = np.full(300, 0.3)
+    sd = np.full(300, 0.75 * GLUE_TYPICAL_SD_SHARE)
     sd[:40] = 2.0
     assert check_glue_precision(sd) is None
     sd[:] = GLUE_TYPICAL_SD_SHARE * 1.0 + 0.05
-    sd[:100] = 0.2
+    sd[:100] = 0.5 * GLUE_TYPICAL_SD_SHARE
     problem = check_glue_precision(sd, 1.0)
     assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
     assert (
