@@ -310,6 +310,5 @@ def _principal_axis(outline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _half_area_difference(footprint: Footprint, centroid: np.ndarray, axis: np.ndarray, middle: float) -> float:
     """(area beyond the middle along +axis - area before it) / total area, from the raster's cells."""
-    proj = (footprint.centres() - centroid) @ axis
-    upper = np.count_nonzero(proj > middle)
-    return (2.0 * upper - len(proj)) / max(len(proj), 1)
+    upper, total = footprint.cells_beyond(centroid, axis, middle)
+    return (2.0 * upper - total) / max(total, 1)
