@@ -67,6 +67,21 @@ def test_a_polygon_filled_on_the_cells_marks_exactly_the_cells_whose_centres_it_
     assert np.count_nonzero(shifted.mask != exact.mask) > 100
 
 
+def test_a_polygon_crossing_the_rasters_edges_marks_the_cells_within_it() -> None:
+    """Filled within the polygon's box clipped to the raster: a polygon reaching past the raster's edges (here its
+    tip and its back) marks the raster's cells it holds, the same as a raster drawn by cell centres; one wholly
+    outside marks none."""
+    polygon = wedge_polygon() + np.array([-25.0, -15.0])  # the back crosses x = -70 mm, a side y = -40 mm
+    exact = raster(polygon)
+    filled = Footprint(np.zeros_like(exact.mask), exact.origin, CELL).filled(polygon)
+    assert exact.mask[:, 0].any() and exact.mask[0, :].any()  # it does reach the edges
+    rows, cols = np.nonzero(filled.mask != exact.mask)
+    centres = np.column_stack([exact.origin[0] + (cols + 0.5) * CELL, exact.origin[1] + (rows + 0.5) * CELL])
+    assert len(rows) < 20 and np.abs(true_inset(polygon, centres)).max(initial=0.0) < 0.03  # ties on the edge
+    away = Footprint(np.zeros_like(exact.mask), exact.origin, CELL).filled(polygon + np.array([500.0, 0.0]))
+    assert not away.mask.any()
+
+
 def test_closing_fills_a_narrow_dent_and_keeps_the_rest_of_the_edge_and_a_pointed_tip() -> None:
     whole = raster(wedge_polygon())
     dented = Footprint(whole.mask.copy(), whole.origin, whole.cell_mm)
