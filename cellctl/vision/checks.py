@@ -328,7 +328,8 @@ def check_glue_precision(
             FailureKind.SURFACE_NOT_MEASURED,
             f"the sole's top is measured too coarsely for its glue heights: their expected error is {typical:.2f} mm "
             f"(median along the path; at most {limit:.2f} for the {tolerance_mm:g} mm tolerance{oblique}): too "
-            "little texture on the top or too much image noise; light the sole more brightly or raise the exposure",
+            "little texture on the top or too much image noise; light the sole more brightly or raise the exposure, "
+            "or set [measure] glue_height_tolerance_mm to what the dispenser really allows",
         )
     return None
 

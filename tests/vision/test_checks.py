@@ -81,7 +81,7 @@ def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
         f"expected error is {GLUE_TYPICAL_SD_SHARE + 0.05:.2f} mm" in problem.reason
         and "1 mm tolerance" in problem.reason
     )
-    assert "exposure" in problem.reason
+    assert "exposure" in problem.reason and "glue_height_tolerance_mm" in problem.reason
     assert check_glue_precision(sd, 2.0) is None  # a cell whose dispenser allows 2 mm takes it
     unknown = check_glue_precision(np.full(10, np.nan))
     assert unknown is not None and unknown.kind is FailureKind.SURFACE_NOT_MEASURED
