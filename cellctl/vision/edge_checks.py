@@ -258,22 +258,22 @@ def running_median(offsets: np.ndarray) -> np.ndarray:
         return np.where(enough, np.nanmedian(window, axis=0), np.nan)
 
 
-# Where the depth outline runs beyond both cameras' silhouettes for longer than the image-edge placement takes
-# inward (cellctl.vision.image_edge: a stretch longer than two census windows is smeared depth, left in place for
-# this check to judge), the running median over EDGE_OFFSET_WINDOW_MM (5 points) reads the stretch at its flanks'
-# value while the glue line, eroded from the outline, follows its peak (std20 sole 1 taught: the outline 0.8-1.15
+# The running median over EDGE_OFFSET_WINDOW_MM (5 points) is for one point's scatter; it reads a bump of the outline
+# beyond the edge at its flanks' value while the glue line, eroded from the outline, follows its peak. Where every
+# camera reads the edge more than MAX_EDGE_OFFSET_MM inside the outline at AGREED_RUN_POINTS consecutive points (1 mm
+# apart), the nearer-the-outline of their readings there is the offset: two cameras' masks agreeing on neighbouring
+# points is no single point's scatter. Found on smeared stretches first (std20 sole 1 taught: the outline 0.8-1.15
 # mm beyond a black sole's edge over 9 mm, both cameras reading -0.6 there and -0.9 on the peak's two points,
-# median 0.6: glue path valid and 1.02 mm off). On such a stretch, where every camera reads the edge more than
-# MAX_EDGE_OFFSET_MM inside the outline at AGREED_RUN_POINTS consecutive points (1 mm apart), the nearer-the-outline
-# of their readings there is the offset: two cameras' masks agreeing on neighbouring points is no single point's
-# scatter (which the median is for). Shorter bumps the placement moves or leaves are left to the median (a 2-3 mm
-# bump of 0.9 mm put the glue line only 0.6-0.7 mm off on set-2000 soles 2015 and 2073).
+# median 0.6: glue path valid and 1.02 mm off). Until session 20 shorter bumps were left to the median (a 2-3 mm bump
+# of 0.9 mm put the glue line 0.6-0.7 mm off on set-2000 soles 2015 and 2073); on soles never looked at before they
+# came within a few hundredths of the tolerance: fresh sole 9327, a 3 mm bump on a square heel's side that both
+# cameras read 0.9-1.4 mm inside, its glue point 0.98 mm off; 9315, 1.4 mm at the toe, its length 0.97 mm long
+# (docs/sole-benchmark.md, twentieth round). Now the agreed readings count anywhere on the outline.
 AGREED_RUN_POINTS = 2
 
 
-def agreed_offsets(offsets: list[np.ndarray], smeared: np.ndarray) -> np.ndarray:
-    """Per outline point (closed, 1 mm apart): on `smeared` points, where two or more cameras all read the edge
-    inside the outline, the reading nearest the outline, kept only inside runs of AGREED_RUN_POINTS or more points
+def agreed_offsets(offsets: list[np.ndarray]) -> np.ndarray:
+    """Per outline point (closed, 1 mm apart): where two or more cameras all read the edge inside the outline, the reading nearest the outline, kept only inside runs of AGREED_RUN_POINTS or more points
     whose such reading lies more than MAX_EDGE_OFFSET_MM inside; 0 elsewhere (one camera alone is left to the
     running median)."""
     readings = np.vstack(offsets)
@@ -281,18 +281,17 @@ def agreed_offsets(offsets: list[np.ndarray], smeared: np.ndarray) -> np.ndarray
         return np.zeros(readings.shape[1])
     known = np.all(np.isfinite(readings), axis=0)
     filled = np.where(known[None, :], readings, 0.0)
-    nearest = np.where(known & smeared, np.max(filled, axis=0), 0.0)  # the least far inside; >= 0 if one is not
+    nearest = np.where(known, np.max(filled, axis=0), 0.0)  # the least far inside; >= 0 if one is not
     run = run_lengths(nearest < -MAX_EDGE_OFFSET_MM) >= AGREED_RUN_POINTS
     return np.where(run, nearest, 0.0)
 
 
-def check_edge_offsets(offsets: list[np.ndarray], smeared: np.ndarray | None = None) -> CheckFailure | None:
+def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
     """The outline (points 1 mm apart, closed) against the edges the cameras' change masks show there.
 
     `offsets`: per camera, one of `edge_offset_pair`'s readings along the outline. Their mean per point, a running median over
-    EDGE_OFFSET_WINDOW_MM, must stay within MAX_EDGE_OFFSET_MM of the outline everywhere it is known; on `smeared`
-    points (per point: on a stretch beyond both silhouettes too long to be moved in) the cameras' agreed readings
-    too (`agreed_offsets`).
+    EDGE_OFFSET_WINDOW_MM, must stay within MAX_EDGE_OFFSET_MM of the outline everywhere it is known, and so must
+    the cameras' agreed readings (`agreed_offsets`).
     """
     mean = mean_of_known(np.vstack(offsets))
     if np.count_nonzero(np.isfinite(mean)) < MIN_TESTABLE * len(mean):
@@ -302,7 +301,7 @@ def check_edge_offsets(offsets: list[np.ndarray], smeared: np.ndarray | None = N
             f"{len(mean)} outline points show one within {EDGE_SEARCH_MM:g} mm",
         )
     local = np.nan_to_num(running_median(mean), nan=0.0)  # too little known: no evidence against the outline
-    agreed = agreed_offsets(offsets, smeared) if smeared is not None else np.zeros(len(mean))
+    agreed = agreed_offsets(offsets)
     local = np.where(np.abs(agreed) > np.abs(local), agreed, local)
     worst = int(np.argmax(np.abs(local)))
     if abs(local[worst]) > MAX_EDGE_OFFSET_MM:

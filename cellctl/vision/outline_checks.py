@@ -30,11 +30,9 @@ from cellctl.vision.edge_checks import (
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
     PlacedOutline,
-    blob_length_mm,
     edge_heights,
     mm_per_pixel,
     projections,
-    smeared_stretches,
     stereo_offsets,
     table_level,
 )
@@ -122,10 +120,7 @@ def _check_outline_images(
     )
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
     inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
-    # The stretches beyond both silhouettes too long for the placement to move in (image_edge.edge_shift's rule):
-    # there the cameras' agreed readings count point by point too (edge_checks.agreed_offsets).
-    smeared = smeared_stretches(inner[0], inner[1], blob_length_mm(reconstruction))
-    problem = _edge_offsets_problem(inner, outer, smeared)
+    problem = _edge_offsets_problem(inner, outer)
     if problem is None or not SHADOW_CLEARED or reconstruction.rectified is None or reconstruction.taught is None:
         return problem
     # Refused: a cast shadow's slivers beside the sole that one camera's mask shows and the other's does not
@@ -142,9 +137,7 @@ def _check_outline_images(
         by_one_camera(readings, one_camera)
         for readings in stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
     )
-    return _edge_offsets_problem(
-        one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared), smeared
-    )
+    return _edge_offsets_problem(one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared))
 
 
 def by_one_camera(readings: tuple[np.ndarray, np.ndarray], one_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,13 +149,13 @@ def by_one_camera(readings: tuple[np.ndarray, np.ndarray], one_camera: np.ndarra
 
 
 def _edge_offsets_problem(
-    inner: tuple[np.ndarray, np.ndarray], outer: tuple[np.ndarray, np.ndarray], smeared: np.ndarray | None = None
+    inner: tuple[np.ndarray, np.ndarray], outer: tuple[np.ndarray, np.ndarray]
 ) -> CheckFailure | None:
     """The edge-offset check on both readings (stereo_offsets): the innermost, then the outermost."""
-    problem = check_edge_offsets(list(inner), smeared)
+    problem = check_edge_offsets(list(inner))
     if problem is not None:
         return problem
-    return check_edge_offsets(list(outer), smeared)
+    return check_edge_offsets(list(outer))
 
 
 HEIGHT_MAP_CELL_MM = 1.0

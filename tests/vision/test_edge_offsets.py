@@ -124,29 +124,36 @@ def test_the_outermost_reading_still_passes_the_true_outline_past_a_shadow_and_a
     assert check_edge_offsets([found]) is None
 
 
-def _bump_readings() -> tuple[list[np.ndarray], np.ndarray]:
+def _bump_readings() -> list[np.ndarray]:
     """Two cameras' readings along a 300-point outline with a 9 mm bump beyond the edge, as on std20 sole 1
-    (taught): both read -0.6 over the bump and -0.9 on its two peak points, ~0.1 mm scatter elsewhere; and the
-    bump as the stretch too long for the placement to move in (`smeared`)."""
+    (taught): both read -0.6 over the bump and -0.9 on its two peak points, ~0.1 mm scatter elsewhere."""
     left = np.tile([0.12, -0.12, -0.38, -0.12], 75)
     left[100:109] = [-0.62, -0.88, -0.88, -0.62, -0.62, -0.62, -0.62, -0.62, -0.38]
-    smeared = np.zeros(300, bool)
-    smeared[100:109] = True
-    return [left, left.copy()], smeared
+    return [left, left.copy()]
 
 
-def test_a_smeared_stretch_both_cameras_read_beyond_the_limit_is_refused_though_the_median_passes_it() -> None:
-    readings, smeared = _bump_readings()
-    assert check_edge_offsets(readings) is None  # the running median alone reads 0.6 mm
-    problem = check_edge_offsets(readings, smeared)
+def test_a_bump_both_cameras_read_beyond_the_limit_is_refused_though_the_median_passes_it() -> None:
+    left, right = _bump_readings()
+    assert check_edge_offsets([left]) is None  # one camera: the running median alone reads 0.6 mm
+    problem = check_edge_offsets([left, right])
     assert problem is not None and problem.kind == FailureKind.OUTLINE_INCONSISTENT
     assert "0.9 mm inside the outline at outline point 101" in problem.reason
 
 
-def test_one_camera_one_point_or_a_short_bump_beyond_the_limit_is_left_to_the_median() -> None:
-    (left, right), smeared = _bump_readings()
-    assert check_edge_offsets([left, right], np.zeros(300, bool)) is None  # short: the placement's to move
-    assert check_edge_offsets([left], smeared) is None  # one camera: its scatter is the median's to judge
-    assert check_edge_offsets([-left, -left], smeared) is None  # a short dent the glue line's closing bridges
+def test_a_short_bump_both_cameras_read_is_refused_too() -> None:
+    # Fresh sole 9327 (session 20): a 3 mm bump of the outline beyond a square heel's side, both masks putting the
+    # edge ~1 mm inside at two points, the 5-point median 0.6 mm: valid, its glue point 0.98 mm off the truth.
+    # (Until then only bumps longer than the placement moves in counted point by point.)
+    left = np.tile([0.125, -0.125], 150)
+    right = left.copy()
+    left[100:104], right[100:104] = [-0.625, -1.125, -0.875, -0.125], [-0.625, -1.375, -1.125, -0.625]
+    assert check_edge_offsets([left]) is None and check_edge_offsets([right]) is None
+    problem = check_edge_offsets([left, right])
+    assert problem is not None and "1.1 mm inside the outline at outline point 101" in problem.reason  # the nearer
+
+
+def test_one_camera_one_point_or_a_dent_beyond_the_limit_is_left_to_the_median() -> None:
+    left, right = _bump_readings()
+    assert check_edge_offsets([-left, -left]) is None  # a short dent the glue line's closing bridges
     right[101] = -0.62  # the cameras agree beyond the limit at point 102 alone
-    assert check_edge_offsets([left, right], smeared) is None
+    assert check_edge_offsets([left, right]) is None
