@@ -273,9 +273,9 @@ AGREED_RUN_POINTS = 2
 
 
 def agreed_offsets(offsets: list[np.ndarray]) -> np.ndarray:
-    """Per outline point (closed, 1 mm apart): where two or more cameras all read the edge inside the outline, the reading nearest the outline, kept only inside runs of AGREED_RUN_POINTS or more points
-    whose such reading lies more than MAX_EDGE_OFFSET_MM inside; 0 elsewhere (one camera alone is left to the
-    running median)."""
+    """Per outline point (closed, 1 mm apart): where two or more cameras all read the edge inside the outline, the
+    reading nearest the outline, kept only inside runs of AGREED_RUN_POINTS or more points whose such reading lies
+    more than MAX_EDGE_OFFSET_MM inside; 0 elsewhere (one camera alone is left to the running median)."""
     readings = np.vstack(offsets)
     if len(readings) < 2:
         return np.zeros(readings.shape[1])
