@@ -7,8 +7,8 @@
 
 /* Below this many pixels a call stays on one thread: waking the others costs more. */
 #define CHK_PARALLEL_MIN 4096
-/* Float planes chk_texture keeps in its scratch space besides the row sums. */
-#define CHK_PLANES 11
+/* Float planes chk_texture and chk_residual keep in their scratch space besides the row sums. */
+#define CHK_PLANES 15
 
 /* The vectorised loops twice, for AVX2 and for any x86-64 (chosen when the module loads): the same IEEE
  * operations in the same order, so the same results, with twice the lanes. */
@@ -537,12 +537,15 @@ int chk_texture(const float *current, int64_t current_stride, const float *refer
     return CHK_OK;
 }
 
-/* One row of the residual against the table as lit now, its magnitude where it is clear (plane 0) and the
- * clear pixels (plane 1, 0/1). */
+/* One row of the residual against the table as lit now and, on the clear pixels (|residual| above floor; 0
+ * elsewhere), the planes the pixel test's window sums read: plane 0 the magnitude, 1 the clear pixels (0/1),
+ * 7 the residual, 9 the brighter ones (0/1), 11 their current values, 13 all clear pixels' current values. */
 CHK_CLONES static void residual_row(const chk_residual_params *p, int width, const float *restrict c,
                                     const float *restrict r, const float *restrict illumination,
-                                    float *restrict residual, float *restrict clear_magnitude, float *restrict clear)
+                                    float *restrict residual, float *const *restrict plane)
 {
+    float *restrict clear_magnitude = plane[0], *restrict clear = plane[1], *restrict clear_residual = plane[7];
+    float *restrict brighter = plane[9], *restrict brighter_current = plane[11], *restrict clear_current = plane[13];
     const float gain = (float)p->gain, offset = (float)p->offset, one = opaque(1.0f);
     const float floor = (float)p->floor;
 #pragma omp simd
@@ -557,19 +560,36 @@ CHK_CLONES static void residual_row(const chk_residual_params *p, int width, con
         const float is_clear = (float)(magnitude > floor);
         clear_magnitude[x] = magnitude * is_clear;
         clear[x] = is_clear;
+        clear_residual[x] = res * is_clear;
+        const float is_brighter = (float)(res > floor);
+        brighter[x] = is_brighter;
+        brighter_current[x] = c[x] * is_brighter;
+        clear_current[x] = c[x] * is_clear;
     }
 }
 
-/* One row of the pixel test (plane 4: raw as 0/1) and the faint-contrast texture vote's candidates. */
-CHK_CLONES static void pixel_test_row(const chk_residual_params *p, int width, const float *restrict residual,
-                                      const float *restrict contrast_sum, const float *restrict clear_share,
+/* One row of the pixel test (raw as 0/1) and the faint-contrast texture vote's candidates, from the window
+ * means of residual_row's planes (`mean`, indexed as its planes: 2 of 0, 3 of 1, 8 of 7, 10 of 9, 12 of 11,
+ * 14 of 13). */
+CHK_CLONES static void pixel_test_row(const chk_residual_params *p, int width, const float *restrict c,
+                                      const float *restrict residual, float *const *restrict mean,
                                       const uint8_t *restrict gone, float *restrict raw, uint8_t *restrict faint_gone)
 {
     const float floor = (float)p->floor, faint_limit = (float)p->faint_contrast, eps = (float)1e-6;
     const float half = 0.5f;
+    const float *restrict contrast_sum = mean[2], *restrict clear_share = mean[3], *restrict clear_sum = mean[8];
+    const float *restrict brighter_share = mean[10], *restrict brighter_current = mean[12];
+    const float *restrict clear_current = mean[14];
     for (int x = 0; x < width; ++x) {
         const float contrast = contrast_sum[x] / max_f(clear_share[x], eps);
-        const float half_contrast = contrast * half;
+        /* The change that dominates the window (brighter or darker than the table) and its brightness. */
+        const int brighter = clear_sum[x] >= 0.0f;
+        const float share = brighter ? brighter_share[x] : clear_share[x] - brighter_share[x];
+        const float current = brighter ? brighter_current[x] : clear_current[x] - brighter_current[x];
+        const float change = current / max_f(share, eps);
+        const float lit = c[x] - residual[x];
+        const int same = brighter ? residual[x] > 0.0f : residual[x] < 0.0f;
+        const float half_contrast = (same ? fabsf(change - lit) : contrast) * half;
         const int is_raw = fabsf(residual[x]) > max_f(floor, half_contrast);
         raw[x] = (float)is_raw;
         faint_gone[x] = (uint8_t)((gone[x] != 0) & (contrast < faint_limit));
@@ -634,8 +654,11 @@ int chk_residual(const float *current, int64_t current_stride, const float *refe
         return CHK_ERR_VALUE;
 
     const workspace w = carve(scratch, height, width, residual_window(p), threads);
-    const box_job contrast[] = {plane_job(w.plane[0], width, p->contrast_window, w.plane[2]),
-                                plane_job(w.plane[1], width, p->contrast_window, w.plane[3])};
+    const int k = p->contrast_window;
+    const box_job contrast[] = {
+        plane_job(w.plane[0], width, k, w.plane[2]),   plane_job(w.plane[1], width, k, w.plane[3]),
+        plane_job(w.plane[7], width, k, w.plane[8]),   plane_job(w.plane[9], width, k, w.plane[10]),
+        plane_job(w.plane[11], width, k, w.plane[12]), plane_job(w.plane[13], width, k, w.plane[14])};
     const box_job inside = plane_job(w.plane[4], width, p->gone_window, w.plane[5]);
     uint8_t *faint_gone = (uint8_t *)w.plane[6];
 #pragma omp parallel num_threads(threads)
@@ -643,14 +666,20 @@ int chk_residual(const float *current, int64_t current_stride, const float *refe
 #pragma omp for schedule(static)
         for (int y = 0; y < height; ++y) {
             const size_t row = (size_t)y * width;
+            float *planes[CHK_PLANES];
+            for (int i = 0; i < CHK_PLANES; ++i)
+                planes[i] = w.plane[i] + row;
             residual_row(p, width, current + y * current_stride, reference + y * reference_stride,
-                         illumination + row, residual + row, w.plane[0] + row, w.plane[1] + row);
+                         illumination + row, residual + row, planes);
         }
-        boxes(&w, contrast, 2, height, width);
+        boxes(&w, contrast, 6, height, width);
 #pragma omp for schedule(static)
         for (int y = 0; y < height; ++y) {
             const size_t row = (size_t)y * width;
-            pixel_test_row(p, width, residual + row, w.plane[2] + row, w.plane[3] + row, gone + row,
+            float *planes[CHK_PLANES];
+            for (int i = 0; i < CHK_PLANES; ++i)
+                planes[i] = w.plane[i] + row;
+            pixel_test_row(p, width, current + y * current_stride, residual + row, planes, gone + row,
                            w.plane[4] + row, faint_gone + row);
         }
         boxes(&w, &inside, 1, height, width);

@@ -87,9 +87,13 @@ int chk_box_mean(const float *src, int64_t src_stride, int height, int width, in
 /*
  * The pixel test of ChangeTest.changed, after the texture vote: the residual against the table as lit now,
  * residual = (current - predicted) - predicted (illumination - 1), predicted = gain x reference + offset;
- * raw (0/1) where |residual| exceeds `floor` and half the local contrast (the mean magnitude of the clear
- * pixels, above floor, within contrast_window), or where the texture is gone (gone, 0/1) and the contrast is
- * fainter than faint_contrast or more than gone_inside of the pixels within gone_window passed the first test.
+ * raw (0/1) where |residual| exceeds `floor` and half a contrast, or where the texture is gone (gone, 0/1) and
+ * the local contrast (the mean magnitude of the clear pixels, |residual| above floor, within contrast_window)
+ * is fainter than faint_contrast or more than gone_inside of the pixels within gone_window passed the first
+ * test. The contrast: where the pixel's residual has the sign of the window's summed clear residuals (the
+ * change that dominates it), that change's brightness (the mean current value of the window's clear pixels
+ * of that sign) less this pixel's table as lit now (current - residual), in magnitude; elsewhere the local
+ * contrast.
  */
 typedef struct {
     double gain, offset;

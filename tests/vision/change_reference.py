@@ -143,10 +143,25 @@ def residual_reference(
     floor = PIXEL_SIGMAS * test.sigma
     clear = (magnitude > floor).astype(np.float32)
     window = (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX)
+    cur = np.asarray(current, np.float32)
+    brighter = (residual > floor).astype(np.float32)
+    clear_share = cv2.blur(clear, window)
     contrast = cv2.blur(magnitude * clear, window)
-    contrast /= np.maximum(cv2.blur(clear, window), 1e-6)
-    half_contrast = np.multiply(contrast, 0.5, out=clear)
-    raw = magnitude > np.maximum(floor, half_contrast, out=half_contrast)
+    contrast /= np.maximum(clear_share, 1e-6)
+    # The change that dominates the window (the sign of its clear residuals' sum), its brightness (the mean
+    # current value of its clear pixels of that sign) against this pixel's table as lit now; the local contrast
+    # where the pixel's residual has the other sign.
+    dominant_brighter = cv2.blur(residual * clear, window) >= 0.0
+    brighter_share = cv2.blur(brighter, window)
+    brighter_current = cv2.blur(cur * brighter, window)
+    clear_current = cv2.blur(cur * clear, window)
+    share = np.where(dominant_brighter, brighter_share, clear_share - brighter_share)
+    change = np.where(dominant_brighter, brighter_current, clear_current - brighter_current)
+    change /= np.maximum(share, np.float32(1e-6))
+    change -= cur - residual
+    same = np.where(dominant_brighter, residual > 0.0, residual < 0.0)
+    half_contrast = np.where(same, np.abs(change), contrast) * np.float32(0.5)
+    raw = magnitude > np.maximum(floor, half_contrast)
     faint = contrast < FAINT_CONTRAST_SIGMAS * test.sigma
     inside = cv2.blur(raw.astype(np.float32), (GONE_WINDOW_PX, GONE_WINDOW_PX)) > GONE_INSIDE
     inside &= texture_gone

@@ -27,6 +27,24 @@ def test_a_bright_sole_edge_along_a_step_of_the_tables_texture_is_changed_up_to_
     assert not changed[61:, :].any() and not changed[:, :38].any()
 
 
+def test_a_white_sole_edge_over_a_bright_line_of_the_table_is_changed_up_to_the_edge() -> None:
+    # A patterned table's bright grid line (rows 56-63, 160 DN on a 90 DN table) runs under the sole's edge
+    # (row 60): over the line the sole (195) differs from the table by a third of its contrast elsewhere.
+    # Held against half the mean residual round it (~50 DN), the covered half of the line stayed table: the
+    # mask ended 4 px short of the edge. Against the line's own brightness it is changed up to the edge.
+    rng = np.random.default_rng(5)
+    shape = (120, 160)
+    reference = np.full(shape, 90.0, np.float32)
+    reference[56:64, :] = 160.0
+    reference += rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current = reference + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current[:60, 40:120] = 195.0 + rng.normal(0.0, 1.0, (60, 80)).astype(np.float32)
+    test = _fitted_outside(current, reference, (slice(None, 70), slice(30, 130)))
+    changed = test.changed(current, reference)
+    assert changed[:59, 42:118].all()
+    assert not changed[61:, :].any() and not changed[:, :38].any() and not changed[:, 122:].any()
+
+
 def test_a_shadow_along_the_same_step_stays_table() -> None:
     rng = np.random.default_rng(4)
     shape = (120, 160)
