@@ -21,6 +21,19 @@
 /* numpy's maximum for values that are never NaN (checked on entry), as one instruction. */
 static inline float max_f(float a, float b) { return a > b ? a : b; }
 
+/* cond ? a : b on the floats' bits. GCC keeps a float ?: whose operands come from divisions as a branch (it may
+ * not trap where C would not have evaluated them), which stops a loop's vectorisation; the same values. */
+static inline float select_f(int cond, float a, float b)
+{
+    uint32_t bits_a, bits_b;
+    memcpy(&bits_a, &a, sizeof bits_a);
+    memcpy(&bits_b, &b, sizeof bits_b);
+    const uint32_t mask = (uint32_t)-(int32_t)(cond != 0), bits = (bits_a & mask) | (bits_b & ~mask);
+    float out;
+    memcpy(&out, &bits, sizeof out);
+    return out;
+}
+
 /* The value, unknown to the optimiser: x / max(p, 1) is otherwise split into two branches (x / p or x, one
  * being a division by 1), which keeps the loop from being vectorised. */
 static inline float opaque(float value)
@@ -580,18 +593,23 @@ CHK_CLONES static void pixel_test_row(const chk_residual_params *p, int width, c
     const float *restrict contrast_sum = mean[2], *restrict clear_share = mean[3], *restrict clear_sum = mean[8];
     const float *restrict brighter_share = mean[10], *restrict brighter_current = mean[12];
     const float *restrict clear_current = mean[14];
+    /* Branch-free (every load and both sides computed, then selected: select_f), so the loop vectorises. */
+#pragma omp simd
     for (int x = 0; x < width; ++x) {
-        const float contrast = contrast_sum[x] / max_f(clear_share[x], eps);
+        const float all_share = clear_share[x], bright_share = brighter_share[x];
+        const float all_current = clear_current[x], bright_current = brighter_current[x];
+        const float res = residual[x], lit = c[x] - res;
+        const float contrast = contrast_sum[x] / max_f(all_share, eps);
         /* The change that dominates the window (brighter or darker than the table) and its brightness. */
         const int brighter = clear_sum[x] >= 0.0f;
-        const float share = brighter ? brighter_share[x] : clear_share[x] - brighter_share[x];
-        const float current = brighter ? brighter_current[x] : clear_current[x] - brighter_current[x];
+        const float dark_share = all_share - bright_share, dark_current = all_current - bright_current;
+        const float share = select_f(brighter, bright_share, dark_share);
+        const float current = select_f(brighter, bright_current, dark_current);
         const float change = current / max_f(share, eps);
-        const float lit = c[x] - residual[x];
-        const int same = brighter ? residual[x] > 0.0f : residual[x] < 0.0f;
-        const float half_contrast = (same ? fabsf(change - lit) : contrast) * half;
-        const int is_raw = fabsf(residual[x]) > max_f(floor, half_contrast);
-        raw[x] = (float)is_raw;
+        const int same = (brighter & (res > 0.0f)) | (!brighter & (res < 0.0f));
+        const float own = fabsf(change - lit);
+        const float half_contrast = select_f(same, own, contrast) * half;
+        raw[x] = (float)(fabsf(res) > max_f(floor, half_contrast));
         faint_gone[x] = (uint8_t)((gone[x] != 0) & (contrast < faint_limit));
     }
 }
