@@ -550,15 +550,47 @@ int chk_texture(const float *current, int64_t current_stride, const float *refer
     return CHK_OK;
 }
 
-/* One row of the residual against the table as lit now and, on the clear pixels (|residual| above floor; 0
- * elsewhere), the planes the pixel test's window sums read: plane 0 the magnitude, 1 the clear pixels (0/1),
- * 7 the residual, 9 the brighter ones (0/1), 11 their current values, 13 all clear pixels' current values. */
+/* chk_residual's planes: the sources of the pixel test's window sums (on the clear pixels, |residual| above floor;
+ * 0 elsewhere), each followed by its box mean, and the raw test with its mean and the faint-gone candidates. */
+enum {
+    RP_MAGNITUDE,             /* |residual| */
+    RP_MAGNITUDE_MEAN,
+    RP_CLEAR,                 /* 0/1 */
+    RP_CLEAR_MEAN,
+    RP_RESIDUAL,              /* the signed residual: its sum's sign is the change that dominates a window */
+    RP_RESIDUAL_MEAN,
+    RP_BRIGHTER,              /* 0/1: residual above floor */
+    RP_BRIGHTER_MEAN,
+    RP_BRIGHTER_CURRENT,      /* the current value of the brighter ones */
+    RP_BRIGHTER_CURRENT_MEAN,
+    RP_CURRENT,               /* the current value of all clear ones */
+    RP_CURRENT_MEAN,
+    RP_RAW,                   /* the pixel test, 0/1 */
+    RP_RAW_MEAN,
+    RP_FAINT_GONE,            /* uint8_t: texture gone where the change is faint */
+    RP_COUNT
+};
+
+/* The window sums the pixel test reads: the even planes from RP_MAGNITUDE to RP_CURRENT, each into the next. */
+#define RP_SUMS 6
+_Static_assert(RP_COUNT <= CHK_PLANES, "chk_residual's planes fit the workspace");
+_Static_assert(RP_CURRENT_MEAN == 2 * RP_SUMS - 1, "each window sum's source is followed by its mean");
+
+/* The planes of `w` from the start of row `row` (height x width planes). */
+static void row_planes(const workspace *w, size_t row, float *planes[CHK_PLANES])
+{
+    for (int i = 0; i < CHK_PLANES; ++i)
+        planes[i] = w->plane[i] + row;
+}
+
+/* One row of the residual against the table as lit now and the sources of the pixel test's window sums. */
 CHK_CLONES static void residual_row(const chk_residual_params *p, int width, const float *restrict c,
                                     const float *restrict r, const float *restrict illumination,
                                     float *restrict residual, float *const *restrict plane)
 {
-    float *restrict clear_magnitude = plane[0], *restrict clear = plane[1], *restrict clear_residual = plane[7];
-    float *restrict brighter = plane[9], *restrict brighter_current = plane[11], *restrict clear_current = plane[13];
+    float *restrict clear_magnitude = plane[RP_MAGNITUDE], *restrict clear = plane[RP_CLEAR];
+    float *restrict clear_residual = plane[RP_RESIDUAL], *restrict brighter = plane[RP_BRIGHTER];
+    float *restrict brighter_current = plane[RP_BRIGHTER_CURRENT], *restrict clear_current = plane[RP_CURRENT];
     const float gain = (float)p->gain, offset = (float)p->offset, one = opaque(1.0f);
     const float floor = (float)p->floor;
 #pragma omp simd
@@ -582,17 +614,17 @@ CHK_CLONES static void residual_row(const chk_residual_params *p, int width, con
 }
 
 /* One row of the pixel test (raw as 0/1) and the faint-contrast texture vote's candidates, from the window
- * means of residual_row's planes (`mean`, indexed as its planes: 2 of 0, 3 of 1, 8 of 7, 10 of 9, 12 of 11,
- * 14 of 13). */
+ * means of residual_row's planes (`mean`: the row's planes, RP_*_MEAN read). */
 CHK_CLONES static void pixel_test_row(const chk_residual_params *p, int width, const float *restrict c,
                                       const float *restrict residual, float *const *restrict mean,
                                       const uint8_t *restrict gone, float *restrict raw, uint8_t *restrict faint_gone)
 {
     const float floor = (float)p->floor, faint_limit = (float)p->faint_contrast, eps = (float)1e-6;
     const float half = 0.5f;
-    const float *restrict contrast_sum = mean[2], *restrict clear_share = mean[3], *restrict clear_sum = mean[8];
-    const float *restrict brighter_share = mean[10], *restrict brighter_current = mean[12];
-    const float *restrict clear_current = mean[14];
+    const float *restrict contrast_sum = mean[RP_MAGNITUDE_MEAN], *restrict clear_share = mean[RP_CLEAR_MEAN];
+    const float *restrict clear_sum = mean[RP_RESIDUAL_MEAN], *restrict brighter_share = mean[RP_BRIGHTER_MEAN];
+    const float *restrict brighter_current = mean[RP_BRIGHTER_CURRENT_MEAN];
+    const float *restrict clear_current = mean[RP_CURRENT_MEAN];
     /* Branch-free (every load and both sides computed, then selected: select_f), so the loop vectorises. */
 #pragma omp simd
     for (int x = 0; x < width; ++x) {
@@ -672,39 +704,36 @@ int chk_residual(const float *current, int64_t current_stride, const float *refe
         return CHK_ERR_VALUE;
 
     const workspace w = carve(scratch, height, width, residual_window(p), threads);
-    const int k = p->contrast_window;
-    const box_job contrast[] = {
-        plane_job(w.plane[0], width, k, w.plane[2]),   plane_job(w.plane[1], width, k, w.plane[3]),
-        plane_job(w.plane[7], width, k, w.plane[8]),   plane_job(w.plane[9], width, k, w.plane[10]),
-        plane_job(w.plane[11], width, k, w.plane[12]), plane_job(w.plane[13], width, k, w.plane[14])};
-    const box_job inside = plane_job(w.plane[4], width, p->gone_window, w.plane[5]);
-    uint8_t *faint_gone = (uint8_t *)w.plane[6];
+    box_job contrast[RP_SUMS];
+    for (int i = 0; i < RP_SUMS; ++i)
+        contrast[i] = plane_job(w.plane[2 * i], width, p->contrast_window, w.plane[2 * i + 1]);
+    const box_job inside = plane_job(w.plane[RP_RAW], width, p->gone_window, w.plane[RP_RAW_MEAN]);
+    uint8_t *faint_gone = (uint8_t *)w.plane[RP_FAINT_GONE];
 #pragma omp parallel num_threads(threads)
     {
 #pragma omp for schedule(static)
         for (int y = 0; y < height; ++y) {
             const size_t row = (size_t)y * width;
             float *planes[CHK_PLANES];
-            for (int i = 0; i < CHK_PLANES; ++i)
-                planes[i] = w.plane[i] + row;
+            row_planes(&w, row, planes);
             residual_row(p, width, current + y * current_stride, reference + y * reference_stride,
                          illumination + row, residual + row, planes);
         }
-        boxes(&w, contrast, 6, height, width);
+        boxes(&w, contrast, RP_SUMS, height, width);
 #pragma omp for schedule(static)
         for (int y = 0; y < height; ++y) {
             const size_t row = (size_t)y * width;
             float *planes[CHK_PLANES];
-            for (int i = 0; i < CHK_PLANES; ++i)
-                planes[i] = w.plane[i] + row;
+            row_planes(&w, row, planes);
             pixel_test_row(p, width, current + y * current_stride, residual + row, planes, gone + row,
-                           w.plane[4] + row, faint_gone + row);
+                           w.plane[RP_RAW] + row, faint_gone + row);
         }
         boxes(&w, &inside, 1, height, width);
 #pragma omp for schedule(static)
         for (int y = 0; y < height; ++y) {
             const size_t row = (size_t)y * width;
-            changed_row(p, width, w.plane[4] + row, w.plane[5] + row, gone + row, faint_gone + row, raw + row);
+            changed_row(p, width, w.plane[RP_RAW] + row, w.plane[RP_RAW_MEAN] + row, gone + row, faint_gone + row,
+                        raw + row);
         }
     }
     return CHK_OK;
