@@ -7,17 +7,31 @@ import open3d as o3d
 
 from cellctl.stereo.kernels import neighbour_means, window_means
 
+# A point whose 20 nearest points lie more than this many of its pixel spacings away in the mean is isolated: a
+# speck of depth with no measured surface round it. On the sole the mean is 1.7 spacings (median), 2.4-2.9 at the
+# 99th-99.9th percentile and above 4 at 0-11 of ~150000 points; the specks the matcher leaves beyond a sole's edge
+# (its disparity dragged onto a few pixels of a dark shadow band it cannot measure, or of the table beside a
+# black sole) read 4-5.6 (14 of the 19 points beyond fresh sole 9339's edge; /work/notes/s22/md.py). The statistical
+# rule's limit (mean + 2 sd, ~2.1-2.2 spacings on a sole) also takes the sole's own edge points, whose neighbours
+# lie on one side only: those are no specks.
+ISOLATED_SPACINGS = 4.0
+
 
 def statistical_inliers(pixels: np.ndarray, points: np.ndarray, spacing_mm: np.ndarray) -> np.ndarray:
     """Indices of the points (N x 3, with their pixels N x 2 and pixel spacing N, mm) that are not outliers.
 
     Open3D's remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0), with neighbours from the image grid.
     """
-    mean = _mean_neighbour_distances(pixels, points, spacing_mm)
+    return inliers_by_mean(mean_neighbour_distances(pixels, points, spacing_mm))
+
+
+def inliers_by_mean(mean: np.ndarray) -> np.ndarray:
+    """Indices of the points whose mean neighbour distance (`mean_neighbour_distances`, N) is no outlier's:
+    at most the mean of them all plus 2 standard deviations (Open3D's std_ratio=2.0)."""
     return np.flatnonzero(mean <= mean.mean() + 2.0 * mean.std())
 
 
-def _mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm: np.ndarray) -> np.ndarray:
+def mean_neighbour_distances(pixels: np.ndarray, points: np.ndarray, spacing_mm: np.ndarray) -> np.ndarray:
     """Each point's mean distance to its 20 nearest points, itself included (N).
 
     Open3D's remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0) rule: a point is an outlier when this

@@ -17,7 +17,7 @@ from cellctl.stereo.kernels import disc_dilate, mark_pixels
 from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.outliers import statistical_inliers
+from cellctl.vision.outliers import ISOLATED_SPACINGS, inliers_by_mean, mean_neighbour_distances
 from cellctl.vision.table import TABLE_INLIER_MM, TablePlane
 from cellctl.vision.teach import TaughtTable
 
@@ -270,15 +270,39 @@ def depth_step(raster: Footprint, every: np.ndarray, high_counts: np.ndarray) ->
     return raised, measured_cells
 
 
-def without_outliers(cloud: StereoCloud, index: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """The points (indices) that statistical outlier removal keeps."""
+@dataclass(frozen=True)
+class PointSpread:
+    """Per point of a set (`point_spread`): its mean distance to its 20 nearest among them (mm), and whether that
+    makes it an isolated speck of depth (outliers.ISOLATED_SPACINGS)."""
+
+    distance: np.ndarray
+    isolated: np.ndarray
+
+
+def point_spread(cloud: StereoCloud, index: np.ndarray, points: np.ndarray) -> PointSpread | None:
+    """The spread of the points `index` of a stereo cloud; None for another cloud (no pixel grid to find the
+    neighbours on, e.g. a true depth map)."""
     calib = cloud.calibration
-    if calib is None:  # not a stereo cloud, so not one point per rectified pixel (e.g. a true depth map)
+    if calib is None:
+        return None
+    spacing = calib.baseline_mm / cloud.disparity[index]  # between pixels at the point: Z / f = B / d
+    distance = mean_neighbour_distances(np.take(cloud.pixels, index, axis=0), np.take(points, index, axis=0), spacing)
+    return PointSpread(distance, distance > ISOLATED_SPACINGS * spacing)
+
+
+def without_outliers(
+    cloud: StereoCloud, index: np.ndarray, points: np.ndarray, distance: np.ndarray | None = None
+) -> np.ndarray:
+    """The points (indices) that statistical outlier removal keeps; `distance`: their mean neighbour distances
+    (`point_spread`) where already known."""
+    if distance is not None:
+        return index[inliers_by_mean(distance)]
+    spread = point_spread(cloud, index, points)
+    if spread is None:  # not a stereo cloud, so not one point per rectified pixel (e.g. a true depth map)
         o3d_cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[index]))
         _, inliers = o3d_cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
         return index[np.asarray(inliers, dtype=np.int64)]
-    spacing = calib.baseline_mm / cloud.disparity[index]  # between pixels at the point: Z / f = B / d
-    return index[statistical_inliers(np.take(cloud.pixels, index, axis=0), np.take(points, index, axis=0), spacing)]
+    return index[inliers_by_mean(spread.distance)]
 
 
 def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:

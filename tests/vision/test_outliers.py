@@ -6,6 +6,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
+from cellctl.vision.outliers import ISOLATED_SPACINGS, inliers_by_mean, mean_neighbour_distances
 from cellctl.vision.outliers import statistical_inliers as _statistical_inliers
 
 FOCAL_PX, BASELINE_MM = 1400.0, 80.0
@@ -37,3 +38,37 @@ def test_same_points_as_open3d(seed: int) -> None:
     kept = _statistical_inliers(pixels, points, spacing)
     assert len(kept) < len(points)  # there is something to remove
     assert set(kept.tolist()) == set(np.asarray(expected).tolist())
+
+
+def _top_with_specks(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A flat, noisy sole top (120 x 80 px, a few unmeasured pixels) seen from 540 mm, and beyond its edge a
+    band the matcher could not measure but for a few specks at the top's height, each 5+ px from any other
+    point (a dark shadow band's pixels given the sole's disparity). The specks' mask comes last."""
+    rng = np.random.default_rng(seed)
+    ys, xs = np.mgrid[300:380, 500:620]
+    xs, ys = xs.ravel(), ys.ravel()
+    keep = rng.random(xs.size) > 0.03
+    xs, ys = xs[keep], ys[keep]
+    speck_x = np.arange(505, 615, 9) + rng.integers(0, 3, 13)
+    speck_y = 385 + rng.integers(0, 8, 13)
+    xs, ys = np.concatenate([xs, speck_x]), np.concatenate([ys, speck_y])
+    z_camera = 540.0 + rng.normal(0.0, 0.1, xs.size)
+    disparity = FOCAL_PX * BASELINE_MM / z_camera
+    points = np.column_stack([(xs - 640) * z_camera / FOCAL_PX, (ys - 512) * z_camera / FOCAL_PX, z_camera])
+    specks = np.zeros(xs.size, bool)
+    specks[-len(speck_x) :] = True
+    return np.column_stack([xs, ys]).astype(np.float64), points, BASELINE_MM / disparity, specks
+
+
+def test_isolated_points_are_the_specks_not_the_tops_edge() -> None:
+    """The specks beyond the edge are isolated; the top's own points are not, its edge and corners included,
+    which the statistical rule drops with them (their neighbours lie on one side only)."""
+    for seed in (0, 1):
+        pixels, points, spacing, specks = _top_with_specks(seed)
+        distance = mean_neighbour_distances(pixels, points, spacing)
+        isolated = distance > ISOLATED_SPACINGS * spacing
+        outlier = np.ones(len(points), bool)
+        outlier[inliers_by_mean(distance)] = False
+        assert np.all(isolated[specks])
+        assert not np.any(isolated[~specks])
+        assert np.any(outlier[~specks])  # the top's edge: outliers, not isolated
