@@ -133,11 +133,12 @@ def measure_sole(
         length = hi - lo
         base.update(axis=axis, outline=outline, half_area_difference=difference)
         if difference < MIN_HALF_AREA_DIFFERENCE:
-            return _invalid(
+            return _refused_or_unmeasured(
+                reconstruction,
                 FailureKind.ENDS_TOO_CLOSE_TO_CALL,
                 f"toe and heel too close to call: the footprint halves differ by {100 * difference:.1f} % of the "
                 f"area (need {100 * MIN_HALF_AREA_DIFFERENCE:.0f} %)",
-                **base,
+                base,
             )
         glue = worker("glue-path").submit(_glue, line, surface, centroid, axis, glue_spacing_mm)
         try:
@@ -186,6 +187,24 @@ def measure_sole(
     return SoleMeasurement(length_mm=length, heel_height_mm=heel_z, toe_height_mm=toe_z, glue_path=path, **base)
 
 
+def _refused_or_unmeasured(
+    reconstruction: Reconstruction, failure: FailureKind, reason: str, base: dict[str, Any]
+) -> MeasurementRefused:
+    """A refusal of the footprint's shape (its outline's checks, its halves) for `reason`, or, where more than
+    MAX_UNMEASURED_FRACTION of the sole's pixels have no depth, for those: the footprint lost part of the sole to
+    them, and that is the reason, not its shape (a glossy toe without depth leaves halves 3 % apart: matrix sole
+    3079, 35 % of its pixels without depth, refused as toe and heel too close to call)."""
+    if reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
+        return _invalid(
+            FailureKind.SURFACE_NOT_MEASURED,
+            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth "
+            f"({_depth_holes_cause(reconstruction.image_noise_dn)}), so its edge cannot be confirmed "
+            f"({reason})",
+            **base,
+        )
+    return _invalid(failure, reason, **base)
+
+
 def _depth_holes_cause(noise_dn: float | None) -> str:
     """What leaves a sole's pixels without depth, with the image's noise where it was read: the simulator's normal
     sensor reads 0.5-0.75 DN, and a camera with three times its noise (under the image-noise check's
@@ -210,17 +229,8 @@ def _outline_and_heights(
 ) -> tuple[float, float] | MeasurementRefused:
     """The outline's self-checks, then the heel and toe heights (added to `base`), or the refusal."""
     problem = outline_problem(reconstruction, placed, surface)
-    if problem is not None and reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
-        # The outline lost part of the sole to pixels without depth: that is the reason, not the outline.
-        return _invalid(
-            FailureKind.SURFACE_NOT_MEASURED,
-            f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth "
-            f"({_depth_holes_cause(reconstruction.image_noise_dn)}), so its edge cannot be confirmed "
-            f"({problem.reason})",
-            **base,
-        )
     if problem is not None:
-        return _invalid(problem.kind, problem.reason, **base)
+        return _refused_or_unmeasured(reconstruction, problem.kind, problem.reason, base)
     length = hi - lo
     heel_xy = centroid + axis * (lo + HEIGHT_POINT_FRACTION * length)
     toe_xy = centroid + axis * (hi - HEIGHT_POINT_FRACTION * length)

@@ -22,7 +22,7 @@ from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene, true_cloud
 from cellctl.sim.sole import SoleModel, SolePose
 from cellctl.vision.measurement import MeasurementRefused, SoleMeasurement, measure_sole
-from cellctl.vision.reconstruction import SoleReconstructor, StereoCloud
+from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor, StereoCloud
 
 TOLERANCE_MM = 1.3  # Wang et al. 2022, Table 4
 # Black soles whose glue heights are measured finely enough to publish at the default 1 mm tolerance (median
@@ -320,10 +320,17 @@ def test_toe_and_heel_too_close_to_call(rig, reconstructor) -> None:  # noqa: AN
     scene = dataclasses.replace(scene, sole=SoleModel(symmetric, scene.sole.pose))
     assert abs(scene.sole.truth().half_area_difference) < 0.01
     pair = scene.render()
-    result = measure_sole(reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left)))
+    reconstruction = reconstructor.segment(true_cloud(rig, pair.depth_left, pair.left))
+    result = measure_sole(reconstruction)
     assert not result.valid and "too close to call" in result.reason
     assert result.failure is FailureKind.ENDS_TOO_CLOSE_TO_CALL
     assert isinstance(result, MeasurementRefused)  # no heights: the type has none
+    # With much of the sole without depth the footprint's halves say nothing: the lost pixels are the reason.
+    assert isinstance(reconstruction, Reconstruction)
+    holed = measure_sole(dataclasses.replace(reconstruction, unmeasured_fraction=0.3))
+    assert holed.failure is FailureKind.SURFACE_NOT_MEASURED
+    assert holed.reason.startswith("30 % of the sole's pixels have no measured depth")
+    assert "toe and heel too close to call" in holed.reason
 
 
 def test_a_short_sole_with_a_steep_toe_spring_is_measured(rig, reconstructor) -> None:  # noqa: ANN001
