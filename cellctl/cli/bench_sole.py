@@ -38,6 +38,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --matrix: only these matrix entries (default all; `--variations list` prints them)",
     )
     parser.add_argument(
+        "--combined",
+        action="store_true",
+        help="with --matrix --variations: every sole has all the listed variations at once (colours rotating), "
+        "for a combination the matrix draws only by chance",
+    )
+    parser.add_argument(
         "--only",
         metavar="SEED,...",
         help="with --matrix: measure only these seeds of the --soles/--first-seed matrix (a matrix sole's "
@@ -74,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--only needs --matrix")
     if args.variations and not args.matrix:
         raise UserError("--variations needs --matrix")
+    if args.combined and (not args.variations or args.variations == "list"):
+        raise UserError("--combined needs --matrix --variations NAME,... (the variations every sole combines)")
     if args.render_only and not args.cache:
         raise UserError("--render-only needs --cache DIR (where the renders go)")
     if args.matrix:
@@ -100,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
 def _run_matrix(args: argparse.Namespace) -> int:
     from cellctl.eval import sole_matrix
     from cellctl.sim.look import VARIATIONS
-    from cellctl.sim.matrix import matrix_soles
+    from cellctl.sim.matrix import combined_soles, matrix_soles
     from cellctl.sim.scene import SoleScene
     from cellctl.vision.calibration import Calibration
 
@@ -110,7 +118,11 @@ def _run_matrix(args: argparse.Namespace) -> int:
         return 0
     entries = tuple(args.variations.split(",")) if args.variations else None
     try:
-        soles = matrix_soles(args.soles, args.first_seed, entries)
+        if args.combined:
+            assert entries is not None  # checked in run
+            soles = combined_soles(args.soles, args.first_seed, entries)
+        else:
+            soles = matrix_soles(args.soles, args.first_seed, entries)
     except ValueError as exc:
         raise UserError(str(exc)) from None
     if args.only:
@@ -131,6 +143,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
     else:
         command = f"cellctl bench-sole --matrix --soles {args.soles} --first-seed {args.first_seed}"
         command += f" --variations {args.variations}" if args.variations else ""
+        command += " --combined" if args.combined else ""
         command += f" --only {args.only}" if args.only else ""
         command += f" --calib {args.calib}" if args.calib else ""
         command += " --taught" if args.taught else ""

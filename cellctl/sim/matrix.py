@@ -67,6 +67,14 @@ def matrix_soles(count: int, first_seed: int = 0, entries: tuple[str, ...] | Non
     return soles
 
 
+def combined_soles(count: int, first_seed: int, entries: tuple[str, ...]) -> list[MatrixSole]:
+    """`count` soles that each combine all of `entries`, colours rotating over MATRIX_COLOURS: a class of soles
+    the matrix draws together only by chance (a flat sole with a leaning wall: about one in 400). ValueError for
+    an unknown variation or two that set the same field of the look."""
+    look_for(entries, first_seed)  # refused here, before anything is rendered
+    return [MatrixSole(first_seed + i, MATRIX_COLOURS[i % len(MATRIX_COLOURS)], entries) for i in range(count)]
+
+
 def _add_compatible(chosen: list[str], candidates: tuple[str, ...], rng: np.random.Generator) -> None:
     """Append one candidate whose fields none of the chosen variations sets (nothing if none fits)."""
     taken = {f for name in chosen for f in VARIATIONS[name].fields}

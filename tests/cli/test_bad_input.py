@@ -192,6 +192,12 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         "seed 3090 is not in the matrix (3000..3083)",
     ),
     "bench-sole: --only without --matrix": lambda d, _: Case(["bench-sole", "--only", "3"], "--only needs --matrix"),
+    "bench-sole: --combined without --variations": lambda d, _: Case(
+        ["bench-sole", "--matrix", "--combined"], "--combined needs --matrix --variations"
+    ),
+    "bench-sole: --combined with clashing variations": lambda d, _: Case(
+        ["bench-sole", "--matrix", "--combined", "--variations", "flat,tall"], "both set height"
+    ),
     "results: missing config": lambda d, _: Case(["results", "--config", str(d / "absent.toml")], "does not exist"),
     "rectify: matrix rows/cols do not match": lambda d, _: Case(
         [

@@ -17,7 +17,14 @@ from cellctl.errors import FailureKind
 from cellctl.eval.sole_bench import SoleBenchRow, glue_line_steep, measure_scene, outline_error
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
-from cellctl.sim.matrix import END_VARIATIONS, MATRIX_COLOURS, MATRIX_ENTRIES, MatrixSole, matrix_soles
+from cellctl.sim.matrix import (
+    END_VARIATIONS,
+    MATRIX_COLOURS,
+    MATRIX_ENTRIES,
+    MatrixSole,
+    combined_soles,
+    matrix_soles,
+)
 from cellctl.sim.render import SceneRenderer
 from cellctl.sim.scene import SoleScene
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
@@ -63,6 +70,22 @@ def test_matrix_visits_every_entry_with_colours_and_ends_mixed() -> None:
     assert sum(any(v in END_VARIATIONS for v in s.variations[1:]) for s in soles) >= len(MATRIX_ENTRIES) // 2
     for sole in soles:
         sole.look  # every combination the matrix makes is a valid one  # noqa: B018
+
+
+def test_combined_soles_each_carry_every_listed_variation() -> None:
+    """`bench-sole --combined`: a combination the matrix draws only by chance (a flat sole with a leaning wall),
+    on every sole, colours rotating."""
+    soles = combined_soles(6, 12000, ("flat", "sloped-wall"))
+    assert [s.seed for s in soles] == list(range(12000, 12006))
+    assert all(s.variations == ("flat", "sloped-wall") for s in soles)
+    assert [s.color for s in soles] == list(MATRIX_COLOURS) * 2
+    for sole in soles:
+        assert sole.look.height == "flat" and 8.0 <= sole.look.wall_slope_deg <= 20.0
+    assert len({s.look.wall_slope_deg for s in soles}) == len(soles)  # drawn per seed
+    with pytest.raises(ValueError, match="both set height"):
+        combined_soles(2, 0, ("flat", "tall"))
+    with pytest.raises(ValueError, match="unknown variation"):
+        combined_soles(2, 0, ("flat", "purple-sole"))
 
 
 # ---- geometry: ends and edges ---------------------------------------------------------------------------
