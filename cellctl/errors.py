@@ -27,6 +27,7 @@ class FailureKind(enum.Enum):
     TABLE_MOVED = "table_moved"  #: the table no longer lies where it was taught (table or cameras moved)
     OUTLINE_INCONSISTENT = "outline_inconsistent"  #: the outline disagrees with the depth step or between the cameras
     GLUE_PATH_INCONSISTENT = "glue_path_inconsistent"  #: glue path heights or normals disagree with the sole's surface
+    WALL_TOO_LOW = "wall_too_low"  #: the sole's wall is too low all round to confirm its outline as its foot
     CALIBRATION_MISMATCH = "calibration_mismatch"  #: the images do not match the calibration
     CALIBRATION_MISSING = "calibration_missing"  #: no usable calibration is loaded
     TABLE_NOT_TAUGHT = "table_not_taught"  #: the cell requires a taught table and has no usable one

@@ -159,6 +159,7 @@ class ErrorCode(enum.IntEnum):
     OUTLINE_INCONSISTENT = 38
     GLUE_PATH_INCONSISTENT = 39
     RECIPE_UNKNOWN = 40
+    WALL_TOO_LOW = 41
     CYCLE_ABORTED = 90
     CYCLE_TIMEOUT = 91
     INTERNAL_ERROR = 99
@@ -247,6 +248,10 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ErrorCode.RECIPE_UNKNOWN: (
         "The recipe number in register 7 names no recipe loaded on this cell (map version 2).",
         "Write the number of an installed recipe before triggering (0 = the cell's default settings), or install the recipe file and restart the service.",
+    ),
+    ErrorCode.WALL_TOO_LOW: (
+        "The sole's wall is too low all round (under 10 mm) for the cameras to tell whether it leans out, so its outline cannot be confirmed as its edge.",
+        "Not a fault of the cell: this sole model is outside what it measures (a flat sole); glue it from the model's stored path or call the line engineer.",
     ),
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",

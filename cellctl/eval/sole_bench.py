@@ -20,6 +20,7 @@ from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.checks import MIN_GLUE_NZ
 from cellctl.vision.defaults import GLUE_OFFSET_MM
+from cellctl.vision.edge_checks import LOW_WALL_QUANTILE, WALL_HEIGHT_INSET_MM
 from cellctl.vision.measurement import MeasurementRefused, MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.teach import TeachError, average_exposures
@@ -51,6 +52,10 @@ class SoleBenchRow:
     # A refusal's outline (where the measurement got that far): its farthest point from the true outline, mm.
     # Says whether an "outline inconsistent" refusal's claim is true, whatever the variations say.
     outline_error_max_mm: float | None = None
+    # The sole's true wall height where it stands highest (the true top 6 mm inside the true outline, its 90th
+    # percentile, as edge_checks.check_wall_height reads the measured one): below the check's limit the cell
+    # cannot confirm the outline as the foot, and a `wall_too_low` refusal is the right answer.
+    wall_height_true_mm: float | None = None
 
 
 def bench_soles(
@@ -147,6 +152,8 @@ def measure_scene(
         failure,
         truth.half_area_difference,
         glue_line_steep(scene),
+        None,
+        wall_height_true(scene),
     )
     if isinstance(result, SoleMeasurement):
         row.length_error_mm = result.length_mm - truth.length_mm
@@ -189,11 +196,26 @@ GLUE_LINE_TRUTH_STEP_MM = 0.5  # spacing of the true glue line's samples
 
 def glue_line_steep(scene: SoleScene) -> float:
     """Share of the true glue line (GLUE_OFFSET_MM inside the true outline) whose true surface normal is more
-    than the glue contract allows from vertical (checks.MIN_GLUE_NZ): from the model, not the measuring code.
+    than the glue contract allows from vertical (checks.MIN_GLUE_NZ): from the model, not the measuring code."""
+    assert scene.sole is not None
+    line = true_inset_line(scene, GLUE_OFFSET_MM)
+    if not len(line):
+        return 0.0
+    return float(np.mean(scene.sole.top_normal_at(line)[:, 2] < MIN_GLUE_NZ))
 
-    The line's samples are the outline's points moved GLUE_OFFSET_MM along the inward normal; those that do not
-    land GLUE_OFFSET_MM inside (where the offset crosses itself at a pointed end) are left out.
-    """
+
+def wall_height_true(scene: SoleScene) -> float:
+    """The true top WALL_HEIGHT_INSET_MM inside the true outline, its LOW_WALL_QUANTILE (mm above the table): the
+    wall height edge_checks.check_wall_height reads on the measured top."""
+    assert scene.sole is not None
+    line = true_inset_line(scene, WALL_HEIGHT_INSET_MM)
+    return float(np.quantile(scene.sole.top_height_at(line), LOW_WALL_QUANTILE)) if len(line) else 0.0
+
+
+def true_inset_line(scene: SoleScene, offset_mm: float) -> np.ndarray:
+    """Points `offset_mm` inside the true outline, GLUE_LINE_TRUTH_STEP_MM apart: the outline's points moved
+    along the inward normal; those that do not land `offset_mm` inside (where the offset crosses itself at a
+    pointed end) are left out."""
     assert scene.sole is not None
     outline = scene.sole.footprint_table().astype(np.float64)
     step = np.linalg.norm(np.diff(outline, axis=0), axis=1).mean()
@@ -201,13 +223,10 @@ def glue_line_steep(scene: SoleScene) -> float:
     tangent = np.roll(outline, -1, axis=0) - np.roll(outline, 1, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     inward = np.column_stack([-tangent[:, 1], tangent[:, 0]])  # left of travel on a counter-clockwise outline
-    line = outline + GLUE_OFFSET_MM * inward
+    line = outline + offset_mm * inward
     polygon = outline.astype(np.float32).reshape(-1, 1, 2)
     inset = np.array([cv2.pointPolygonTest(polygon, (float(x), float(y)), True) for x, y in line])
-    line = line[np.abs(inset - GLUE_OFFSET_MM) < 0.1 * GLUE_OFFSET_MM]
-    if not len(line):
-        return 0.0
-    return float(np.mean(scene.sole.top_normal_at(line)[:, 2] < MIN_GLUE_NZ))
+    return line[np.abs(inset - offset_mm) < 0.1 * offset_mm]
 
 
 def _row_text(row: SoleBenchRow) -> str:

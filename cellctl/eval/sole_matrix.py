@@ -36,6 +36,7 @@ from cellctl.sim.rig import rig_for
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.checks import MAX_GLUE_UNCOVERED
+from cellctl.vision.edge_checks import LOW_WALL_MM
 from cellctl.vision.measurement import MIN_HALF_AREA_DIFFERENCE
 from cellctl.vision.reconstruction import SoleReconstructor
 
@@ -90,6 +91,8 @@ def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
             fair_kinds.add(FailureKind.ENDS_TOO_CLOSE_TO_CALL)
         if row.glue_line_steep_true is not None and row.glue_line_steep_true > STEEP_GLUE_LINE_SHARE:
             fair_kinds |= STEEP_GLUE_LINE_REFUSALS
+        if row.wall_height_true_mm is not None and row.wall_height_true_mm < LOW_WALL_MM:
+            fair_kinds.add(FailureKind.WALL_TOO_LOW)  # true of the sole, whatever its variations say
         fair = row.failure is not None and row.failure in {kind.value for kind in fair_kinds}
         return MatrixRow(sole, row, "fair refusal" if fair else "missed")
     bad = tuple(name for name, limit in TOLERANCES.items() if abs(getattr(row, name)) > limit)

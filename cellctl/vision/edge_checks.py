@@ -80,6 +80,25 @@ MAX_EDGE_OFFSET_MM = 0.8
 MIN_CONCAVE_RADIUS_MM = 12.0
 NOTCH_MAX_HALF_CHORD_MM = 7
 
+# A wall too low to confirm the outline as the sole's foot. The outline is the top edge's silhouette (the camera
+# on a wall's inner side sees no more); a wall leaning out towards the table puts its foot h tan(lean) beyond
+# it, and the cell sees that only in depth (a ramp the edge checks read) or where the wall's lower part differs
+# from the table in the images. The depth step is blurred ~1-1.5 mm either side of the edge (heights beyond a
+# vertical flat sole's foot still read 30-60 % of its top 1-1.5 mm out), and the lower part of a wall lit at a
+# grazing angle mostly has the table's brightness: on flat soles (6-7.5 mm) leaning 8-20 degrees the outline
+# lay 0.3-1.4 mm inside the foot with every check passing (docs/sole-benchmark.md, twenty-third round). A sole
+# whose wall stands LOW_WALL_MM or more somewhere (a heel) shows a lean of 8 degrees or more there as a ramp of
+# 1.4 mm or more, which the edge checks refuse; lower all round, it is refused here. What stays unseen on any
+# sole: a lean too small to run beyond the blur (h tan(lean) under ~1.4 mm, a mould's draft of a few degrees).
+LOW_WALL_MM = 10.0
+LOW_WALL_QUANTILE = 0.9  # the wall's height where it stands highest, not one stretch of it
+# Where the wall's height is read: the top this far inside the outline (a coarse median of the cloud). Far enough
+# in to be on the top past a leaning wall's run at the heel (a 20 mm heel leaning 20 degrees runs 7 mm: there
+# the reading is 16 mm), near enough for a flat sole's top (6-7.5 mm) to be its wall's height.
+WALL_HEIGHT_INSET_MM = 6.0
+WALL_HEIGHT_RADIUS_MM = 3.0
+LEAN_SHOWN_DEG = 20.0  # the steepest lean the refusal's words put a number on (the simulator's range: 8-20)
+
 
 def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
     """A notch in the outline (N x 2, counter-clockwise, points 1 mm apart, closed) sharper than a sole's edge
@@ -109,6 +128,26 @@ def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
             "sole's edge",
         )
     return None
+
+
+def check_wall_height(edge_height: np.ndarray) -> CheckFailure | None:
+    """Refuse a sole whose wall is lower than LOW_WALL_MM all round (the LOW_WALL_QUANTILE of `edge_height`, the
+    measured top WALL_HEIGHT_INSET_MM inside each outline point): too low for depth to show whether it leans
+    out, so its outline cannot be confirmed as its foot (the constants' comment says why)."""
+    known = edge_height[np.isfinite(edge_height)]
+    if not len(known):
+        return None  # no surface near the edge: the surface checks refuse it
+    high = float(np.quantile(known, LOW_WALL_QUANTILE))
+    if high >= LOW_WALL_MM:
+        return None
+    reach = high * np.tan(np.radians(LEAN_SHOWN_DEG))
+    return CheckFailure(
+        FailureKind.WALL_TOO_LOW,
+        f"the sole's wall stands at most {high:.1f} mm high ({100 * LOW_WALL_QUANTILE:.0f}th percentile round the outline; the cell needs "
+        f"{LOW_WALL_MM:.0f} mm somewhere): on a wall this low, depth cannot tell a vertical wall from one leaning "
+        f"out, whose foot would lie up to {reach:.1f} mm (at {LEAN_SHOWN_DEG:.0f} degrees) beyond the outline, so "
+        "the outline cannot be confirmed as the sole's edge",
+    )
 
 
 def check_edge_profile(

@@ -22,10 +22,13 @@ from cellctl.vision.checks import (
 )
 from cellctl.vision.closed_path import outward_normals, resample_closed
 from cellctl.vision.edge_checks import (
+    WALL_HEIGHT_INSET_MM,
+    WALL_HEIGHT_RADIUS_MM,
     check_edge_offsets,
     check_edge_profile,
     check_outline_notch,
     check_steep_wall,
+    check_wall_height,
 )
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
@@ -49,6 +52,11 @@ def outline_problem(reconstruction: Reconstruction, placed: PlacedOutline, surfa
     other's mask left): the edge-offset check reads those points by that camera."""
     ring = resample_closed(placed.outline, 1.0)
     outward = outward_normals(ring)
+    # First: a wall too low all round to show a lean cannot have its outline confirmed, whatever the checks
+    # below find (on a flat sole they pass a leaning wall's outline, or refuse it for what they read in the blur).
+    problem = check_wall_height(surface.coarse_heights(ring - WALL_HEIGHT_INSET_MM * outward, WALL_HEIGHT_RADIUS_MM))
+    if problem is not None:
+        return problem
     heights = height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
         # Untaught, the colour test's edge is also held to the nearer distance (checks.UNTAUGHT_OUTSIDE_PX).

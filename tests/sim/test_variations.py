@@ -14,7 +14,7 @@ import pytest
 
 from cellctl.cli import main
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import SoleBenchRow, glue_line_steep, measure_scene, outline_error
+from cellctl.eval.sole_bench import SoleBenchRow, glue_line_steep, measure_scene, outline_error, wall_height_true
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
 from cellctl.sim.matrix import (
@@ -357,8 +357,21 @@ def test_judging_valid_and_refused_results() -> None:
     assert judge(sloped, replace(on_wall, glue_line_steep_true=0.02)).verdict == "missed"
     assert judge(sloped, replace(on_wall, failure=FailureKind.NO_SOLE.value)).verdict == "missed"
     assert judge(sloped, replace(_row(), glue_line_steep_true=0.5)).verdict == "right"  # measured right stays right
+    # A wall too low to confirm the outline: right where the true wall is that low, whatever the variations.
+    low = replace(refused, failure=FailureKind.WALL_TOO_LOW.value, wall_height_true_mm=7.2)
+    assert judge(sole, low).verdict == "fair refusal"
+    assert judge(sole, replace(low, wall_height_true_mm=21.0)).verdict == "missed"
     results = [judge(sole, _row()), judge(sole, refused)]
     assert acceptance(results).measured_fraction == 0.5 and not acceptance(results).passed
+
+
+@pytest.mark.parametrize(("height", "low", "high"), [("flat", 6.0, 8.0), ("normal", 20.0, 36.0), ("tall", 40.0, 52.0)])
+def test_the_true_wall_height_is_the_heel_of_the_model(height: str, low: float, high: float) -> None:
+    # The 90th percentile of the true top 6 mm inside the outline: the heel's height (the top's cross curvature
+    # adds up to 2 mm), from the model alone.
+    for seed in range(3):
+        scene = SoleScene.random(seed, "white", half_size_rig(), SceneLook(height=height))
+        assert low <= wall_height_true(scene) <= high
 
 
 def test_missed_outline_refusals_are_counted_by_their_outlines_truth() -> None:
