@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.sim.sole_profile import FOOT_MM
 
 END_KINDS = ("round", "pointed", "square", "cusped")
 HEIGHT_CLASSES = ("normal", "flat", "tall")
@@ -44,6 +45,7 @@ class SceneLook:
     heel: str = "round"
     wall_slope_deg: float = 0.0  # side wall leaning out towards the table (0: vertical)
     top_edge_radius_mm: float = 0.0  # rounded (bevelled) top edge (0: sharp)
+    wall_foot_mm: float = FOOT_MM  # vertical wall below a sloped wall's lean (0: leaning from the table up)
     height: str = "normal"  # HEIGHT_CLASSES: flat ~6 mm, normal 8-35 mm, tall up to 50 mm
     colours: str = "plain"  # COLOUR_SCHEMES: rim = dark (or light) band round the edge and on the wall
     table: str = "dark"  # TABLE_LOOKS
@@ -73,8 +75,8 @@ class SceneLook:
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
-        if not 0.0 <= self.wall_slope_deg < 45.0 or self.top_edge_radius_mm < 0.0:
-            raise ValueError("wall slope must be in [0, 45) degrees and the top edge radius >= 0 mm")
+        if not 0.0 <= self.wall_slope_deg < 45.0 or self.top_edge_radius_mm < 0.0 or self.wall_foot_mm < 0.0:
+            raise ValueError("wall slope must be in [0, 45) degrees, the top edge radius and wall foot >= 0 mm")
         if self.right_gain <= 0.0 or self.right_gamma <= 0.0:
             raise ValueError("right camera gain and gamma must be positive")
         if self.texture_contrast <= 0.0:
@@ -119,8 +121,15 @@ VARIATIONS: dict[str, Variation] = {
         Variation("square-heel", "heel squared off (superelliptic cap)", ("heel",), _set(heel="square")),
         Variation("cusped-toe", "toe ending in a cusp (concave sides, zero tip radius)", ("toe",), _set(toe="cusped")),
         Variation("cusped-heel", "heel ending in a cusp", ("heel",), _set(heel="cusped")),
+        # The lean starts 0-4 mm above the table: from the table itself, as a moulded sole's draft may, or above a
+        # vertical foot (sole_profile.FOOT_MM, what every sloped wall had before).
         Variation(
-            "sloped-wall", "side wall leaning out 8-20 degrees", ("wall_slope_deg",), _draw("wall_slope_deg", 8, 20)
+            "sloped-wall",
+            "side wall leaning out 8-20 degrees from 0-4 mm above the table",
+            ("wall_slope_deg", "wall_foot_mm"),
+            lambda look, rng: replace(
+                look, wall_slope_deg=float(rng.uniform(8, 20)), wall_foot_mm=float(rng.uniform(0.0, FOOT_MM))
+            ),
         ),
         Variation(
             "rounded-edge",

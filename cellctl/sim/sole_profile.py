@@ -9,10 +9,12 @@ profile with a smooth minimum.
 
 Edge: the top surface near the outline, as a function of the exact distance `dist` from the outline
 (inside), the local top height T and underside height U. A vertical wall rises from U; a sloped wall rises
-from a vertical foot of FOOT_MM and leans out by `wall_slope_deg` towards the table; a rounded top edge is
-a circular fillet of `top_radius` between the wall and the top. Every profile keeps the part of the sole
-above MIN_HEIGHT_MM (docs/measurements.md, footprint) reaching out to the outline itself, so the footprint
-is the outline: the foot and the fillet are limited to keep FOOT_MM of vertical wall.
+from a vertical foot of `foot_mm` (FOOT_MM unless the look draws another: 0 is a wall leaning from the table
+up) and leans out by `wall_slope_deg` towards the table; a rounded top edge is a circular fillet of
+`top_radius` between the wall and the top. With the default foot every profile keeps the part of the sole
+above MIN_HEIGHT_MM (docs/measurements.md, footprint) reaching out to the outline itself, so the footprint is
+the outline: the foot and the fillet are limited to keep `foot_mm` of vertical wall. A lower foot is what
+another simulator (or a real moulded sole) may well have: the outline is still the foot on the table.
 """
 
 from __future__ import annotations
@@ -96,6 +98,7 @@ class EdgeProfile:
 
     wall_slope_deg: float = 0.0
     top_radius: float = 0.0
+    foot_mm: float = FOOT_MM  # vertical wall below the lean (and below the fillet)
 
     @property
     def plain(self) -> bool:
@@ -111,7 +114,7 @@ class EdgeProfile:
             return np.asarray(top, np.float64)
         dist = np.clip(np.asarray(dist, np.float64), 0.0, None)
         alpha = np.radians(self.wall_slope_deg)
-        foot = bottom + FOOT_MM
+        foot = bottom + self.foot_mm
         r = np.clip(np.minimum(self.top_radius, top - foot), 0.0, None)
         corner = (top - foot) * np.tan(alpha)  # where the (unrounded) wall meets the top
         tangent = r / np.tan((np.pi / 2 + alpha) / 2)  # corner to the fillet's tangent points

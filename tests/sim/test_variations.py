@@ -150,6 +150,15 @@ def test_sloped_wall_rises_from_its_foot() -> None:
     dist = np.array([0.0, 3.0, 50.0])
     z = profile.height(dist, np.full(3, 30.0), np.zeros(3))
     np.testing.assert_allclose(z, [FOOT_MM, FOOT_MM + 3.0 / np.tan(np.radians(15.0)), 30.0])
+    # A wall leaning from the table up (no vertical foot): the outline is where it meets the table.
+    from_table = EdgeProfile(15.0, 0.0, foot_mm=0.0).height(dist, np.full(3, 30.0), np.zeros(3))
+    np.testing.assert_allclose(from_table, [0.0, 3.0 / np.tan(np.radians(15.0)), 30.0])
+
+
+def test_sloped_walls_lean_from_the_table_up_to_a_four_mm_foot() -> None:
+    feet = [look_for(("sloped-wall",), seed).wall_foot_mm for seed in range(40)]
+    assert 0.0 <= min(feet) < 0.5 and FOOT_MM - 0.5 < max(feet) <= FOOT_MM
+    assert SceneLook().wall_foot_mm == FOOT_MM  # other looks keep the foot every sloped wall had before
 
 
 def test_mesh_follows_the_edge_profile() -> None:
