@@ -48,6 +48,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="MM",
         help="how far glue heights may stray: a sole measured too coarsely for it is refused (default 1)",
     )
+    parser.add_argument(
+        "--vertical-wall",
+        action="store_true",
+        help="the sole's side wall is known not to lean out (its mould): measure it even if its wall is too low all "
+        "round for the cell to check (under 10 mm; refused as wall_too_low otherwise)",
+    )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument(
         "--ply", type=Path, metavar="out.ply", help="write the sole's point cloud (table frame, colours)"
@@ -104,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.calib} LEFT RIGHT), or pass --untaught for a plain one-colour sole on a plain table"
         )
     reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right)
-    result = measure_sole(reconstruction, offset, spacing, tolerance)
+    result = measure_sole(reconstruction, offset, spacing, tolerance, vertical_wall=args.vertical_wall)
     if args.ply:
         _write_ply(args.ply, reconstruction)
     if args.export:

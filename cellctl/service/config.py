@@ -45,6 +45,9 @@ class CalibrationConfig:
     path: Path
 
 
+SOLE_WALLS = ("unknown", "vertical")
+
+
 @dataclass(frozen=True)
 class MeasureConfig:
     depth_range_mm: tuple[float, float] = DEPTH_RANGE_MM
@@ -55,6 +58,9 @@ class MeasureConfig:
     # depth checks it: on the matrix sets 9-12 of 84 results were valid and wrong that way (docs/sole-benchmark.md,
     # thirteenth round). A cell that measures only plain one-colour soles on a plain table may set it false.
     require_taught_table: bool = True
+    # The soles' side wall: "unknown" (the cell refuses a sole whose wall is too low all round to show whether it
+    # leans out, `wall_too_low`) or "vertical" (known from the mould: its outline is its foot however low it is).
+    sole_wall: str = "unknown"
 
 
 @dataclass(frozen=True)
@@ -252,6 +258,7 @@ def _measure(t: Table) -> MeasureConfig:
             high=GLUE_HEIGHT_TOLERANCE_RANGE_MM[1],
         ),
         require_taught_table=t.get("require_taught_table", bool, MeasureConfig.require_taught_table),
+        sole_wall=t.choice("sole_wall", SOLE_WALLS, MeasureConfig.sole_wall),
     )
     t.finish()
     return config

@@ -26,12 +26,13 @@ SWAPPED = (
 
 @dataclass(frozen=True)
 class MeasureSettings:
-    """What a cycle needs to know beyond the frame: glue path offset and spacing, and the glue heights'
-    tolerance (mm)."""
+    """What a cycle needs to know beyond the frame: glue path offset and spacing, the glue heights' tolerance
+    (mm), and whether the sole model's wall is known to be vertical (measure_sole)."""
 
     glue_offset_mm: float
     glue_spacing_mm: float
     glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM
+    vertical_wall: bool = False
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,11 @@ def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings
     except MeasurementInputError as exc:  # e.g. frames of another size than the calibration
         return Refused(exc.kind, f"cameras deliver frames the measurement cannot use: {exc}")
     measurement = measure_sole(
-        reconstruction, settings.glue_offset_mm, settings.glue_spacing_mm, settings.glue_height_tolerance_mm
+        reconstruction,
+        settings.glue_offset_mm,
+        settings.glue_spacing_mm,
+        settings.glue_height_tolerance_mm,
+        vertical_wall=settings.vertical_wall,
     )
     timings = dict(measurement.timings)
     if isinstance(measurement, MeasurementRefused):

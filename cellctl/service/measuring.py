@@ -70,7 +70,12 @@ class CellMeasurer:
             plane = self.reconstructor.learn_table(frame.left, frame.right)
             log.info("table plane %s", "learnt from the warm-up pair" if plane is not None else "NOT found")
         measure = self.config.measure
-        settings = MeasureSettings(measure.glue_offset_mm, measure.glue_spacing_mm, measure.glue_height_tolerance_mm)
+        settings = MeasureSettings(
+            measure.glue_offset_mm,
+            measure.glue_spacing_mm,
+            measure.glue_height_tolerance_mm,
+            measure.sole_wall == "vertical",
+        )
         result = measure_frame(frame, self.reconstructor, settings)
         outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
         log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
@@ -118,9 +123,8 @@ class CellMeasurer:
         if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
             reconstructor = self._reconstructor_for(recipe.depth_range_mm)
         tolerance = self.config.measure.glue_height_tolerance_mm  # the cell's dispenser, not the sole model's
-        result = measure_frame(
-            frame, reconstructor, MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm, tolerance)
-        )
+        settings = MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm, tolerance, recipe.vertical_wall)
+        result = measure_frame(frame, reconstructor, settings)
         timings.update(result.timings)
         if isinstance(result, Refused):
             raise CycleFailed.of(result.failure, result.reason)

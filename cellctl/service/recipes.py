@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from cellctl.service.config import ConfigError, MeasureConfig
+from cellctl.service.config import SOLE_WALLS, ConfigError, MeasureConfig
 from cellctl.service.config_table import Table, read_toml
 from firmware_io.registers import FeatureBit
 
@@ -52,6 +52,7 @@ class Recipe:
     heel_height_mm: Tolerance | None = None
     toe_height_mm: Tolerance | None = None
     source: Path | None = None
+    vertical_wall: bool = False  # [sole] wall = "vertical": the model's wall does not lean out (measure_sole)
 
     @property
     def checks_tolerances(self) -> bool:
@@ -73,7 +74,12 @@ class Recipe:
     def default(cls, measure: MeasureConfig) -> Recipe:
         """Recipe 0: the cell's [measure] settings, nothing checked."""
         return cls(
-            DEFAULT_RECIPE, "cell default", measure.glue_offset_mm, measure.glue_spacing_mm, measure.depth_range_mm
+            DEFAULT_RECIPE,
+            "cell default",
+            measure.glue_offset_mm,
+            measure.glue_spacing_mm,
+            measure.depth_range_mm,
+            vertical_wall=measure.sole_wall == "vertical",
         )
 
 
@@ -121,6 +127,7 @@ def load_recipe(path: Path, measure: MeasureConfig) -> Recipe:
     if not name.strip():
         raise root.fail("name", 'empty: name the shoe model, e.g. "Runner 42 left"')
     glue = root.table("glue")
+    sole = root.table("sole")
     depth = root.get("depth_range_mm", list, list(measure.depth_range_mm))
     if len(depth) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in depth):
         raise root.fail("depth_range_mm", f"expected [near, far] in mm, got {depth!r}")
@@ -136,8 +143,10 @@ def load_recipe(path: Path, measure: MeasureConfig) -> Recipe:
         heel_height_mm=_tolerance(root, "heel_height_mm"),
         toe_height_mm=_tolerance(root, "toe_height_mm"),
         source=path,
+        vertical_wall=sole.choice("wall", SOLE_WALLS, measure.sole_wall) == "vertical",
     )
     glue.finish()
+    sole.finish()
     root.finish()
     return recipe
 

@@ -42,7 +42,7 @@ from cellctl.vision.edge_checks import MIN_CONCAVE_RADIUS_MM
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.glue_path import depth_normals, glue_path
 from cellctl.vision.image_edge import PlacedOutline, onto_image_edge
-from cellctl.vision.outline_checks import outline_problem
+from cellctl.vision.outline_checks import outline_problem, wall_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.sole_region import MAX_IMAGE_NOISE_DN
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
@@ -102,9 +102,14 @@ def measure_sole(
     glue_offset_mm: float = GLUE_OFFSET_MM,
     glue_spacing_mm: float = GLUE_SPACING_MM,
     glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM,
+    vertical_wall: bool = False,
 ) -> MeasurementResult:
     """Length, heel and toe height and glue path of a reconstructed sole; a glue path whose heights are expected
-    to stray beyond `glue_height_tolerance_mm` is refused (checks.check_glue_precision)."""
+    to stray beyond `glue_height_tolerance_mm` is refused (checks.check_glue_precision).
+
+    vertical_wall: the sole model's side wall is known not to lean out (from its mould; a recipe says so): its
+    outline is then its foot even where the wall is too low for the cell to check (edge_checks.check_wall_height).
+    """
     check_glue_settings(glue_offset_mm, glue_spacing_mm, glue_height_tolerance_mm)
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
@@ -142,7 +147,7 @@ def measure_sole(
             )
         glue = worker("glue-path").submit(_glue, line, surface, centroid, axis, glue_spacing_mm)
         try:
-            checked = _outline_and_heights(reconstruction, placed, surface, centroid, axis, lo, hi, base)
+            checked = _outline_and_heights(reconstruction, placed, surface, centroid, axis, lo, hi, base, vertical_wall)
             timings["measure"] = time.perf_counter() - start
             if isinstance(checked, MeasurementRefused):
                 return checked  # as before: whatever the glue path came to does not matter
@@ -226,8 +231,16 @@ def _outline_and_heights(
     lo: float,
     hi: float,
     base: dict[str, Any],
+    vertical_wall: bool,
 ) -> tuple[float, float] | MeasurementRefused:
-    """The outline's self-checks, then the heel and toe heights (added to `base`), or the refusal."""
+    """The wall's height (unless the sole model's wall is known to be vertical), the outline's self-checks, then
+    the heel and toe heights (added to `base`), or the refusal."""
+    if not vertical_wall:
+        # First, and not renamed for missing depth: a wall too low all round to show a lean cannot have its outline
+        # confirmed, whatever the outline's checks find (on a flat sole they pass a leaning wall's outline).
+        low = wall_problem(placed, surface)
+        if low is not None:
+            return _invalid(low.kind, low.reason, **base)
     problem = outline_problem(reconstruction, placed, surface)
     if problem is not None:
         return _refused_or_unmeasured(reconstruction, problem.kind, problem.reason, base)

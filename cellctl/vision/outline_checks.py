@@ -52,11 +52,6 @@ def outline_problem(reconstruction: Reconstruction, placed: PlacedOutline, surfa
     other's mask left): the edge-offset check reads those points by that camera."""
     ring = resample_closed(placed.outline, 1.0)
     outward = outward_normals(ring)
-    # First: a wall too low all round to show a lean cannot have its outline confirmed, whatever the checks
-    # below find (on a flat sole they pass a leaning wall's outline, or refuse it for what they read in the blur).
-    problem = check_wall_height(surface.coarse_heights(ring - WALL_HEIGHT_INSET_MM * outward, WALL_HEIGHT_RADIUS_MM))
-    if problem is not None:
-        return problem
     heights = height_map(reconstruction)
     if reconstruction.raised is not None and reconstruction.measured_cells is not None:
         # Untaught, the colour test's edge is also held to the nearer distance (checks.UNTAUGHT_OUTSIDE_PX).
@@ -96,6 +91,14 @@ def outline_problem(reconstruction: Reconstruction, placed: PlacedOutline, surfa
         return problem
     # Last: a short notch both cameras' masks share passes every check above; the outline's shape shows it.
     return check_outline_notch(ring)
+
+
+def wall_problem(placed: PlacedOutline, surface: SoleSurface) -> CheckFailure | None:
+    """A wall too low all round to show whether it leans out (edge_checks.check_wall_height): read on the outline
+    resampled every 1 mm, as the outline's checks read it."""
+    ring = resample_closed(placed.outline, 1.0)
+    inside = ring - WALL_HEIGHT_INSET_MM * outward_normals(ring)
+    return check_wall_height(surface.coarse_heights(inside, WALL_HEIGHT_RADIUS_MM))
 
 
 def _check_outline_images(

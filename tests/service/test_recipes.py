@@ -16,12 +16,24 @@ MEASURE = MeasureConfig(depth_range_mm=(450.0, 650.0), glue_offset_mm=2.0, glue_
 
 def test_the_shipped_examples_load_and_recipe_0_is_the_cell_default() -> None:
     book = RecipeBook.load(DEPLOY / "recipes", MEASURE)
-    assert [r.number for r in book] == [0, 1, 2]
-    default, runner, trail = list(book)
+    assert [r.number for r in book] == [0, 1, 2, 3]
+    default, runner, trail, sandal = list(book)
     assert default.name == "cell default" and not default.checks_tolerances and default.glue_offset_mm == 2.0
     assert runner.toe_height_mm == Tolerance(8.0, 1.0, 2.0) and runner.glue_spacing_mm == 2.0
     assert trail.glue_offset_mm == 3.5 and trail.toe_height_mm is None and trail.depth_range_mm == (450.0, 650.0)
-    assert book.get(3) is None
+    assert sandal.vertical_wall and not (default.vertical_wall or runner.vertical_wall or trail.vertical_wall)
+    assert book.get(4) is None
+
+
+def test_the_sole_wall_is_unknown_unless_the_recipe_or_the_cell_declares_it_vertical(tmp_path: Path) -> None:
+    path = tmp_path / "flat.toml"
+    path.write_text('number = 5\nname = "flat"\n')
+    assert not load_recipe(path, MEASURE).vertical_wall
+    vertical_cell = MeasureConfig(sole_wall="vertical")
+    default = RecipeBook.load(None, vertical_cell).get(0)
+    assert load_recipe(path, vertical_cell).vertical_wall and default is not None and default.vertical_wall
+    path.write_text('number = 5\nname = "flat"\n[sole]\nwall = "unknown"\n')
+    assert not load_recipe(path, vertical_cell).vertical_wall  # the recipe's word counts over the cell's
 
 
 @pytest.mark.parametrize(
@@ -52,6 +64,8 @@ def test_features_outside_their_tolerance_get_their_bit(
         ('number = 1\nname = "x"\n[glue]\noffset_mm = -1\n', "offset_mm: -1 is impossible"),
         ('number = 1\nname = "x"\n[length_mm]\nnominal = 250\ntolerence = 2\n', "unknown key(s) tolerence"),
         ('number = 1\nname = "x"\ndepth_range_mm = [600, 500]\n', "need 0 < near < far"),
+        ('number = 1\nname = "x"\n[sole]\nwall = "slanted"\n', "wall: 'slanted' is not one of 'unknown', 'vertical'"),
+        ('number = 1\nname = "x"\n[sole]\nheight = 6\n', "unknown key(s) height"),
         ("number = 1\nname = \n", "not valid TOML"),
     ],
 )

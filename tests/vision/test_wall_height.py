@@ -7,7 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cellctl.cameras.base import StereoFrame
 from cellctl.errors import FailureKind
+from cellctl.service.cycle import Measured, MeasureSettings, Refused, measure_frame
 from cellctl.sim.look import SceneLook
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene, true_cloud
@@ -52,3 +54,18 @@ def test_a_flat_sole_is_refused_on_its_true_depth_a_normal_one_is_measured(heigh
         assert isinstance(result, MeasurementRefused) and result.failure is FailureKind.WALL_TOO_LOW, result.reason
     else:
         assert result.valid, result.reason
+
+
+def test_a_flat_sole_declared_vertical_is_measured_through_the_cycle() -> None:
+    # The recipe's word (MeasureSettings.vertical_wall, from `[sole] wall = "vertical"`) reaches the check: the
+    # same stereo pair is refused without it and measured within the acceptance tolerances with it.
+    rig = default_rig()
+    scene = SoleScene.random(2, "white", rig, SceneLook(height="flat"))
+    pair = scene.render()
+    frame, reconstructor = StereoFrame(pair.left, pair.right, 0.0, 0.0), SoleReconstructor(rig)
+    refused = measure_frame(frame, reconstructor, MeasureSettings(2.0, 2.0))
+    assert isinstance(refused, Refused) and refused.failure is FailureKind.WALL_TOO_LOW
+    measured = measure_frame(frame, reconstructor, MeasureSettings(2.0, 2.0, vertical_wall=True))
+    assert isinstance(measured, Measured), measured.reason
+    assert scene.sole is not None
+    assert abs(measured.measurement.length_mm - scene.sole.truth().length_mm) < 1.0
