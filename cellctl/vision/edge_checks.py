@@ -89,7 +89,8 @@ NOTCH_MAX_HALF_CHORD_MM = 7
 # lay 0.3-1.4 mm inside the foot with every check passing (docs/sole-benchmark.md, twenty-third round). A sole
 # whose wall stands LOW_WALL_MM or more somewhere (a heel) shows a lean of 8 degrees or more there as a ramp of
 # 1.4 mm or more, which the edge checks refuse; lower all round, it is refused here. What stays unseen on any
-# sole: a lean too small to run beyond the blur (h tan(lean) under ~1.4 mm, a mould's draft of a few degrees).
+# sole: a lean smaller than the cameras' view angle past the edge (a mould's draft of a few degrees), hidden
+# behind the top edge from both cameras as a vertical wall is (docs/measurements.md, Wall height).
 LOW_WALL_MM = 10.0
 LOW_WALL_QUANTILE = 0.9  # the wall's height where it stands highest, not one stretch of it
 # Where the wall's height is read: the top this far inside the outline (a coarse median of the cloud). Far enough
@@ -143,10 +144,10 @@ def check_wall_height(edge_height: np.ndarray) -> CheckFailure | None:
     reach = high * np.tan(np.radians(LEAN_SHOWN_DEG))
     return CheckFailure(
         FailureKind.WALL_TOO_LOW,
-        f"the sole's wall stands at most {high:.1f} mm high ({100 * LOW_WALL_QUANTILE:.0f}th percentile round the outline; the cell needs "
-        f"{LOW_WALL_MM:.0f} mm somewhere): on a wall this low, depth cannot tell a vertical wall from one leaning "
-        f"out, whose foot would lie up to {reach:.1f} mm (at {LEAN_SHOWN_DEG:.0f} degrees) beyond the outline, so "
-        "the outline cannot be confirmed as the sole's edge",
+        f"the sole's wall stands at most {high:.1f} mm high ({100 * LOW_WALL_QUANTILE:.0f}th percentile round the "
+        f"outline; the cell needs {LOW_WALL_MM:.0f} mm somewhere): on a wall this low, depth cannot tell a vertical "
+        f"wall from one leaning out, whose foot would lie up to {reach:.1f} mm (at {LEAN_SHOWN_DEG:.0f} degrees) "
+        "beyond the outline, so the outline cannot be confirmed as the sole's edge",
     )
 
 
