@@ -17,17 +17,10 @@ from cellctl.stereo.kernels import neighbour_means, window_means
 ISOLATED_SPACINGS = 4.0
 
 
-def statistical_inliers(pixels: np.ndarray, points: np.ndarray, spacing_mm: np.ndarray) -> np.ndarray:
-    """Indices of the points (N x 3, with their pixels N x 2 and pixel spacing N, mm) that are not outliers.
-
-    Open3D's remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0), with neighbours from the image grid.
-    """
-    return inliers_by_mean(mean_neighbour_distances(pixels, points, spacing_mm))
-
-
 def inliers_by_mean(mean: np.ndarray) -> np.ndarray:
     """Indices of the points whose mean neighbour distance (`mean_neighbour_distances`, N) is no outlier's:
-    at most the mean of them all plus 2 standard deviations (Open3D's std_ratio=2.0)."""
+    at most the mean of them all plus 2 standard deviations (Open3D's std_ratio=2.0). With the distances from
+    the image grid, Open3D's remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)."""
     return np.flatnonzero(mean <= mean.mean() + 2.0 * mean.std())
 
 

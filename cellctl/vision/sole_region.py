@@ -295,14 +295,14 @@ def without_outliers(
 ) -> np.ndarray:
     """The points (indices) that statistical outlier removal keeps; `distance`: their mean neighbour distances
     (`point_spread`) where already known."""
-    if distance is not None:
-        return index[inliers_by_mean(distance)]
-    spread = point_spread(cloud, index, points)
-    if spread is None:  # not a stereo cloud, so not one point per rectified pixel (e.g. a true depth map)
-        o3d_cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[index]))
-        _, inliers = o3d_cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
-        return index[np.asarray(inliers, dtype=np.int64)]
-    return index[inliers_by_mean(spread.distance)]
+    if distance is None:
+        spread = point_spread(cloud, index, points)
+        if spread is None:  # not a stereo cloud, so not one point per rectified pixel (e.g. a true depth map)
+            o3d_cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[index]))
+            _, inliers = o3d_cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
+            return index[np.asarray(inliers, dtype=np.int64)]
+        distance = spread.distance
+    return index[inliers_by_mean(distance)]
 
 
 def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:

@@ -7,7 +7,6 @@ import open3d as o3d
 import pytest
 
 from cellctl.vision.outliers import ISOLATED_SPACINGS, inliers_by_mean, mean_neighbour_distances
-from cellctl.vision.outliers import statistical_inliers as _statistical_inliers
 
 FOCAL_PX, BASELINE_MM = 1400.0, 80.0
 
@@ -35,7 +34,7 @@ def test_same_points_as_open3d(seed: int) -> None:
     pixels, points, spacing = _stereo_cloud(seed)
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     _, expected = cloud.remove_statistical_outlier(nb_neighbors=20, std_ratio=2.0)
-    kept = _statistical_inliers(pixels, points, spacing)
+    kept = inliers_by_mean(mean_neighbour_distances(pixels, points, spacing))
     assert len(kept) < len(points)  # there is something to remove
     assert set(kept.tolist()) == set(np.asarray(expected).tolist())
 
