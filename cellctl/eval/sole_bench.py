@@ -152,8 +152,7 @@ def measure_scene(
         failure,
         truth.half_area_difference,
         glue_line_steep(scene),
-        None,
-        wall_height_true(scene),
+        wall_height_true_mm=wall_height_true(scene),
     )
     if isinstance(result, SoleMeasurement):
         row.length_error_mm = result.length_mm - truth.length_mm

@@ -70,12 +70,7 @@ class CellMeasurer:
             plane = self.reconstructor.learn_table(frame.left, frame.right)
             log.info("table plane %s", "learnt from the warm-up pair" if plane is not None else "NOT found")
         measure = self.config.measure
-        settings = MeasureSettings(
-            measure.glue_offset_mm,
-            measure.glue_spacing_mm,
-            measure.glue_height_tolerance_mm,
-            measure.sole_wall == "vertical",
-        )
+        settings = self._settings(Recipe.default(measure))  # recipe 0: the cell's own [measure] settings
         result = measure_frame(frame, self.reconstructor, settings)
         outcome = "measured" if isinstance(result, Measured) else f"refused ({result.reason})"
         log.info("warmed up in %.1f s: pair %s", time.monotonic() - start, outcome)
@@ -122,13 +117,16 @@ class CellMeasurer:
         reconstructor = self.reconstructor
         if recipe.depth_range_mm != self.config.measure.depth_range_mm or reconstructor is None:
             reconstructor = self._reconstructor_for(recipe.depth_range_mm)
-        tolerance = self.config.measure.glue_height_tolerance_mm  # the cell's dispenser, not the sole model's
-        settings = MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm, tolerance, recipe.vertical_wall)
-        result = measure_frame(frame, reconstructor, settings)
+        result = measure_frame(frame, reconstructor, self._settings(recipe))
         timings.update(result.timings)
         if isinstance(result, Refused):
             raise CycleFailed.of(result.failure, result.reason)
         return result
+
+    def _settings(self, recipe: Recipe) -> MeasureSettings:
+        """What a cycle measuring for `recipe` needs: its glue path and wall, the cell's glue height tolerance."""
+        tolerance = self.config.measure.glue_height_tolerance_mm  # the cell's dispenser, not the sole model's
+        return MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm, tolerance, recipe.vertical_wall)
 
     def _reconstructor_for(self, depth_range_mm: tuple[float, float]) -> SoleReconstructor:
         """The reconstructor of a recipe's own depth range (the matcher's disparity range follows from it),
