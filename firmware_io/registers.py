@@ -251,7 +251,7 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ),
     ErrorCode.WALL_TOO_LOW: (
         "The sole's wall is too low all round (under 10 mm) for the cameras to tell whether it leans out, so its outline cannot be confirmed as its edge.",
-        "Not a fault of the cell: this sole model is outside what it measures (a flat sole); glue it from the model's stored path or call the line engineer.",
+        "Not a fault of the cell: it cannot check a wall this low. If the model's mould shows its wall vertical, declare it in the recipe (`[sole] wall = \"vertical\"`, docs/recipes.md); otherwise glue it from the model's stored path or call the line engineer.",
     ),
     ErrorCode.CYCLE_ABORTED: (
         "The cycle was abandoned because the service is stopping.",
