@@ -242,8 +242,8 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
         "Check that one sole lies flat with nothing touching it and the lenses are clean; re-trigger.",
     ),
     ErrorCode.GLUE_PATH_INCONSISTENT: (
-        "The glue path leaves the sole's surface (height jump, out of the sole's height range, or tilted normal).",
-        "Re-trigger; if it repeats for this sole, check lighting for glare and call the line engineer.",
+        "The glue path leaves the sole's surface (height jump, out of the sole's height range, tilted normal, or a glue line the recipe's wall draft puts on the top edge).",
+        "Re-trigger; if it repeats for this sole, check lighting for glare and call the line engineer (a recipe stating a wall draft: raise its [glue] offset_mm as the reason says).",
     ),
     ErrorCode.RECIPE_UNKNOWN: (
         "The recipe number in register 7 names no recipe loaded on this cell (map version 2).",

@@ -48,11 +48,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="MM",
         help="how far glue heights may stray: a sole measured too coarsely for it is refused (default 1)",
     )
-    parser.add_argument(
+    wall = parser.add_mutually_exclusive_group()
+    wall.add_argument(
         "--vertical-wall",
         action="store_true",
         help="the sole's side wall is known not to lean out (its mould): measure it even if its wall is too low all "
         "round for the cell to check (under 10 mm; refused as wall_too_low otherwise)",
+    )
+    wall.add_argument(
+        "--wall-draft",
+        type=float,
+        metavar="DEG",
+        help="the sole's side wall leans out this many degrees from its top edge to the table (its mould's draft, "
+        "0..10): the outline, length and glue path are taken at the foot the cameras cannot see",
     )
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument(
@@ -84,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from cellctl.vision.measurement import check_glue_settings, measure_sole
     from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
     from cellctl.vision.teach import TeachError, load_taught
+    from cellctl.vision.wall_draft import check_draft
 
     offset = GLUE_OFFSET_MM if args.glue_offset is None else args.glue_offset
     spacing = GLUE_SPACING_MM if args.glue_spacing is None else args.glue_spacing
@@ -92,6 +101,12 @@ def run(args: argparse.Namespace) -> int:
         check_glue_settings(offset, spacing, tolerance)
     except ValueError as exc:
         raise UserError(f"--glue-offset/--glue-spacing/--glue-height-tolerance: {exc}") from None
+    draft = 0.0 if args.vertical_wall else args.wall_draft
+    if draft:
+        try:
+            check_draft(draft)
+        except ValueError as exc:
+            raise UserError(f"--wall-draft: {exc}") from None
     calib = Calibration.load(args.calib)
     left, right = _read(args.left, "LEFT"), _read(args.right, "RIGHT")
     for name, image in (("LEFT", left), ("RIGHT", right)):
@@ -110,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.calib} LEFT RIGHT), or pass --untaught for a plain one-colour sole on a plain table"
         )
     reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right)
-    result = measure_sole(reconstruction, offset, spacing, tolerance, vertical_wall=args.vertical_wall)
+    result = measure_sole(reconstruction, offset, spacing, tolerance, wall_draft_deg=draft)
     if args.ply:
         _write_ply(args.ply, reconstruction)
     if args.export:

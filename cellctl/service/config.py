@@ -31,6 +31,7 @@ from cellctl.vision.defaults import (
     GLUE_OFFSET_RANGE_MM,
     GLUE_SPACING_MM,
     GLUE_SPACING_RANGE_MM,
+    WALL_DRAFT_RANGE_DEG,
 )
 
 __all__ = ["CellConfig", "ConfigError", "ImageLogConfig", "MeasureConfig", "OpcUaConfig", "PlcConfig"]
@@ -45,7 +46,25 @@ class CalibrationConfig:
     path: Path
 
 
-SOLE_WALLS = ("unknown", "vertical")
+SOLE_WALLS = ("unknown", "vertical", "drafted")
+
+
+def read_sole_wall(t: Table, wall_key: str, draft_key: str, default: float | None) -> float | None:
+    """A sole model's wall as a config table states it (`wall_key`: SOLE_WALLS; `draft_key`: degrees, with
+    "drafted" only), as measure_sole's wall_draft_deg: None unknown, 0 vertical, else the draft; `default` where
+    the table leaves it out (the cell's word for a recipe)."""
+    stated = "unknown" if default is None else "vertical" if default == 0.0 else "drafted"
+    wall = t.choice(wall_key, SOLE_WALLS, stated)
+    if wall != "drafted":
+        if draft_key in t.data:
+            raise t.fail(draft_key, f'a draft goes with {wall_key} = "drafted", not {wall!r}')
+        return None if wall == "unknown" else 0.0
+    if draft_key not in t.data:
+        if default:  # the cell's draft
+            return default
+        raise t.fail(draft_key, f'missing: {wall_key} = "drafted" needs the mould\'s draft in degrees, e.g. 3')
+    low, high = WALL_DRAFT_RANGE_DEG
+    return t.number(draft_key, above=low, high=high)
 
 
 @dataclass(frozen=True)
@@ -58,9 +77,11 @@ class MeasureConfig:
     # depth checks it: on the matrix sets 9-12 of 84 results were valid and wrong that way (docs/sole-benchmark.md,
     # thirteenth round). A cell that measures only plain one-colour soles on a plain table may set it false.
     require_taught_table: bool = True
-    # The soles' side wall: "unknown" (the cell refuses a sole whose wall is too low all round to show whether it
-    # leans out, `wall_too_low`) or "vertical" (known from the mould: its outline is its foot however low it is).
-    sole_wall: str = "unknown"
+    # The soles' side wall ([measure] sole_wall, sole_draft_deg), as measure_sole's wall_draft_deg: None unknown
+    # (the cell refuses a sole whose wall is too low all round to show whether it leans out, `wall_too_low`), 0
+    # vertical (known from the mould: its outline is its foot however low it is), else the mould's draft in degrees
+    # (cellctl.vision.wall_draft: the outline is moved out to the foot the cameras cannot see).
+    sole_wall_draft_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -258,7 +279,7 @@ def _measure(t: Table) -> MeasureConfig:
             high=GLUE_HEIGHT_TOLERANCE_RANGE_MM[1],
         ),
         require_taught_table=t.get("require_taught_table", bool, MeasureConfig.require_taught_table),
-        sole_wall=t.choice("sole_wall", SOLE_WALLS, MeasureConfig.sole_wall),
+        sole_wall_draft_deg=read_sole_wall(t, "sole_wall", "sole_draft_deg", MeasureConfig.sole_wall_draft_deg),
     )
     t.finish()
     return config

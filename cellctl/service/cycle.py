@@ -27,12 +27,12 @@ SWAPPED = (
 @dataclass(frozen=True)
 class MeasureSettings:
     """What a cycle needs to know beyond the frame: glue path offset and spacing, the glue heights' tolerance
-    (mm), and whether the sole model's wall is known to be vertical (measure_sole)."""
+    (mm), and what the line knows of the sole model's wall (measure_sole's wall_draft_deg)."""
 
     glue_offset_mm: float
     glue_spacing_mm: float
     glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM
-    vertical_wall: bool = False
+    wall_draft_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings
         settings.glue_offset_mm,
         settings.glue_spacing_mm,
         settings.glue_height_tolerance_mm,
-        vertical_wall=settings.vertical_wall,
+        wall_draft_deg=settings.wall_draft_deg,
     )
     timings = dict(measurement.timings)
     if isinstance(measurement, MeasurementRefused):

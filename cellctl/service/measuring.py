@@ -126,7 +126,7 @@ class CellMeasurer:
     def _settings(self, recipe: Recipe) -> MeasureSettings:
         """What a cycle measuring for `recipe` needs: its glue path and wall, the cell's glue height tolerance."""
         tolerance = self.config.measure.glue_height_tolerance_mm  # the cell's dispenser, not the sole model's
-        return MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm, tolerance, recipe.vertical_wall)
+        return MeasureSettings(recipe.glue_offset_mm, recipe.glue_spacing_mm, tolerance, recipe.wall_draft_deg)
 
     def _reconstructor_for(self, depth_range_mm: tuple[float, float]) -> SoleReconstructor:
         """The reconstructor of a recipe's own depth range (the matcher's disparity range follows from it),

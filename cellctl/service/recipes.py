@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from cellctl.service.config import SOLE_WALLS, ConfigError, MeasureConfig
+from cellctl.service.config import ConfigError, MeasureConfig, read_sole_wall
 from cellctl.service.config_table import Table, read_toml
 from firmware_io.registers import FeatureBit
 
@@ -52,7 +52,9 @@ class Recipe:
     heel_height_mm: Tolerance | None = None
     toe_height_mm: Tolerance | None = None
     source: Path | None = None
-    vertical_wall: bool = False  # [sole] wall = "vertical": the model's wall does not lean out (measure_sole)
+    # [sole] wall, draft_deg: what the line knows of the model's wall (measure_sole's wall_draft_deg: None unknown,
+    # 0 vertical, else its draft)
+    wall_draft_deg: float | None = None
 
     @property
     def checks_tolerances(self) -> bool:
@@ -79,7 +81,7 @@ class Recipe:
             measure.glue_offset_mm,
             measure.glue_spacing_mm,
             measure.depth_range_mm,
-            vertical_wall=measure.sole_wall == "vertical",
+            wall_draft_deg=measure.sole_wall_draft_deg,
         )
 
 
@@ -143,7 +145,7 @@ def load_recipe(path: Path, measure: MeasureConfig) -> Recipe:
         heel_height_mm=_tolerance(root, "heel_height_mm"),
         toe_height_mm=_tolerance(root, "toe_height_mm"),
         source=path,
-        vertical_wall=sole.choice("wall", SOLE_WALLS, measure.sole_wall) == "vertical",
+        wall_draft_deg=read_sole_wall(sole, "wall", "draft_deg", measure.sole_wall_draft_deg),
     )
     glue.finish()
     sole.finish()

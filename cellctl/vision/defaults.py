@@ -17,6 +17,10 @@ GLUE_SPACING_RANGE_MM: tuple[float, float] = (0.1, 50.0)
 #: is refused (cellctl.vision.checks.check_glue_precision); its bounds.
 GLUE_HEIGHT_TOLERANCE_MM = 1.0
 GLUE_HEIGHT_TOLERANCE_RANGE_MM: tuple[float, float] = (0.1, 10.0)
+#: The side-wall drafts (degrees) a recipe may state for a moulded sole (cellctl.vision.wall_draft), 0 excluded (a
+#: vertical wall): a mould's draft is a few degrees; beyond 10 the wall shows to the cameras and the edge checks
+#: refuse it whatever the recipe says.
+WALL_DRAFT_RANGE_DEG: tuple[float, float] = (0.0, 10.0)
 #: Results outside these ranges are no sole on this cell: refused, never published.
 PLAUSIBLE_LENGTH_MM: tuple[float, float] = (100.0, 400.0)
 PLAUSIBLE_HEIGHT_MM: tuple[float, float] = (0.5, 150.0)

@@ -47,6 +47,7 @@ from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused,
 from cellctl.vision.sole_region import MAX_IMAGE_NOISE_DN
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
+from cellctl.vision.wall_draft import check_draft, check_glue_inset, foot_outline, wall_runs
 from cellctl.vision.workers import worker
 
 __all__ = [
@@ -102,15 +103,20 @@ def measure_sole(
     glue_offset_mm: float = GLUE_OFFSET_MM,
     glue_spacing_mm: float = GLUE_SPACING_MM,
     glue_height_tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM,
-    vertical_wall: bool = False,
+    wall_draft_deg: float | None = None,
 ) -> MeasurementResult:
     """Length, heel and toe height and glue path of a reconstructed sole; a glue path whose heights are expected
     to stray beyond `glue_height_tolerance_mm` is refused (checks.check_glue_precision).
 
-    vertical_wall: the sole model's side wall is known not to lean out (from its mould; a recipe says so): its
-    outline is then its foot even where the wall is too low for the cell to check (edge_checks.check_wall_height).
+    wall_draft_deg: what the line knows of the sole model's side wall from its mould (a recipe says so). None:
+    nothing, and a wall too low all round for the cell to see whether it leans out is refused
+    (edge_checks.check_wall_height). 0: vertical, the outline found is the foot however low the wall. More: the
+    wall leans out by that draft from the top edge to the table, hidden from the cameras; the outline, length and
+    glue line are taken at its foot (cellctl.vision.wall_draft).
     """
     check_glue_settings(glue_offset_mm, glue_spacing_mm, glue_height_tolerance_mm)
+    if wall_draft_deg:
+        check_draft(wall_draft_deg)
     timings = dict(reconstruction.timings)
     points = reconstruction.sole_points
     # What every result carries, valid or not; grows as the measurement learns more about the sole.
@@ -123,6 +129,9 @@ def measure_sole(
     surface = SoleSurface(reconstruction)  # one per reconstruction: its neighbour grid serves every query below
     placed = onto_image_edge(reconstruction, smooth_closed(footprint.outline(), smoothing), surface)
     outline = placed.outline
+    runs = wall_runs(outline, surface, wall_draft_deg) if wall_draft_deg else None
+    if runs is not None:  # the checks below judge the top edge the cameras see; the rest is taken at the foot
+        outline = foot_outline(outline, runs)
     # The glue line needs only the footprint and the outline: its rasters are drawn on a second thread from
     # here, beside the axis, the half areas, the outline checks and the heights (numpy, OpenCV and the C kernels
     # release the GIL); the glue path on it follows on the same thread once the axis is known. The refusals keep
@@ -147,7 +156,9 @@ def measure_sole(
             )
         glue = worker("glue-path").submit(_glue, line, surface, centroid, axis, glue_spacing_mm)
         try:
-            checked = _outline_and_heights(reconstruction, placed, surface, centroid, axis, lo, hi, base, vertical_wall)
+            checked = _outline_and_heights(
+                reconstruction, placed, surface, centroid, axis, lo, hi, base, wall_draft_deg is not None
+            )
             timings["measure"] = time.perf_counter() - start
             if isinstance(checked, MeasurementRefused):
                 return checked  # as before: whatever the glue path came to does not matter
@@ -162,6 +173,8 @@ def measure_sole(
     if failure is not None:
         return _invalid(failure, missing or "no glue path", **base)
     assert path is not None
+    if runs is not None and (problem := check_glue_inset(runs, glue_offset_mm)) is not None:
+        return _invalid(problem.kind, problem.reason, **base)
     problem = check_glue_coverage(
         np.isfinite(surface.coarse_heights(path.points[:, :2], _cover_radius(reconstruction)))
     )
@@ -231,11 +244,11 @@ def _outline_and_heights(
     lo: float,
     hi: float,
     base: dict[str, Any],
-    vertical_wall: bool,
+    wall_known: bool,
 ) -> tuple[float, float] | MeasurementRefused:
-    """The wall's height (unless the sole model's wall is known to be vertical), the outline's self-checks, then
+    """The wall's height (unless the sole model's wall is known from its mould), the outline's self-checks, then
     the heel and toe heights (added to `base`), or the refusal."""
-    if not vertical_wall:
+    if not wall_known:
         # First, and not renamed for missing depth: a wall too low all round to show a lean cannot have its outline
         # confirmed, whatever the outline's checks find (on a flat sole they pass a leaning wall's outline).
         low = wall_problem(placed, surface)

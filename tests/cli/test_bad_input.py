@@ -162,6 +162,10 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         ],
         "spacing in 0.1..50 mm",
     ),
+    "measure: wall draft 45 degrees": lambda d, _: Case(
+        ["measure", "--calib", str(d / "calib.yaml"), "--wall-draft", "45", str(d / "grey.png"), str(d / "grey.png")],
+        "--wall-draft: a wall's draft must be in (0, 10] degrees",
+    ),
     "measure: glue height tolerance 0": lambda d, _: Case(
         [
             "measure",

@@ -58,6 +58,14 @@ def test_defaults_and_relative_paths(tmp_path: Path) -> None:
     assert config.measure.require_taught_table  # safe by default: cycles refused until the table is taught
 
 
+def test_the_cells_sole_wall(tmp_path: Path) -> None:
+    assert CellConfig.load(write(tmp_path, MINIMAL)).measure.sole_wall_draft_deg is None
+    text = MINIMAL + '[measure]\nsole_wall = "drafted"\nsole_draft_deg = 2.5\n'
+    assert CellConfig.load(write(tmp_path, text)).measure.sole_wall_draft_deg == 2.5
+    text = MINIMAL + '[measure]\nsole_wall = "vertical"\n'
+    assert CellConfig.load(write(tmp_path, text)).measure.sole_wall_draft_deg == 0.0
+
+
 def test_rtu_endpoint(tmp_path: Path) -> None:
     text = MINIMAL + '[plc]\ntransport = "rtu"\nserial_port = "/dev/ttyUSB0"\nbaudrate = 115200\nparity = "N"\n'
     endpoint = CellConfig.load(write(tmp_path, text)).plc.endpoint()
@@ -87,6 +95,8 @@ def test_rtu_endpoint(tmp_path: Path) -> None:
         ("[measure]\nglue_spacing_mm = 0\n", r"glue_spacing_mm: 0 is impossible"),
         ("[measure]\nglue_height_tolerance_mm = 0\n", r"glue_height_tolerance_mm: 0 is impossible: must be in 0.1..10"),
         ('[measure]\nrequire_taught_table = "yes"\n', r"require_taught_table"),
+        ('[measure]\nsole_wall = "drafted"\n', r"sole_draft_deg: missing: sole_wall = \"drafted\" needs"),
+        ('[measure]\nsole_wall = "drafted"\nsole_draft_deg = 30\n', r"sole_draft_deg: 30 is impossible"),
     ],
 )
 def test_mistakes_are_refused_naming_the_key(tmp_path: Path, extra: str, message: str) -> None:

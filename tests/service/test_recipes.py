@@ -21,19 +21,43 @@ def test_the_shipped_examples_load_and_recipe_0_is_the_cell_default() -> None:
     assert default.name == "cell default" and not default.checks_tolerances and default.glue_offset_mm == 2.0
     assert runner.toe_height_mm == Tolerance(8.0, 1.0, 2.0) and runner.glue_spacing_mm == 2.0
     assert trail.glue_offset_mm == 3.5 and trail.toe_height_mm is None and trail.depth_range_mm == (450.0, 650.0)
-    assert sandal.vertical_wall and not (default.vertical_wall or runner.vertical_wall or trail.vertical_wall)
+    assert sandal.wall_draft_deg == 0.0 and default.wall_draft_deg is runner.wall_draft_deg is trail.wall_draft_deg
+    assert default.wall_draft_deg is None
     assert book.get(4) is None
 
 
-def test_the_sole_wall_is_unknown_unless_the_recipe_or_the_cell_declares_it_vertical(tmp_path: Path) -> None:
+def test_the_sole_wall_is_unknown_unless_the_recipe_or_the_cell_states_it(tmp_path: Path) -> None:
     path = tmp_path / "flat.toml"
     path.write_text('number = 5\nname = "flat"\n')
-    assert not load_recipe(path, MEASURE).vertical_wall
-    vertical_cell = MeasureConfig(sole_wall="vertical")
+    assert load_recipe(path, MEASURE).wall_draft_deg is None
+    vertical_cell = MeasureConfig(sole_wall_draft_deg=0.0)
     default = RecipeBook.load(None, vertical_cell).get(0)
-    assert load_recipe(path, vertical_cell).vertical_wall and default is not None and default.vertical_wall
+    assert load_recipe(path, vertical_cell).wall_draft_deg == 0.0 and default is not None
+    assert default.wall_draft_deg == 0.0
     path.write_text('number = 5\nname = "flat"\n[sole]\nwall = "unknown"\n')
-    assert not load_recipe(path, vertical_cell).vertical_wall  # the recipe's word counts over the cell's
+    assert load_recipe(path, vertical_cell).wall_draft_deg is None  # the recipe's word counts over the cell's
+    path.write_text('number = 5\nname = "moulded"\n[sole]\nwall = "drafted"\ndraft_deg = 2.5\n')
+    assert load_recipe(path, MEASURE).wall_draft_deg == 2.5
+    path.write_text('number = 5\nname = "moulded"\n[sole]\nwall = "drafted"\n')
+    assert load_recipe(path, MeasureConfig(sole_wall_draft_deg=3.0)).wall_draft_deg == 3.0  # the cell's draft
+
+
+@pytest.mark.parametrize(
+    ("sole", "problem"),
+    [
+        ('wall = "drafted"', "needs the mould's draft in degrees"),
+        ('wall = "vertical"\ndraft_deg = 2', 'a draft goes with wall = "drafted"'),
+        ("draft_deg = 2", 'a draft goes with wall = "drafted"'),
+        ('wall = "drafted"\ndraft_deg = 0', "draft_deg"),
+        ('wall = "drafted"\ndraft_deg = 12', "draft_deg"),
+        ('wall = "leaning"', "is not one of"),
+    ],
+)
+def test_a_wall_stated_wrongly_is_refused_by_name(tmp_path: Path, sole: str, problem: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(f'number = 5\nname = "moulded"\n[sole]\n{sole}\n')
+    with pytest.raises(ConfigError, match=problem):
+        load_recipe(path, MEASURE)
 
 
 @pytest.mark.parametrize(

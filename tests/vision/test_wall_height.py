@@ -57,7 +57,7 @@ def test_a_flat_sole_is_refused_on_its_true_depth_a_normal_one_is_measured(heigh
 
 
 def test_a_flat_sole_declared_vertical_is_measured_through_the_cycle() -> None:
-    # The recipe's word (MeasureSettings.vertical_wall, from `[sole] wall = "vertical"`) reaches the check: the
+    # The recipe's word (MeasureSettings.wall_draft_deg 0, from `[sole] wall = "vertical"`) reaches the check: the
     # same stereo pair is refused without it and measured within the acceptance tolerances with it.
     rig = default_rig()
     scene = SoleScene.random(2, "white", rig, SceneLook(height="flat"))
@@ -65,7 +65,7 @@ def test_a_flat_sole_declared_vertical_is_measured_through_the_cycle() -> None:
     frame, reconstructor = StereoFrame(pair.left, pair.right, 0.0, 0.0), SoleReconstructor(rig)
     refused = measure_frame(frame, reconstructor, MeasureSettings(2.0, 2.0))
     assert isinstance(refused, Refused) and refused.failure is FailureKind.WALL_TOO_LOW
-    measured = measure_frame(frame, reconstructor, MeasureSettings(2.0, 2.0, vertical_wall=True))
+    measured = measure_frame(frame, reconstructor, MeasureSettings(2.0, 2.0, wall_draft_deg=0.0))
     assert isinstance(measured, Measured), measured.reason
     assert scene.sole is not None
     assert abs(measured.measurement.length_mm - scene.sole.truth().length_mm) < 1.0
