@@ -64,6 +64,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="with --cache: only render the soles (and the empty tables with --taught) into the cache",
     )
+    parser.add_argument(
+        "--declared-walls",
+        action="store_true",
+        help="with --matrix: measure each sole with its model's wall stated as a recipe would ([sole] wall: "
+        "vertical, or the draft of a wall leaning from the table), as a line that knows its moulds",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of markdown")
     parser.set_defaults(func=run)
 
@@ -82,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--variations needs --matrix")
     if args.combined and (not args.variations or args.variations == "list"):
         raise UserError("--combined needs --matrix --variations NAME,... (the variations every sole combines)")
+    if args.declared_walls and not args.matrix:
+        raise UserError("--declared-walls needs --matrix")
     if args.render_only and not args.cache:
         raise UserError("--render-only needs --cache DIR (where the renders go)")
     if args.matrix:
@@ -136,7 +144,12 @@ def _run_matrix(args: argparse.Namespace) -> int:
         scenes = [SoleScene.random(s.seed, s.color, calib or rig_for(s.look.rig), s.look) for s in soles]
         return _render_only(scenes, cache, args.taught)
     results = sole_matrix.bench_matrix(
-        soles, calib, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught, cache=cache
+        soles,
+        calib,
+        progress=lambda text: print(f"  {text}", file=sys.stderr),
+        taught=args.taught,
+        cache=cache,
+        declared_walls=args.declared_walls,
     )
     if args.json:
         print(json.dumps(sole_matrix.as_json(results), indent=2))
@@ -147,6 +160,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
         command += f" --only {args.only}" if args.only else ""
         command += f" --calib {args.calib}" if args.calib else ""
         command += " --taught" if args.taught else ""
+        command += " --declared-walls" if args.declared_walls else ""
         print(sole_matrix.matrix_markdown(results, command))
     return 0 if sole_matrix.acceptance(results).passed else 1
 

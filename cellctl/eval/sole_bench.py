@@ -119,15 +119,21 @@ def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCach
 
 
 def measure_scene(
-    reconstructor: SoleReconstructor, scene: SoleScene, variations: str = "plain", cache: RenderCache | None = None
+    reconstructor: SoleReconstructor,
+    scene: SoleScene,
+    variations: str = "plain",
+    cache: RenderCache | None = None,
+    declared_wall: bool = False,
 ) -> SoleBenchRow:
-    """Render one scene (not timed), measure it like `cellctl measure` (timed) and compare with its truth."""
+    """Render one scene (not timed), measure it like `cellctl measure` (timed) and compare with its truth;
+    declared_wall: with the sole model's wall stated as a recipe would (`declared_draft`)."""
     assert scene.sole is not None
     pair = cache.render(scene) if cache else scene.render()
+    draft = declared_draft(scene) if declared_wall else None
     start = time.perf_counter()
     result: MeasurementResult | None
     try:
-        result = measure_sole(reconstructor.reconstruct(pair.left, pair.right))
+        result = measure_sole(reconstructor.reconstruct(pair.left, pair.right), wall_draft_deg=draft)
         reason, failure = (
             (result.reason, result.failure.value) if isinstance(result, MeasurementRefused) else (None, None)
         )
@@ -169,6 +175,16 @@ def measure_scene(
     elif isinstance(result, MeasurementRefused):
         row.outline_error_max_mm = outline_error(scene, result)
     return row
+
+
+def declared_draft(scene: SoleScene) -> float | None:
+    """The sole model's wall as its recipe would state it (measure_sole's wall_draft_deg): 0 for a vertical wall,
+    its draft for a wall leaning from the table; None (unknown) for a lean that starts above a vertical foot, which
+    a draft does not describe."""
+    slope, foot = scene.look.wall_slope_deg, scene.look.wall_foot_mm
+    if slope == 0.0:
+        return 0.0
+    return slope if foot == 0.0 else None
 
 
 def outline_error(scene: SoleScene, refused: MeasurementRefused) -> float | None:

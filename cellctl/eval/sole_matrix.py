@@ -105,11 +105,13 @@ def bench_matrix(
     progress: Callable[[str], None] | None = None,
     taught: bool = False,
     cache: RenderCache | None = None,
+    declared_walls: bool = False,
 ) -> list[MatrixRow]:
     """Render, measure and judge every sole; `calib` replaces the looks' rigs (default: each look's own rig).
 
     taught: teach each scene's empty table first (not timed), as the cell does once at set-up.
     cache: renders kept on disk (`cellctl.sim.render_cache`).
+    declared_walls: measure each sole with its model's wall stated as its recipe would (sole_bench.declared_draft).
     """
     reconstructors: dict[str, SoleReconstructor] = {}
     rows = []
@@ -123,7 +125,7 @@ def bench_matrix(
         if taught:
             reconstructor = taught_reconstructor(reconstructor.calib, scene, cache)
         label = sole.label + fallback_note(taught, reconstructor)
-        result = judge(sole, measure_scene(reconstructor, scene, label, cache))
+        result = judge(sole, measure_scene(reconstructor, scene, label, cache, declared_walls))
         rows.append(result)
         if progress:
             progress(_progress_text(result))

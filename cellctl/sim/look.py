@@ -131,6 +131,17 @@ VARIATIONS: dict[str, Variation] = {
                 look, wall_slope_deg=float(rng.uniform(8, 20)), wall_foot_mm=float(rng.uniform(0.0, FOOT_MM))
             ),
         ),
+        # Outside the matrix so that its sets keep their soles. A mould's draft leans less than the cameras' view
+        # of the sole's sides (3-6 degrees at the default rig): the wall hides behind the top edge from both, and
+        # a result taken at the top edge is short by the wall's run (cellctl.vision.wall_draft). Measurable only
+        # where the recipe states the draft (`cellctl bench-sole --declared-walls`).
+        Variation(
+            "draft",
+            "side wall leaning out 1-6 degrees from the table (a mould's draft)",
+            ("wall_slope_deg", "wall_foot_mm"),
+            lambda look, rng: replace(look, wall_slope_deg=float(rng.uniform(1, 6)), wall_foot_mm=0.0),
+            in_matrix=False,
+        ),
         Variation(
             "rounded-edge",
             "top edge rounded, 3-5 mm radius",

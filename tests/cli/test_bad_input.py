@@ -196,6 +196,9 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         "seed 3090 is not in the matrix (3000..3083)",
     ),
     "bench-sole: --only without --matrix": lambda d, _: Case(["bench-sole", "--only", "3"], "--only needs --matrix"),
+    "bench-sole: --declared-walls without --matrix": lambda d, _: Case(
+        ["bench-sole", "--declared-walls"], "--declared-walls needs --matrix"
+    ),
     "bench-sole: --combined without --variations": lambda d, _: Case(
         ["bench-sole", "--matrix", "--combined"], "--combined needs --matrix --variations"
     ),

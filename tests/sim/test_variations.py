@@ -14,7 +14,14 @@ import pytest
 
 from cellctl.cli import main
 from cellctl.errors import FailureKind
-from cellctl.eval.sole_bench import SoleBenchRow, glue_line_steep, measure_scene, outline_error, wall_height_true
+from cellctl.eval.sole_bench import (
+    SoleBenchRow,
+    declared_draft,
+    glue_line_steep,
+    measure_scene,
+    outline_error,
+    wall_height_true,
+)
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
 from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
 from cellctl.sim.matrix import (
@@ -86,6 +93,23 @@ def test_combined_soles_each_carry_every_listed_variation() -> None:
         combined_soles(2, 0, ("flat", "tall"))
     with pytest.raises(ValueError, match="unknown variation"):
         combined_soles(2, 0, ("flat", "purple-sole"))
+
+
+def test_a_moulds_draft_leans_from_the_table_outside_the_matrix() -> None:
+    """`draft`: the wall leans 1-6 degrees from the table itself (no vertical foot), named only; the bench states
+    it as a recipe would with --declared-walls (`declared_draft`), and a lean above a foot cannot be stated."""
+    soles = combined_soles(6, 17000, ("draft",))
+    for sole in soles:
+        assert 1.0 <= sole.look.wall_slope_deg <= 6.0 and sole.look.wall_foot_mm == 0.0
+    assert "draft" not in MATRIX_ENTRIES and not VARIATIONS["draft"].in_matrix
+    with pytest.raises(ValueError, match="both set wall_slope_deg"):
+        combined_soles(2, 0, ("draft", "sloped-wall"))
+    rig = half_size_rig()
+    drafted = SoleScene.random(1, "white", rig, soles[0].look)
+    assert declared_draft(drafted) == soles[0].look.wall_slope_deg
+    assert declared_draft(SoleScene.random(1, "white", rig, SceneLook())) == 0.0
+    above_a_foot = SceneLook(wall_slope_deg=12.0, wall_foot_mm=3.0)
+    assert declared_draft(SoleScene.random(1, "white", rig, above_a_foot)) is None
 
 
 # ---- geometry: ends and edges ---------------------------------------------------------------------------
