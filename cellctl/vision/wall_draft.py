@@ -5,8 +5,8 @@ default rig). A wall that leans out by less than that faces away from both of th
 exactly as a vertical wall does, and no image or depth reading differs (docs/measurements.md, Validity;
 docs/sole-benchmark.md, twenty-fourth round). The outline the cell finds is then the top edge, and the sole's
 foot, where its length and its outline are taken, lies further out by the wall's run, h tan(draft) at a top
-edge h above the table: on 24 soles drawn with 1-6 degree drafts (the simulator's `draft` variation) all 10
-results published were 1.3-3.0 mm short.
+edge h above the table: on 72 soles drawn with 1-6 degree drafts (the simulator's `draft` variation) all 32
+results published were 0.7-4.7 mm short.
 
 A line knows its sole model's draft from the mould. A recipe that states it (`[sole] wall = "drafted"`,
 `draft_deg`; docs/recipes.md) has the outline moved out by that run at each point, from the measured height of
