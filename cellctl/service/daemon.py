@@ -87,6 +87,8 @@ class Daemon:
         self.status = CellStatus(self.link, self.cameras, notifier if notifier is not None else SystemdNotifier())
         self.events = self.status.events  # observers (operator station, metrics, image log) subscribe here
         self.recipes = RecipeBook.load(config.recipes.directory, config.measure)
+        if (note := self.recipes.wall_note()) is not None:
+            log.info(note)  # a commissioning hint, not a fault: the defaults refuse what they cannot see
         self.glue_output = GlueOutput.from_config(config)
         self.reporter = CycleReporter(config, self.link, self.glue_output)
         self.listeners: list[OutcomeListener] = self.reporter.listeners  # called after the PLC has its answer

@@ -112,6 +112,18 @@ class RecipeBook:
     def get(self, number: int) -> Recipe | None:
         return self._by_number.get(number)
 
+    def wall_note(self) -> str | None:
+        """A line for the log naming the recipes whose sole wall is unknown, and what that costs (docs/recipes.md);
+        None where every recipe states it."""
+        unknown = [str(r.number) for r in self if r.wall_draft_deg is None]
+        if not unknown:
+            return None
+        return (
+            f"sole wall unknown in recipe(s) {', '.join(unknown)}: flat soles are refused (wall_too_low) and a wall "
+            "leaning out by a mould's draft the cameras cannot see (under ~4 degrees) is measured at its top edge, "
+            'short by its run; state it per recipe ([sole] wall = "vertical" or "drafted" with draft_deg)'
+        )
+
     def __iter__(self):  # noqa: ANN204 - Iterator[Recipe]
         return iter(sorted(self._by_number.values(), key=lambda r: r.number))
 

@@ -26,6 +26,12 @@ def test_the_shipped_examples_load_and_recipe_0_is_the_cell_default() -> None:
     assert book.get(4) is None
 
 
+def test_the_log_names_the_recipes_whose_wall_is_unknown() -> None:
+    note = RecipeBook.load(DEPLOY / "recipes", MEASURE).wall_note()
+    assert note is not None and note.startswith("sole wall unknown in recipe(s) 0, 1, 2:")  # 3 states it
+    assert RecipeBook.load(None, MeasureConfig(sole_wall_draft_deg=2.0)).wall_note() is None
+
+
 def test_the_sole_wall_is_unknown_unless_the_recipe_or_the_cell_states_it(tmp_path: Path) -> None:
     path = tmp_path / "flat.toml"
     path.write_text('number = 5\nname = "flat"\n')
