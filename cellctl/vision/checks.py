@@ -75,6 +75,11 @@ MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a
 # gets its heights from elsewhere: 1-8 mm off on simulated soles.
 GLUE_COVER_RADIUS_MM = 1.0
 MAX_GLUE_UNCOVERED = 0.05
+# The heel and toe heights' patches: every valid result of the matrix sets 16000 and 18000 held 1.0-1.1 times the
+# points a patch's area over a pixel's footprint gives (the top lies nearer the cameras than the table); a glossy
+# sole published 2.6 mm low at its heel held 0.11 (fresh set 19000, sole 19020; docs/sole-benchmark.md,
+# twenty-fourth round).
+MIN_HEIGHT_SUPPORT = 0.5
 # The glue heights' precision: the median along the path of each height's expected error (the sd of the fit that
 # gave it: glue_path.sample_variance's noise model and the fit's bias, cellctl.vision.surface.path_heights), as a
 # share of the glue-height tolerance. The matrix's valid soles read 0.11-0.55 mm (black rubber ~0.27 in the median);
@@ -278,6 +283,21 @@ def _hidden(
         region, top = claimed
         below |= np.isnan(height) & (top[None, :] >= z) & region.contains(xy).reshape(below.shape)
     return np.any(below, axis=0)
+
+
+def check_height_support(names: tuple[str, ...], counts: np.ndarray, expected: float) -> CheckFailure | None:
+    """The heel and toe heights' patches (`names`, their cloud points `counts`) against the points a fully measured
+    patch holds (`expected`: its area over a pixel's footprint on the table): under MIN_HEIGHT_SUPPORT of them, the
+    height is the few points left between glare or mismatches, not the top's."""
+    for name, count in zip(names, counts, strict=True):
+        if count < MIN_HEIGHT_SUPPORT * expected:
+            return CheckFailure(
+                FailureKind.SURFACE_NOT_MEASURED,
+                f"the {name} height rests on {int(count)} measured points where its patch holds about "
+                f"{expected:.0f} ({100 * count / expected:.0f} %, need {100 * MIN_HEIGHT_SUPPORT:.0f} %): glare or "
+                "too little texture there; light the sole without highlights or raise the exposure",
+            )
+    return None
 
 
 def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:

@@ -265,3 +265,11 @@ def test_hidden_rays_are_the_step_by_step_rule() -> None:
         expected = _hidden_step_by_step(points, camera, dome, region)
         assert 0 < np.count_nonzero(expected) < len(points)  # some rays pass, some do not
         np.testing.assert_array_equal(checks._hidden(points, camera, dome, region), expected)
+
+
+def test_a_heel_height_resting_on_a_few_points_is_refused() -> None:
+    # A fully measured patch holds about `expected` points; glare left the heel's with a tenth of them (19020).
+    assert checks.check_height_support(("heel", "toe"), np.array([1900.0, 2300.0]), 2083.0) is None
+    problem = checks.check_height_support(("heel", "toe"), np.array([237.0, 2327.0]), 2083.0)
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert "the heel height rests on 237 measured points where its patch holds about 2083 (11 %" in problem.reason
