@@ -5,7 +5,8 @@ exposures of the empty table); measuring it costs a few. `cellctl bench-sole --c
 render here. A render is stored under a key that covers everything that decides its pixels:
 
 * the scene: seed, colour, look (every variation switch), the rig's calibration and the camera pose;
-* the exposure: which shot (the scene itself or an empty-table exposure with its own sensor noise);
+* the exposure: which shot (the scene itself, a further exposure of it or an empty-table exposure, each with
+  its own sensor noise);
 * the renderer: a hash of the source of every other module of `cellctl.sim`, so a change to the simulator
   (a new material, a fixed shadow ray) can never serve an image rendered by older code.
 
@@ -26,11 +27,31 @@ from pathlib import Path
 
 import numpy as np
 
-from cellctl.sim.render import RenderedPair
+from cellctl.sim.render import RenderedPair, SceneRenderer
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.teach import calibration_fingerprint
 
-SCENE_SHOT = 0  # the scene with its sole; empty-table exposures are shots 1, 2, ...
+SCENE_SHOT = 0  # the scene with its sole; its further exposures are shots -1, -2, ...; the empty table's 1, 2, ...
+# Sensor-noise seed of the scene's exposure k (shot -k): its seed + k times this prime (the empty table's exposures
+# step by 7919, SoleScene.render_empties), so no two exposures of a matrix share their noise.
+EXPOSURE_SEED_STEP = 104729
+
+
+def exposure_shots(count: int) -> list[int]:
+    """The shots of `count` exposures of the scene with its sole, as the cell's cycle takes them: 0, -1, -2, ..."""
+    return [-k for k in range(count)]
+
+
+def render_exposures(scene: SoleScene, shots: list[int]) -> list[RenderedPair]:
+    """Exposures of the scene with its sole (`exposure_shots`; 0 is `SoleScene.render` itself), ray-cast and shaded
+    once: only the sensor noise differs. Here, not in cellctl.sim.scene, so that adding it left every stored render
+    valid (`renderer_version` hashes that module)."""
+    if max(shots) > SCENE_SHOT:
+        raise ValueError(f"the scene's exposures are shots 0, -1, -2, ..., got {max(shots)}")
+    renderer = SceneRenderer(scene.calib, scene.camera_pose, scene.sole, scene.color, scene.seed, scene.look)
+    return renderer.render_shots(
+        [None if shot == SCENE_SHOT else scene.seed - EXPOSURE_SEED_STEP * shot for shot in shots]
+    )
 
 
 @lru_cache(maxsize=1)
@@ -71,6 +92,19 @@ class RenderCache:
         """The scene with its sole (`SoleScene.render`)."""
         return self._get(scene, SCENE_SHOT)
 
+    def render_exposures(self, scene: SoleScene, count: int) -> list[RenderedPair]:
+        """`count` exposures of the scene with its sole (`render_exposures`): the missing ones rendered in one go."""
+        shots = exposure_shots(count)
+        pairs = {shot: _load(self._path(scene, shot)) for shot in shots}
+        missing = [shot for shot, pair in pairs.items() if pair is None]
+        self.hits += len(shots) - len(missing)
+        self.misses += len(missing)
+        if missing:
+            for shot, pair in zip(missing, render_exposures(scene, missing), strict=True):
+                _store(self._path(scene, shot), pair)
+                pairs[shot] = pair
+        return [p for p in (pairs[shot] for shot in shots) if p is not None]
+
     def render_empty(self, scene: SoleScene, shot: int) -> RenderedPair:
         """An exposure of the empty table (`SoleScene.render_empty`)."""
         return self.render_empties(scene, [shot])[0]
@@ -90,7 +124,8 @@ class RenderCache:
         return [p for p in (pairs[shot] for shot in shots) if p is not None]
 
     def prefill(self, scene: SoleScene, shots: list[int]) -> int:
-        """Render the missing `shots` (0: the scene, 1...: empty-table exposures) of a scene into the cache,
+        """Render the missing `shots` (0: the scene, -1...: its further exposures, 1...: empty-table exposures) of a
+        scene into the cache,
         unless another process is rendering this scene (a lock file). Returns how many it rendered.
 
         Several processes prefilling the same list of scenes so share the work.
@@ -106,7 +141,10 @@ class RenderCache:
         try:
             if SCENE_SHOT in missing:
                 self._get(scene, SCENE_SHOT)
-            empties = [shot for shot in missing if shot != SCENE_SHOT]
+            further = [shot for shot in missing if shot < SCENE_SHOT]
+            if further:
+                self.render_exposures(scene, 1 - min(further))
+            empties = [shot for shot in missing if shot > SCENE_SHOT]
             if empties:
                 self.render_empties(scene, empties)
         finally:

@@ -38,6 +38,7 @@ def renders(monkeypatch: pytest.MonkeyPatch) -> CountingRenders:
     fake = CountingRenders()
     monkeypatch.setattr(SoleScene, "render", lambda self: fake(self))
     monkeypatch.setattr(SoleScene, "render_empties", lambda self, shots: [fake(self, shot) for shot in shots])
+    monkeypatch.setattr(render_cache, "render_exposures", lambda scene, shots: [fake(scene, shot) for shot in shots])
     return fake
 
 
@@ -102,6 +103,27 @@ def test_prefilling_processes_share_the_work(tmp_path: Path, renders: CountingRe
     assert cache.prefill(scene(), [0, 1, 2]) == 3 and renders.calls == 3
     assert cache.prefill(scene(), [0, 1, 2]) == 0 and cache.prefill(scene(), [0, 1, 2, 3]) == 1
     assert not lock.exists() and renders.calls == 4
+
+
+def test_the_scenes_exposures_are_cached_apart_from_the_empty_tables(tmp_path: Path, renders: CountingRenders) -> None:
+    cache = RenderCache(tmp_path)
+    first = cache.render(scene())
+    exposures = cache.render_exposures(scene(), 3)  # the scene's own render is its first exposure: 2 new
+    assert renders.calls == 3 and exposures[0].left.tobytes() == first.left.tobytes()
+    assert len({e.left.tobytes() for e in exposures}) == 3
+    cache.render_empties(scene(), [1, 2])
+    assert renders.calls == 5 and len(RenderCache(tmp_path).render_exposures(scene(), 3)) == 3 and renders.calls == 5
+    assert cache.prefill(scene(), [0, -1, -2, -3, 1, 2]) == 1 and renders.calls == 6
+
+
+def test_the_first_exposure_is_the_scene_and_the_others_differ_by_noise_alone() -> None:
+    grey = scene(7, "grey")
+    first, second = render_cache.render_exposures(grey, [0, -1])
+    np.testing.assert_array_equal(first.left, grey.render().left)
+    noise = second.left.astype(np.int16) - first.left.astype(np.int16)
+    assert 0.5 < float(np.std(noise)) < 3.0 and abs(float(np.mean(noise))) < 0.1
+    with pytest.raises(ValueError, match="shots 0, -1, -2"):
+        render_cache.render_exposures(grey, [1])
 
 
 def test_several_exposures_rendered_together_equal_each_rendered_alone() -> None:
