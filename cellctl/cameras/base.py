@@ -22,6 +22,9 @@ class StereoFrame:
     t_right: float
     # Where the pair came from, journaled with the cycle: e.g. the simulated scene seed, the replay file.
     info: dict[str, Any] = field(default_factory=dict)
+    # The mean of several exposures of this same still view (cellctl.cameras.averaging), for the sole's surface
+    # fits; None for a single exposure.
+    averaged: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def skew_s(self) -> float:
@@ -40,4 +43,14 @@ class FrameSource(Protocol):
         """A synchronised pair; with not_before (time.monotonic()), both frames were taken at or after it."""
         ...
 
+    def grab_exposures(self, count: int, not_before: float | None = None) -> list[StereoFrame]:
+        """Up to `count` (at least one) consecutive synchronised pairs of the same scene, as `grab_pair` takes
+        them, for a cycle to average (cellctl.cameras.averaging); a source of stored pairs gives one."""
+        ...
+
     def close(self) -> None: ...
+
+
+def consecutive_pairs(source: FrameSource, count: int, not_before: float | None = None) -> list[StereoFrame]:
+    """`count` (at least one) pairs grabbed one after the other from a live source (`FrameSource.grab_exposures`)."""
+    return [source.grab_pair(not_before) for _ in range(max(count, 1))]

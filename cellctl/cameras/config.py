@@ -5,6 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+# Pairs grabbed per cycle and averaged (cellctl.cameras.averaging): the sensor's noise falls by sqrt(n), which black
+# soles need for their glue heights; a cycle waits (n - 1) frame periods longer for them (~100 ms at 30 fps).
+AVERAGED_FRAMES = 4
+MAX_AVERAGED_FRAMES = 16
+
 
 @dataclass(frozen=True)
 class SimulatedCameraConfig:
@@ -28,4 +33,5 @@ class CameraConfig:
     sync_tolerance_ms: float = 8.0
     timeout_ms: float = 1000.0
     max_regrabs: int = 4
+    averaged_frames: int = AVERAGED_FRAMES
     simulated: SimulatedCameraConfig = field(default_factory=SimulatedCameraConfig)

@@ -47,5 +47,9 @@ class ReplayCameras:
             left, right, now, now, {"backend": "replay", "left": str(left_path), "right": str(right_path)}
         )
 
+    def grab_exposures(self, count: int, not_before: float | None = None) -> list[StereoFrame]:
+        """The next stored pair alone: a stored pair is one exposure (averaging it with itself would change nothing)."""
+        return [self.grab_pair(not_before)]
+
     def close(self) -> None:
         pass

@@ -1,7 +1,9 @@
 """Simulated cameras: sole scenes rendered through the rig of a calibration, with injectable faults.
 
 Each grab_pair() shows the next scene of `seeds` in turn (SoleScene.random(seed)), rendered once per seed
-and cached, so cycles after the first round cost no rendering. The two cameras run free at FRAME_PERIOD_S
+and cached, so cycles after the first round cost no rendering. grab_exposures(n) shows the next scene in up to
+`exposures` exposures, each with its own sensor noise (cellctl.sim.render_cache.render_exposures), as a still
+sole looks to real cameras frame after frame. The two cameras run free at FRAME_PERIOD_S
 like real USB cameras; `skew_s` offsets the right camera's frame clock, and the pairs go through the same
 timestamp pairing as the V4L2 backend (cellctl.cameras.sync), so a skew near half a frame period yields
 out-of-sync pairs that re-grabbing cannot fix. Faults for tests and drills: unplug()/replug(),
@@ -13,9 +15,12 @@ from __future__ import annotations
 import threading
 import time
 
+import numpy as np
+
 from cellctl.cameras.base import CameraMissing, FrameTimeout, StereoFrame
 from cellctl.cameras.sync import TimedFrame, grab_synchronised
 from cellctl.sim.render import RenderedPair
+from cellctl.sim.render_cache import exposure_shots, render_exposures
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 
@@ -34,9 +39,12 @@ class SimulatedCameras:
         skew_s: float = 0.0,
         sync_tolerance_s: float = 0.008,
         max_regrabs: int = 4,
+        exposures: int = 1,
     ) -> None:
         if not seeds:
             raise ValueError("simulated cameras need at least one scene seed")
+        if exposures < 1:
+            raise ValueError(f"simulated cameras render one or more exposures per scene, got {exposures}")
         self.calib = calib
         self.seeds = tuple(seeds)
         self.color = color
@@ -44,7 +52,9 @@ class SimulatedCameras:
         self.sync_tolerance_s = sync_tolerance_s
         self.max_regrabs = max_regrabs
         self._next = 0
+        self.exposures = exposures
         self._cache: dict[int, tuple[RenderedPair, dict[str, object]]] = {}
+        self._further: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}  # exposures 2... (images only)
         self._lock = threading.Lock()
         self._unplugged: str | None = None
         self._frames_to_drop = 0
@@ -68,7 +78,7 @@ class SimulatedCameras:
     # ---- FrameSource ---------------------------------------------------------------------------
 
     def scene_for(self, seed: int) -> tuple[RenderedPair, dict[str, object]]:
-        """The rendered pair and truth of one seed (rendered on first use, then cached)."""
+        """The rendered pair (its first exposure) and truth of one seed (rendered on first use, then cached)."""
         if seed not in self._cache:
             scene = SoleScene.random(seed=seed, color=self.color, calib=self.calib)
             truth = scene.truth()
@@ -78,7 +88,9 @@ class SimulatedCameras:
                 "color": self.color,
                 "truth": {k: truth[k] for k in ("length_mm", "heel_height_mm", "toe_height_mm")},
             }
-            self._cache[seed] = (scene.render(), info)
+            pairs = render_exposures(scene, exposure_shots(self.exposures))
+            self._cache[seed] = (pairs[0], info)
+            self._further[seed] = [(p.left, p.right) for p in pairs[1:]]
         return self._cache[seed]
 
     def open(self) -> None:
@@ -88,6 +100,10 @@ class SimulatedCameras:
             self.scene_for(seed)
 
     def grab_pair(self, not_before: float | None = None) -> StereoFrame:
+        return self.grab_exposures(1, not_before)[0]
+
+    def grab_exposures(self, count: int, not_before: float | None = None) -> list[StereoFrame]:
+        """The next scene in up to `count` exposures (at most `exposures`; at least one)."""
         self._check_plugged()
         seed = self.seeds[self._next % len(self.seeds)]
         self._next += 1
@@ -101,14 +117,19 @@ class SimulatedCameras:
             frame_number[side] += 1
             return TimedFrame(timestamp, None)
 
-        left, right = grab_synchronised(
-            lambda: grab("left"), lambda: grab("right"), self.sync_tolerance_s, self.max_regrabs, not_before
-        )
         pair, info = self.scene_for(seed)
-        return StereoFrame(pair.left, pair.right, left.timestamp, right.timestamp, dict(info))
+        images = [(pair.left, pair.right), *self._further[seed]][: max(1, min(count, self.exposures))]
+        frames = []
+        for left_image, right_image in images:
+            left, right = grab_synchronised(
+                lambda: grab("left"), lambda: grab("right"), self.sync_tolerance_s, self.max_regrabs, not_before
+            )
+            frames.append(StereoFrame(left_image, right_image, left.timestamp, right.timestamp, dict(info)))
+        return frames
 
     def close(self) -> None:
         self._cache.clear()
+        self._further.clear()
 
     def _check_plugged(self) -> None:
         with self._lock:

@@ -25,7 +25,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from cellctl.cameras.base import CameraMissing, FrameTimeout, StereoFrame
+from cellctl.cameras.base import CameraMissing, FrameTimeout, StereoFrame, consecutive_pairs
 from cellctl.cameras.identity import camera_identity
 from cellctl.cameras.sync import TimedFrame, grab_synchronised
 
@@ -149,6 +149,10 @@ class V4l2Cameras:
         # Identities are looked up per pair (a readdir of /dev/v4l/by-id): a replug may change them.
         info |= {"left_id": camera_identity(self.left.device), "right_id": camera_identity(self.right.device)}
         return StereoFrame(images[0], images[1], left.timestamp, right.timestamp, info)
+
+    def grab_exposures(self, count: int, not_before: float | None = None) -> list[StereoFrame]:
+        """The next `count` pairs of the streams (the sole lies still: the same scene, new sensor noise)."""
+        return consecutive_pairs(self, count, not_before)
 
     def close(self) -> None:
         self.left.close()

@@ -70,6 +70,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --matrix: measure each sole with its model's wall stated as a recipe would ([sole] wall: "
         "vertical, or the draft of a wall leaning from the table), as a line that knows its moulds",
     )
+    parser.add_argument(
+        "--frames",
+        type=int,
+        metavar="N",
+        help="exposures of each sole averaged per measurement (default: as a cycle takes them, the default of "
+        "[cameras] averaged_frames)",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of markdown")
     parser.set_defaults(func=run)
 
@@ -90,6 +97,13 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--combined needs --matrix --variations NAME,... (the variations every sole combines)")
     if args.declared_walls and not args.matrix:
         raise UserError("--declared-walls needs --matrix")
+    from cellctl.cameras.config import AVERAGED_FRAMES, MAX_AVERAGED_FRAMES
+
+    args.frames = AVERAGED_FRAMES if args.frames is None else args.frames
+    if not 1 <= args.frames <= MAX_AVERAGED_FRAMES:
+        raise UserError(
+            f"--frames must be 1..{MAX_AVERAGED_FRAMES} (exposures averaged per measurement), got {args.frames}"
+        )
     if args.render_only and not args.cache:
         raise UserError("--render-only needs --cache DIR (where the renders go)")
     if args.matrix:
@@ -100,15 +114,22 @@ def run(args: argparse.Namespace) -> int:
     cache = _cache(args)
     if args.render_only:
         assert cache is not None
-        return _render_only([SoleScene.random(seed, color, calib) for seed, color in soles], cache, args.taught)
+        scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
+        return _render_only(scenes, cache, args.taught, args.frames)
     rows = bench_sole.bench_soles(
-        calib, soles, progress=lambda text: print(f"  {text}", file=sys.stderr), taught=args.taught, cache=cache
+        calib,
+        soles,
+        progress=lambda text: print(f"  {text}", file=sys.stderr),
+        taught=args.taught,
+        cache=cache,
+        frames=args.frames,
     )
     if args.json:
         print(json.dumps(bench_sole.as_json(rows), indent=2))
     else:
         command = f"cellctl bench-sole --soles {args.soles} --first-seed {args.first_seed}"
         command += " --taught" if args.taught else ""
+        command += _frames_flag(args.frames)
         print(bench_sole.to_markdown(rows, command + (f" --calib {args.calib}" if args.calib else "")))
     return 0
 
@@ -142,7 +163,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
 
         assert cache is not None
         scenes = [SoleScene.random(s.seed, s.color, calib or rig_for(s.look.rig), s.look) for s in soles]
-        return _render_only(scenes, cache, args.taught)
+        return _render_only(scenes, cache, args.taught, args.frames)
     results = sole_matrix.bench_matrix(
         soles,
         calib,
@@ -150,6 +171,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
         taught=args.taught,
         cache=cache,
         declared_walls=args.declared_walls,
+        frames=args.frames,
     )
     if args.json:
         print(json.dumps(sole_matrix.as_json(results), indent=2))
@@ -161,6 +183,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
         command += f" --calib {args.calib}" if args.calib else ""
         command += " --taught" if args.taught else ""
         command += " --declared-walls" if args.declared_walls else ""
+        command += _frames_flag(args.frames)
         print(sole_matrix.matrix_markdown(results, command))
     return 0 if sole_matrix.acceptance(results).passed else 1
 
@@ -194,11 +217,20 @@ def _cache(args: argparse.Namespace) -> RenderCache | None:
         ) from None
 
 
-def _render_only(scenes: list[SoleScene], cache: RenderCache, taught: bool) -> int:
+def _render_only(scenes: list[SoleScene], cache: RenderCache, taught: bool, frames: int) -> int:
     from cellctl.eval.sole_bench import TEACH_SHOTS
+    from cellctl.sim.render_cache import exposure_shots
 
     for scene in scenes:
-        shots = list(range(0, TEACH_SHOTS + 1 if taught else 1))  # 0: the scene, 1...: empty-table exposures
+        # 0, -1, ...: the scene's exposures; 1...: the empty table's
+        shots = exposure_shots(frames) + list(range(1, TEACH_SHOTS + 1 if taught else 1))
         rendered = cache.prefill(scene, shots)
         print(f"  sole {scene.seed} {scene.color}: {rendered} of {len(shots)} renders new", file=sys.stderr)
     return 0
+
+
+def _frames_flag(frames: int) -> str:
+    """ " --frames N" for a report's command line, unless N is the cycle's default."""
+    from cellctl.cameras.config import AVERAGED_FRAMES
+
+    return "" if frames == AVERAGED_FRAMES else f" --frames {frames}"

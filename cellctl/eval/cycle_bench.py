@@ -1,7 +1,8 @@
 """Cycle time as a multiple of OpenCV StereoSGBM HH4 on the same pair, in the same run (docs/benchmarks.md, 4).
 
 A figure that does not depend on the machine: the cycle's measurement (what the service runs between a
-grab and the answer, `cellctl.service.cycle.measure_frame`: reconstruct, then measure_sole) against the time OpenCV StereoSGBM in MODE_HH4 needs to
+grab and the answer: the mean of the exposures, cellctl.cameras.averaging, then
+`cellctl.service.cycle.measure_frame`: reconstruct, then measure_sole) against the time OpenCV StereoSGBM in MODE_HH4 needs to
 match the same rectified pair over the cell's whole disparity range. The two are timed alternately, one
 cycle then one HH4 match, so both see the same load; the ratio is median cycle / median HH4.
 
@@ -20,7 +21,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from cellctl.cameras.averaging import average_frames
+from cellctl.cameras.base import StereoFrame
+from cellctl.cameras.config import AVERAGED_FRAMES
 from cellctl.eval.methods import opencv_sgbm
+from cellctl.sim.render_cache import exposure_shots, render_exposures
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
@@ -121,18 +126,24 @@ def bench_cycles(
     depth_range_mm: tuple[float, float] = DEFAULT_DEPTH_RANGE_MM,
     progress: Callable[[str], None] | None = None,
     whole_pair: bool = False,
+    frames: int = AVERAGED_FRAMES,
 ) -> CycleBench:
     """`cycles` cycles over the rendered soles in turn, each followed by one HH4 match of the first pair.
 
     whole_pair: the cycle as it was before the search region (no taught table: the table found in every
-    cycle, the whole pair matched over the whole range), for comparison.
+    cycle, the whole pair matched over the whole range), for comparison. frames: exposures of each sole a cycle
+    averages ([cameras] averaged_frames), timed with it.
     """
     if cycles < 1:
         raise ValueError(f"cycles must be at least 1, got {cycles}")
     one_blas_thread()  # as the service does (cellctl.service.measuring)
     keep_freed_memory()  # as the service does
     scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
-    pairs = [scene.render() for scene in scenes]
+    exposures = [
+        [StereoFrame(e.left, e.right, 0.0, 0.0) for e in render_exposures(scene, exposure_shots(frames))]
+        for scene in scenes
+    ]
+    pairs = [average_frames(shots) for shots in exposures]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]
     # The simulator draws each scene's table texture from its seed: every scene is its own cell, taught on
     # its own empty table (`cellctl teach`) and warmed up as the daemon does before READY.
@@ -140,7 +151,8 @@ def bench_cycles(
     disparities = (reconstructors[0].min_disparity, reconstructors[0].num_disparities)
 
     def cycle(which: int) -> MeasurementResult:
-        reconstruction = reconstructors[which].reconstruct(pairs[which].left, pairs[which].right)
+        pair = average_frames(exposures[which])
+        reconstruction = reconstructors[which].reconstruct(pair.left, pair.right, pair.averaged)
         return measure_sole(reconstruction, GLUE_OFFSET_MM, GLUE_SPACING_MM)
 
     for which in range(len(pairs)):

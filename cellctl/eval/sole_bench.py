@@ -15,7 +15,10 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
-from cellctl.sim.render_cache import RenderCache
+from cellctl.cameras.averaging import average_frames
+from cellctl.cameras.base import StereoFrame
+from cellctl.cameras.config import AVERAGED_FRAMES
+from cellctl.sim.render_cache import RenderCache, exposure_shots, render_exposures
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.checks import MIN_GLUE_NZ
@@ -64,18 +67,20 @@ def bench_soles(
     progress: Callable[[str], None] | None = None,
     taught: bool = False,
     cache: RenderCache | None = None,
+    frames: int = AVERAGED_FRAMES,
 ) -> list[SoleBenchRow]:
     """Measure each (seed, colour) plain sole once and compare with its truth.
 
     taught: teach each scene's empty table first (not timed), as a cell does once at set-up
-    (cellctl.vision.teach); else measure without a taught table. cache: renders kept on disk.
+    (cellctl.vision.teach); else measure without a taught table. cache: renders kept on disk. frames: exposures
+    averaged per measurement (`scene_frame`).
     """
     reconstructor = SoleReconstructor(calib)
     rows = []
     for seed, color in soles:
         scene = SoleScene.random(seed, color, calib)
         chosen = taught_reconstructor(calib, scene, cache) if taught else reconstructor
-        rows.append(measure_scene(chosen, scene, "plain" + fallback_note(taught, chosen), cache))
+        rows.append(measure_scene(chosen, scene, "plain" + fallback_note(taught, chosen), cache, frames=frames))
         if progress:
             progress(_row_text(rows[-1]))
     return rows
@@ -118,22 +123,32 @@ def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCach
         return SoleReconstructor(calib)
 
 
+def scene_frame(scene: SoleScene, frames: int = AVERAGED_FRAMES, cache: RenderCache | None = None) -> StereoFrame:
+    """What a cycle of the cell measures: `frames` exposures of the scene, the last with the mean of all
+    (cellctl.cameras.averaging). The scene's own render (shot 0) comes last, so the exposure the outline is found on
+    is the one every run before averaging measured."""
+    pairs = cache.render_exposures(scene, frames) if cache else render_exposures(scene, exposure_shots(frames))
+    return average_frames([StereoFrame(p.left, p.right, 0.0, 0.0) for p in reversed(pairs)])
+
+
 def measure_scene(
     reconstructor: SoleReconstructor,
     scene: SoleScene,
     variations: str = "plain",
     cache: RenderCache | None = None,
     declared_wall: bool = False,
+    frames: int = AVERAGED_FRAMES,
 ) -> SoleBenchRow:
-    """Render one scene (not timed), measure it like `cellctl measure` (timed) and compare with its truth;
-    declared_wall: with the sole model's wall stated as a recipe would (`declared_draft`)."""
+    """Render one scene (not timed) in `frames` exposures averaged as a cycle takes them (`scene_frame`), measure it
+    like `cellctl measure` (timed) and compare with its truth; declared_wall: with the sole model's wall stated as a
+    recipe would (`declared_draft`)."""
     assert scene.sole is not None
-    pair = cache.render(scene) if cache else scene.render()
+    pair = scene_frame(scene, frames, cache)
     draft = declared_draft(scene) if declared_wall else None
     start = time.perf_counter()
     result: MeasurementResult | None
     try:
-        result = measure_sole(reconstructor.reconstruct(pair.left, pair.right), wall_draft_deg=draft)
+        result = measure_sole(reconstructor.reconstruct(pair.left, pair.right, pair.averaged), wall_draft_deg=draft)
         reason, failure = (
             (result.reason, result.failure.value) if isinstance(result, MeasurementRefused) else (None, None)
         )

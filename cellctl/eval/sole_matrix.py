@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from cellctl.cameras.config import AVERAGED_FRAMES
 from cellctl.errors import FailureKind
 from cellctl.eval.sole_bench import (
     CRASHED,
@@ -106,12 +107,14 @@ def bench_matrix(
     taught: bool = False,
     cache: RenderCache | None = None,
     declared_walls: bool = False,
+    frames: int = AVERAGED_FRAMES,
 ) -> list[MatrixRow]:
     """Render, measure and judge every sole; `calib` replaces the looks' rigs (default: each look's own rig).
 
     taught: teach each scene's empty table first (not timed), as the cell does once at set-up.
     cache: renders kept on disk (`cellctl.sim.render_cache`).
     declared_walls: measure each sole with its model's wall stated as its recipe would (sole_bench.declared_draft).
+    frames: exposures averaged per measurement (sole_bench.scene_frame).
     """
     reconstructors: dict[str, SoleReconstructor] = {}
     rows = []
@@ -125,7 +128,7 @@ def bench_matrix(
         if taught:
             reconstructor = taught_reconstructor(reconstructor.calib, scene, cache)
         label = sole.label + fallback_note(taught, reconstructor)
-        result = judge(sole, measure_scene(reconstructor, scene, label, cache, declared_walls))
+        result = judge(sole, measure_scene(reconstructor, scene, label, cache, declared_walls, frames))
         rows.append(result)
         if progress:
             progress(_progress_text(result))

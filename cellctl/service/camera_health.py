@@ -12,6 +12,8 @@ import threading
 import time
 
 from cellctl.cameras import CameraError, FrameSource, StereoFrame
+from cellctl.cameras.averaging import average_frames
+from cellctl.cameras.config import AVERAGED_FRAMES
 from cellctl.cameras.identity import identity_problem
 from cellctl.service.codes import CycleFailed
 from cellctl.service.quiet_log import RepeatQuietLog
@@ -28,8 +30,9 @@ CAMERA_LOG_REPEAT_S = 60.0
 class CameraHealth:
     """Grabs for the cycles, and knows whether the cameras work and are the calibrated ones."""
 
-    def __init__(self, source: FrameSource, calib: Calibration | None) -> None:
+    def __init__(self, source: FrameSource, calib: Calibration | None, averaged_frames: int = AVERAGED_FRAMES) -> None:
         self.source = source
+        self.averaged_frames = averaged_frames  # pairs per cycle, averaged (cellctl.cameras.averaging)
         self.calib = calib
         self.lock = threading.Lock()  # held for every grab
         self.ok = False
@@ -67,11 +70,12 @@ class CameraHealth:
         return True
 
     def grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
-        """A pair exposed after `not_before` (the trigger); CycleFailed with the camera's code otherwise."""
+        """The mean of `averaged_frames` pairs exposed after `not_before` (the trigger; frames of a scene that moved
+        meanwhile left out); CycleFailed with the camera's code otherwise."""
         start = time.perf_counter()
         try:
-            with self.lock:
-                frame = self.source.grab_pair(not_before=not_before)  # frames exposed after the trigger only
+            with self.lock:  # frames exposed after the trigger only
+                frames = self.source.grab_exposures(self.averaged_frames, not_before=not_before)
         except CameraError as exc:
             self.ok = False
             self._last_probe = time.monotonic()
@@ -79,4 +83,7 @@ class CameraHealth:
         finally:
             timings["grab"] = time.perf_counter() - start
         self.ok = True
+        start = time.perf_counter()
+        frame = average_frames(frames)
+        timings["average"] = time.perf_counter() - start
         return frame

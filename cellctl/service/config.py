@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cellctl.cameras.config import CameraConfig, SimulatedCameraConfig
+from cellctl.cameras.config import AVERAGED_FRAMES, MAX_AVERAGED_FRAMES, CameraConfig, SimulatedCameraConfig
 from cellctl.service.config_plc import PlcConfig, read_plc
 from cellctl.service.config_table import ConfigError, Table, read_toml
 from cellctl.vision.defaults import (
@@ -215,6 +215,7 @@ def _cameras(t: Table) -> CameraConfig:
         sync_tolerance_ms=t.number("sync_tolerance_ms", 8.0, above=0, high=1000),
         timeout_ms=t.number("timeout_ms", 1000.0, above=0, high=60000),
         max_regrabs=t.integer("max_regrabs", 4, low=0, high=100),
+        averaged_frames=t.integer("averaged_frames", AVERAGED_FRAMES, low=1, high=MAX_AVERAGED_FRAMES),
         simulated=simulated,
     )
     t.finish()

@@ -80,7 +80,7 @@ class Daemon:
                 f"{self.measurer.calibration_problem}"
             )
         self.source = source if source is not None else open_frame_source(config.cameras, self.calib)
-        self.cameras = CameraHealth(self.source, self.calib)
+        self.cameras = CameraHealth(self.source, self.calib, config.cameras.averaged_frames)
         self.cameras.setup_problem = self.measurer.setup_problem or None  # set: CALIBRATION_OK (and READY) stay off
         self.camera_lock = self.cameras.lock  # held for every grab: the station's live view grabs between cycles
         self.link = _plc_link(config)

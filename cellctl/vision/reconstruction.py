@@ -110,9 +110,16 @@ class SoleReconstructor:
         self.table_plane = plane
         return plane
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
-        """The sole's cloud from one raw (unrectified) stereo pair."""
+    def reconstruct(
+        self, left: np.ndarray, right: np.ndarray, surface: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> ReconstructionResult:
+        """The sole's cloud from one raw (unrectified) stereo pair. `surface`: the mean of several exposures of the
+        same view (cellctl.cameras.averaging), from which the sole's surface is fitted (`surface_grey`); default
+        the pair itself."""
         self._check_pair(left, right)
+        if surface is not None:
+            self._check_pair(*surface)
+        fitted = (left, right) if surface is None else surface
         timings: dict[str, float] = {}
         rect_left, rect_right = self._rectify(left, right, timings)
         self.last_region, self.last_fallback = None, ""
@@ -127,7 +134,7 @@ class SoleReconstructor:
                     why = "the sole reaches the search region's edge"
                 else:
                     self.last_region = region
-                    return self._with_surface_grey(result, left, right)
+                    return self._with_surface_grey(result, *fitted)
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
@@ -136,7 +143,7 @@ class SoleReconstructor:
             hint = self._range_hint(rect_left, rect_right, result)
             if hint:
                 result = replace(result, reason=f"{result.reason}; {hint}")
-        return self._with_surface_grey(result, left, right)
+        return self._with_surface_grey(result, *fitted)
 
     def _with_surface_grey(
         self, result: ReconstructionResult, left: np.ndarray, right: np.ndarray

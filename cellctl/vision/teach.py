@@ -96,12 +96,22 @@ class Drift:
     problem: str | None
 
 
+MAX_AVERAGED_EXPOSURES = 256  # their sum still fits 16 bits
+
+
 def average_exposures(images: list[np.ndarray]) -> np.ndarray:
     """Several exposures of the same static view averaged (uint8): sensor noise falls by sqrt(count)."""
     if not images or any(image.shape != images[0].shape for image in images):
         raise TeachError("teaching needs one or more images of the same size per camera")
-    mean = np.asarray(np.mean(np.stack([image.astype(np.float32) for image in images]), axis=0))
-    return np.asarray(np.clip(np.round(mean), 0, 255), np.uint8)
+    if len(images) > MAX_AVERAGED_EXPOSURES:
+        raise TeachError(f"at most {MAX_AVERAGED_EXPOSURES} exposures can be averaged, got {len(images)}")
+    # Summed in 16 bits and rounded through a table: the mean np.round gives (halves to even), without the float
+    # copies of every image (a cycle averages four pairs: ~70 ms that way, ~15 this way).
+    total = np.zeros(images[0].shape, np.uint16)
+    for image in images:
+        np.add(total, image, out=total, casting="unsafe")
+    rounded = np.round(np.arange(255 * len(images) + 1) / len(images)).astype(np.uint8)
+    return np.asarray(rounded[total])
 
 
 def calibration_fingerprint(calib: Calibration) -> str:

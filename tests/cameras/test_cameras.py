@@ -78,6 +78,16 @@ def test_simulated_pairs_rotate_through_seeds_with_truth(sim: SimulatedCameras) 
     assert first.skew_s <= 0.008
 
 
+def test_simulated_exposures_show_one_scene_with_new_noise_each() -> None:
+    sim = SimulatedCameras(half_size_rig(), seeds=(1, 2), exposures=3)
+    frames = sim.grab_exposures(5)  # no more than were rendered
+    assert [f.info["seed"] for f in frames] == [1, 1, 1] and sim.grab_pair().info["seed"] == 2
+    noise = frames[1].left.astype(np.int16) - frames[0].left.astype(np.int16)
+    assert 0.5 < float(np.std(noise)) < 3.0  # the sensor's noise (~1-1.6 DN each), nothing else
+    assert [f.t_left for f in frames] == sorted({f.t_left for f in frames})  # consecutive frames
+    assert sim.grab_exposures(1)[0].left is frames[0].left  # the scene's first exposure is its pair
+
+
 def test_simulated_faults_and_recovery(sim: SimulatedCameras) -> None:
     sim.unplug("right")
     with pytest.raises(CameraMissing, match="right camera"):
@@ -103,6 +113,7 @@ def test_replay_serves_pairs_in_turn(tmp_path: Path) -> None:
     replay = ReplayCameras(tmp_path)
     values = [int(replay.grab_pair().right[0, 0, 0]) for _ in range(3)]
     assert values == [11, 21, 11]
+    assert [int(f.right[0, 0, 0]) for f in replay.grab_exposures(4)] == [21]  # a stored pair is one exposure
     with pytest.raises(CameraMissing, match="does not exist"):
         ReplayCameras(tmp_path / "gone").grab_pair()
     with pytest.raises(CameraMissing, match="holds no"):

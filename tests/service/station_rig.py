@@ -78,17 +78,18 @@ class StationService:
         """A cycle on an empty, featureless view (as if the table were covered): refused by the real
         measurement, with a frame, so its pictures are logged."""
         source = self.daemon.source
-        original = source.grab_pair
-        frame = original()
+        original = source.grab_exposures
+        frame = source.grab_pair()
 
-        def empty_table(not_before: float | None = None) -> StereoFrame:
-            source.grab_pair = original  # type: ignore[method-assign]
+        def empty_table(count: int, not_before: float | None = None) -> list[StereoFrame]:
+            source.grab_exposures = original  # type: ignore[method-assign]
             rng = np.random.default_rng(0)
             grey = np.full_like(frame.left, 90)
             noisy = np.clip(grey + rng.normal(0, 2, grey.shape), 0, 255).astype(np.uint8)
-            return StereoFrame(noisy, noisy.copy(), frame.t_left, frame.t_right, {"backend": "test", "scene": "empty"})
+            info = {"backend": "test", "scene": "empty"}
+            return [StereoFrame(noisy, noisy.copy(), frame.t_left, frame.t_right, info)]
 
-        source.grab_pair = empty_table  # type: ignore[method-assign]
+        source.grab_exposures = empty_table  # type: ignore[method-assign]
         return self.cycle()
 
     def get(self, path: str, headers: dict[str, str] | None = None, method: str = "GET") -> tuple[int, bytes]:

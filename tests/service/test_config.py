@@ -116,6 +116,7 @@ def test_mistakes_are_refused_naming_the_key(tmp_path: Path, extra: str, message
         ('backend = "simulated"\nsize = [1280]', r"size: expected \[width, height\]"),
         ('backend = "simulated"\npixel_format = "H264"', r"pixel_format: 'H264' is not one of"),
         ('backend = "simulated"\nsync_tolerance_ms = -1', r"sync_tolerance_ms: -1 is impossible"),
+        ('backend = "simulated"\naveraged_frames = 0', r"averaged_frames: 0 is impossible: must be in 1..16"),
         (
             'backend = "simulated"\n[cameras.simulated]\nseeds = []',
             r"\[cameras.simulated\] seeds: expected a non-empty",

@@ -142,6 +142,9 @@ def test_cli_render_only_fills_the_cache_and_needs_a_directory(
     calib = tmp_path / "calib.yaml"
     half_size_rig().save(calib)
     args = ["bench-sole", "--matrix", "--soles", "2", "--calib", str(calib), "--cache", str(tmp_path / "c")]
-    assert main([*args, "--render-only", "--taught"]) == 0
-    assert renders.calls == 2 * 5 and len(list((tmp_path / "c").glob("*.npz"))) == 10
-    assert main([*args, "--render-only", "--taught"]) == 0 and renders.calls == 10
+    assert main([*args, "--render-only", "--taught"]) == 0  # per sole 4 exposures of it, 4 of the empty table
+    assert renders.calls == 2 * 8 and len(list((tmp_path / "c").glob("*.npz"))) == 16
+    assert main([*args, "--render-only", "--taught"]) == 0 and renders.calls == 16
+    assert main([*args, "--render-only", "--frames", "5"]) == 0 and renders.calls == 18
+    assert main([*args, "--render-only", "--frames", "0"]) == 2
+    assert "--frames must be 1..16" in capsys.readouterr().err

@@ -155,6 +155,30 @@ def test_surface_samples_on_two_threads_are_those_on_one(stereo_results) -> None
                 np.testing.assert_array_equal(a, b)
 
 
+def test_the_mean_of_four_exposures_measures_the_black_sole_one_exposure_cannot(rig, reconstructor) -> None:  # noqa: ANN001
+    """Sole 5 again, as a cycle takes it (cellctl.cameras.averaging): the outline from the last exposure, unchanged, the
+    surface fitted on the mean of four, whose halved noise brings the glue heights within the 1 mm tolerance."""
+    from cellctl.eval.sole_bench import glue_truth, scene_frame
+
+    scene = SoleScene.random(5, "black", rig)
+    frame = scene_frame(scene, 4)
+    assert frame.averaged is not None and frame.info["averaged_frames"] == 4
+    single = reconstructor.reconstruct(frame.left, frame.right)
+    averaged = reconstructor.reconstruct(frame.left, frame.right, frame.averaged)
+    assert isinstance(single, Reconstruction) and isinstance(averaged, Reconstruction)
+    np.testing.assert_array_equal(averaged.sole_points, single.sole_points)
+    assert isinstance(measure_sole(single), MeasurementRefused)
+    result = measure_sole(averaged)
+    assert isinstance(result, SoleMeasurement), result
+    assert np.all(np.abs(errors(scene, result)) < [1.0, 0.5, 0.5])
+    transform = scene.table_from_measured(result.camera_to_table)
+    points = result.glue_path.points @ transform[:3, :3].T + transform[:3, 3]
+    _, height, _ = glue_truth(scene, points[:, :2])
+    assert float(np.abs(points[:, 2] - height).max()) < 1.0
+    with pytest.raises(MeasurementInputError, match="calibrat"):
+        reconstructor.reconstruct(frame.left, frame.right, (frame.left[::2, ::2], frame.right[::2, ::2]))
+
+
 def test_the_surface_fits_read_the_sole_rectified_without_rounding(rig, stereo_results) -> None:  # noqa: ANN001
     """The reconstruction's `surface_grey`: round the sole, the raw pair rectified in float (Calibration.rectify_grey);
     elsewhere the rounded pair; and the surface's image fits read it."""

@@ -1,0 +1,75 @@
+"""Several exposures of the still scene averaged: the sensor's noise falls by sqrt(n) for the sole's surface fits.
+
+Why: on a black sole the top's texture is a few grey levels deep and the sensor's noise about 1.3 DN, so the
+surface's sub-pixel image fits (cellctl.vision.subpixel), which give every height and glue point, are
+noise-limited there. With one exposure the glue heights' expected error on black soles lay at 0.28-0.46 mm against
+the 0.28 mm a 1 mm tolerance allows, and those soles were refused (docs/sole-benchmark.md, twenty-sixth round);
+four exposures halve the noise. The sole lies still on the table while the cell measures it, so the exposures
+differ by the sensor's noise alone.
+
+Only the surface fits read the mean (`StereoFrame.averaged`); the matcher, the change against the taught table and
+so the outline read the last exposure, as before: their thresholds were set on single exposures, and on the mean
+the change test's residual noise reads at its floor and its masks moved (lengths 0.15-0.2 mm longer on white and
+grey soles, and one glue inset 1.11 mm off beside a black sole's contact shadow, with a floor restoring the
+single-exposure noise: docs/sole-benchmark.md, twenty-sixth round).
+
+Where an exposure differs from the last one by more than the noise (the sole still settling after it was laid
+down, the fixture shaken), the mean would blur the surface: it is left out (`still_frames`), and the frame's info
+says how many were averaged and how many were left out.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cellctl.cameras.base import StereoFrame
+from cellctl.vision.teach import average_exposures
+
+# Two exposures agree where no more than MAX_MOVED_SHARE of their pixels differ by more than MOTION_SIGMAS times
+# the difference's own robust spread (and at least MIN_MOTION_DN, the 8-bit steps): pure sensor noise exceeds
+# 6 sigma at ~1e-9 of the pixels (a bright pixel's shot noise, ~1.5 x the median spread, at ~1e-4); a sole that
+# moved by one pixel changes its whole edge (~0.15-0.3 % of a 1280 x 1024 image for a white sole).
+MOTION_SIGMAS = 6.0
+MIN_MOTION_DN = 4.0
+MAX_MOVED_SHARE = 0.001
+MOTION_STRIDE = 4  # every 4th row and column: the same share to ~1e-4, at 1/16 of the cost in the cycle
+
+
+def frames_agree(first: np.ndarray, second: np.ndarray) -> bool:
+    """Whether two exposures (BGR or grey uint8, the same size) of one camera show the same still scene."""
+    a = _grey(first[::MOTION_STRIDE, ::MOTION_STRIDE]).astype(np.float32)
+    b = _grey(second[::MOTION_STRIDE, ::MOTION_STRIDE]).astype(np.float32)  # (green: the grey's largest weight)
+    difference = b - a
+    centre = float(np.median(difference))  # a light's flicker moves the whole image a little
+    spread = 1.4826 * float(np.median(np.abs(difference - centre)))
+    limit = max(MOTION_SIGMAS * spread, MIN_MOTION_DN)
+    return float(np.mean(np.abs(difference - centre) > limit)) <= MAX_MOVED_SHARE
+
+
+def still_frames(frames: list[StereoFrame]) -> list[StereoFrame]:
+    """The frames (in order) whose left image agrees with the last frame's (`frames_agree`), the last included: a
+    scene that moves moves in both cameras' views, and one comparison per frame costs the cycle ~4 ms."""
+    last = frames[-1]
+    return [f for f in frames[:-1] if frames_agree(f.left, last.left)] + [last]
+
+
+def average_frames(frames: list[StereoFrame]) -> StereoFrame:
+    """The last of `frames` (one or more consecutive exposures) with the mean of the still ones among them as its
+    `averaged` pair (None if only the last is still); its info is the last frame's with "averaged_frames" (and
+    "moved_frames" where some were left out)."""
+    if not frames:
+        raise ValueError("averaging needs one or more frames")
+    still = still_frames(frames)
+    last = still[-1]
+    info = dict(last.info, averaged_frames=len(still))
+    if len(still) < len(frames):
+        info["moved_frames"] = len(frames) - len(still)
+    if len(still) == 1:
+        return StereoFrame(last.left, last.right, last.t_left, last.t_right, info)
+    averaged = average_exposures([f.left for f in still]), average_exposures([f.right for f in still])
+    return StereoFrame(last.left, last.right, last.t_left, last.t_right, info, averaged)
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """A grey image's own values; a BGR image's green channel (motion shows in any channel)."""
+    return image if image.ndim == 2 else image[..., 1]
