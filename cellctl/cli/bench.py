@@ -24,6 +24,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="with --cycle: no taught table, the whole pair matched (the cycle before the search region)",
     )
+    p.add_argument(
+        "--frames",
+        type=int,
+        metavar="N",
+        help="with --cycle: exposures each cycle averages (default: the default of [cameras] averaged_frames)",
+    )
     p.set_defaults(func=run)
 
 
@@ -35,8 +41,10 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--threads must be at least 1")
     if args.runs is not None and args.runs < 1:
         raise ValueError("--runs must be at least 1")
+    if args.frames is not None and not args.cycle:
+        raise ValueError("--frames needs --cycle")
     if args.cycle:
-        return run_cycle(args.cycles, args.whole_pair)
+        return run_cycle(args.cycles, args.whole_pair, args.frames)
     teddy = benchmark.teddy_case(args.data, runs=args.runs or 9)
     synthetic = benchmark.synthetic_case(runs=args.runs or 5)
     results, summaries = benchmark.run_benchmark(
@@ -49,17 +57,25 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_cycle(cycles: int, whole_pair: bool) -> int:
+def run_cycle(cycles: int, whole_pair: bool, frames: int | None = None) -> int:
     """`cellctl bench --cycle`: cellctl.eval.cycle_bench on the simulated rig of deploy/sim-calib.yaml."""
+    from cellctl.cameras.config import AVERAGED_FRAMES, MAX_AVERAGED_FRAMES
     from cellctl.cli.demo_cell import DEFAULT_CONFIG
     from cellctl.eval.cycle_bench import bench_cycles
     from cellctl.vision.calibration import Calibration
 
     if cycles < 1:
         raise ValueError(f"--cycles {cycles} must be at least 1")
+    frames = AVERAGED_FRAMES if frames is None else frames
+    if not 1 <= frames <= MAX_AVERAGED_FRAMES:
+        raise ValueError(f"--frames {frames} must be 1..{MAX_AVERAGED_FRAMES}")
     calib = Calibration.load(DEFAULT_CONFIG.parent / "sim-calib.yaml")
     bench = bench_cycles(
-        calib, cycles, progress=lambda s: print(f"  {s}", file=sys.stderr, flush=True), whole_pair=whole_pair
+        calib,
+        cycles,
+        progress=lambda s: print(f"  {s}", file=sys.stderr, flush=True),
+        whole_pair=whole_pair,
+        frames=frames,
     )
     print(bench.to_markdown())
     return 0

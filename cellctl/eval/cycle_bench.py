@@ -151,9 +151,13 @@ def bench_cycles(
     disparities = (reconstructors[0].min_disparity, reconstructors[0].num_disparities)
 
     def cycle(which: int) -> MeasurementResult:
+        start = time.perf_counter()
         pair = average_frames(exposures[which])
+        averaging = time.perf_counter() - start
         reconstruction = reconstructors[which].reconstruct(pair.left, pair.right, pair.averaged)
-        return measure_sole(reconstruction, GLUE_OFFSET_MM, GLUE_SPACING_MM)
+        result = measure_sole(reconstruction, GLUE_OFFSET_MM, GLUE_SPACING_MM)
+        result.timings["average"] = averaging  # as the service times it (CameraHealth.grab)
+        return result
 
     for which in range(len(pairs)):
         cycle(which)  # the warm-up
