@@ -65,8 +65,8 @@ def average_frames(frames: list[StereoFrame]) -> StereoFrame:
     info = dict(last.info, averaged_frames=len(still))
     if len(still) < len(frames):
         info["moved_frames"] = len(frames) - len(still)
-    if len(still) == 1:
-        return StereoFrame(last.left, last.right, last.t_left, last.t_right, info)
+    if len(still) == 1:  # its own mean, if it brings one (a replayed cycle of the image log)
+        return StereoFrame(last.left, last.right, last.t_left, last.t_right, info, last.averaged)
     # The right camera's mean on the second core (numpy's loops release the GIL): ~8 ms of a cycle's ~16.
     right = worker("average").submit(average_exposures, [f.right for f in still])
     averaged = average_exposures([f.left for f in still]), right.result()

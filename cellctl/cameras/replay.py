@@ -34,21 +34,25 @@ class ReplayCameras:
         self.pairs()
 
     def grab_pair(self, not_before: float | None = None) -> StereoFrame:
-        """The next stored pair, stamped now (so always after not_before)."""
+        """The next stored pair, stamped now (so always after not_before), with its mean where the folder holds one
+        (meanleft_NN.png / meanright_NN.png, as the image log writes them: the cycle's exposures averaged)."""
         pairs = self.pairs()
         left_path, right_path = pairs[self._next % len(pairs)]
         self._next += 1
+        means = [path.with_name(f"mean{path.name}") for path in (left_path, right_path)]
         try:
             left, right = read_image(left_path, what="replay image"), read_image(right_path, what="replay image")
+            averaged = None
+            if all(path.is_file() for path in means):
+                averaged = read_image(means[0], what="replay image"), read_image(means[1], what="replay image")
         except (OSError, ValueError) as exc:
             raise CameraMissing(f"replay pair {left_path.name}/{right_path.name}: {exc}") from None
         now = time.monotonic()
-        return StereoFrame(
-            left, right, now, now, {"backend": "replay", "left": str(left_path), "right": str(right_path)}
-        )
+        info = {"backend": "replay", "left": str(left_path), "right": str(right_path)}
+        return StereoFrame(left, right, now, now, info, averaged)
 
     def grab_exposures(self, count: int, not_before: float | None = None) -> list[StereoFrame]:
-        """The next stored pair alone: a stored pair is one exposure (averaging it with itself would change nothing)."""
+        """The next stored pair alone: a stored pair is one exposure (with its stored mean, if any)."""
         return [self.grab_pair(not_before)]
 
     def close(self) -> None:

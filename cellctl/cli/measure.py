@@ -33,6 +33,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("left", type=Path, metavar="LEFT", help="left image")
     parser.add_argument("right", type=Path, metavar="RIGHT", help="right image")
     parser.add_argument(
+        "--mean",
+        nargs=2,
+        type=Path,
+        metavar=("MEAN_LEFT", "MEAN_RIGHT"),
+        help="the mean of the cycle's exposures of the same view (the image log's meanleft_/meanright_ files): the "
+        "sole's surface is fitted on them, as the cycle did (default: on LEFT and RIGHT)",
+    )
+    parser.add_argument(
         "--depth-range",
         nargs=2,
         type=float,
@@ -109,11 +117,15 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--wall-draft: {exc}") from None
     calib = Calibration.load(args.calib)
     left, right = _read(args.left, "LEFT"), _read(args.right, "RIGHT")
-    for name, image in (("LEFT", left), ("RIGHT", right)):
+    mean = None if args.mean is None else (_read(args.mean[0], "MEAN_LEFT"), _read(args.mean[1], "MEAN_RIGHT"))
+    named = [("LEFT", args.left, left), ("RIGHT", args.right, right)]
+    if mean is not None:
+        named += [("MEAN_LEFT", args.mean[0], mean[0]), ("MEAN_RIGHT", args.mean[1], mean[1])]
+    for name, path, image in named:
         try:
             calib.check_image(image)
         except ValueError as exc:
-            raise UserError(f"{name} {getattr(args, name.lower())}: {exc}") from None
+            raise UserError(f"{name} {path}: {exc}") from None
     depth_range = tuple(args.depth_range) if args.depth_range else DEFAULT_DEPTH_RANGE_MM
     try:  # a table taught beside the calibration (`cellctl teach`) is used when there is one
         taught = load_taught(args.calib, calib)
@@ -124,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
             f"no taught table beside {args.calib}: teach the empty fixture first (cellctl teach --calib "
             f"{args.calib} LEFT RIGHT), or pass --untaught for a plain one-colour sole on a plain table"
         )
-    reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right)
+    reconstruction = SoleReconstructor(calib, depth_range, taught=taught).reconstruct(left, right, mean)
     result = measure_sole(reconstruction, offset, spacing, tolerance, wall_draft_deg=draft)
     if args.ply:
         _write_ply(args.ply, reconstruction)

@@ -5,12 +5,15 @@
 
 One flat folder, one entry per journaled cycle, named by the journal's row id:
 
-    left_00000042.png  right_00000042.png     the raw pair as grabbed (lossless)
+    left_00000042.png  right_00000042.png     the raw pair as grabbed (lossless), the cycle's last exposure
+    meanleft_00000042.png  meanright_00000042.png   the mean of the cycle's exposures, where it averaged several
+                                              (cellctl.cameras.averaging: the sole's surface was fitted on them)
     overlay_00000042.png                      what the operator saw (the `cellctl measure --png` picture)
     meta_00000042.json                        cycle, status, error code, reason, time
 
 so the folder is itself a replay set: `backend = "replay"` with `replay_dir` pointing here serves the pairs in
-turn, and `cellctl measure --calib CAL left_00000042.png right_00000042.png` measures one again. Retention
+turn (with their means), and `cellctl measure --calib CAL left_00000042.png right_00000042.png --mean
+meanleft_00000042.png meanright_00000042.png` measures one again as the cycle did. Retention
 keeps the newest `keep_cycles` entries and at most `max_mb` on disk, oldest removed first.
 """
 
@@ -41,7 +44,8 @@ log = logging.getLogger(__name__)
 QUEUE_LIMIT = 8  # cycles waiting to be written; beyond, pictures are dropped (with a warning)
 BUSY_WAIT_S = 5.0  # longest a step waits for the daemon to finish a cycle
 SET_UP_WAIT_S = 5.0  # longest the log's creation waits for its writer's set-up (~25 ms; a loaded host, far more)
-_ENTRY = re.compile(r"(left|right|overlay|meta)_(\d{8})\.(png|json)")
+KINDS = ("left", "right", "meanleft", "meanright", "overlay", "meta")  # the files of an entry (any may be missing)
+_ENTRY = re.compile(rf"({'|'.join(KINDS)})_(\d{{8}})\.(png|json)")
 # Lossless and fast (see service.artifacts); the log is written after the PLC has its answer.
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
 
@@ -147,11 +151,11 @@ class ImageLog:
             # on 2 cores, the three took ~0.3 s off the next cycle (every 10th good cycle was the slowest).
             # The overlay's drawing waits between its parts too (draw_overlay's pause): drawn whole, begun
             # just before a trigger, it ran beside the next cycle's first stages (120 ms of CPU seen).
-            steps = (
-                ("left", lambda: frame.left),
-                ("right", lambda: frame.right),
-                ("overlay", lambda: held_copy(self._overlay(record, frame, measured))),  # held into its bands
-            )
+            steps = [("left", lambda: frame.left), ("right", lambda: frame.right)]
+            if (averaged := frame.averaged) is not None:
+                steps += [("meanleft", lambda: averaged[0]), ("meanright", lambda: averaged[1])]
+            # The overlay held into its bands.
+            steps.append(("overlay", lambda: held_copy(self._overlay(record, frame, measured))))
             for kind, picture in steps:
                 self._wait_between_cycles()
                 image = picture()
@@ -204,13 +208,13 @@ class ImageLog:
     def prune(self) -> int:
         """Remove the oldest entries beyond keep_cycles or max_mb; returns how many went."""
         entries = self.entries()
-        sizes = [sum(_size(e.path(k)) for k in ("left", "right", "overlay", "meta")) for e in entries]
+        sizes = [sum(_size(e.path(k)) for k in KINDS) for e in entries]
         total, budget = sum(sizes), self.config.max_mb * 1e6
         removed = 0
         for entry, size in zip(entries, sizes):
             if len(entries) - removed <= self.config.keep_cycles and total <= budget:
                 break
-            for kind in ("left", "right", "overlay", "meta"):
+            for kind in KINDS:
                 entry.path(kind).unlink(missing_ok=True)
             total -= size
             removed += 1

@@ -114,6 +114,12 @@ def test_replay_serves_pairs_in_turn(tmp_path: Path) -> None:
     values = [int(replay.grab_pair().right[0, 0, 0]) for _ in range(3)]
     assert values == [11, 21, 11]
     assert [int(f.right[0, 0, 0]) for f in replay.grab_exposures(4)] == [21]  # a stored pair is one exposure
+    assert replay.grab_pair().averaged is None
+    for side, value in (("left", 12), ("right", 13)):  # the image log's mean of a cycle's exposures, beside its pair
+        cv2.imwrite(str(tmp_path / f"mean{side}_02.png"), np.full((8, 8, 3), value, np.uint8))
+    served = replay.grab_exposures(4)[0]
+    assert served.averaged is not None and [int(m[0, 0, 0]) for m in served.averaged] == [12, 13]
+    assert int(served.right[0, 0, 0]) == 21 and len(replay.pairs()) == 2
     with pytest.raises(CameraMissing, match="does not exist"):
         ReplayCameras(tmp_path / "gone").grab_pair()
     with pytest.raises(CameraMissing, match="holds no"):

@@ -295,7 +295,9 @@ class FailingReconstructor:
         self.calib, self.min_disparity = real.calib, real.min_disparity
         self.reason = f"simulated failure: {kind.value}"
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
+    def reconstruct(
+        self, left: np.ndarray, right: np.ndarray, surface: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> ReconstructionResult:
         if self.kind is FailureKind.CALIBRATION_MISMATCH:
             return self.real.reconstruct(left[::2, ::2], right[::2, ::2])
         return ReconstructionRefused(failure=self.kind, reason=self.reason, measured_points=0, measured_fraction=0.0)
@@ -344,9 +346,11 @@ class StuckReconstructor:
     def __init__(self, real: SoleReconstructor) -> None:
         self.real, self.release = real, threading.Event()
 
-    def reconstruct(self, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
+    def reconstruct(
+        self, left: np.ndarray, right: np.ndarray, surface: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> ReconstructionResult:
         assert self.release.wait(30)
-        return self.real.reconstruct(left, right)
+        return self.real.reconstruct(left, right, surface)
 
 
 def test_a_slow_cycle_keeps_the_heartbeat_and_an_overrun_is_answered_cycle_timeout(tmp_path: Path) -> None:

@@ -79,11 +79,14 @@ def test_logged_cycles_replay_through_the_replay_backend_and_measure(cell: Stati
         calib,
         str(entry.path("left")),
         str(entry.path("right")),
+        "--mean",  # the cycle fitted the surface on the mean of its exposures
+        str(entry.path("meanleft")),
+        str(entry.path("meanright")),
         "--glue-height-tolerance",
         str(cell.daemon.config.measure.glue_height_tolerance_mm),  # the cell's own
     ]
     done = subprocess.run([*command, "--json"], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == 0, done.stdout[-600:]
     again = json.loads(done.stdout)
     # The same pair measures the same, within what the table fit's multithreaded RANSAC (Open3D segment_plane)
     # varies from process to process (0.13 mm seen on this machine under load; see docs/station.md).

@@ -92,22 +92,27 @@ def record(row_id: int, ok: bool) -> CycleRecord:
     )
 
 
-def frame(value: int) -> StereoFrame:
+def frame(value: int, averaged: bool = False) -> StereoFrame:
+    """A pair; `averaged`: with the mean of the cycle's exposures beside it (its images' halves)."""
     rng = np.random.default_rng(value)
     left = rng.integers(0, 255, (64, 80, 3), dtype=np.uint8)
-    return StereoFrame(left, left[:, ::-1].copy(), 0.0, 0.0)
+    right = left[:, ::-1].copy()
+    return StereoFrame(left, right, 0.0, 0.0, averaged=(left // 2, right // 2) if averaged else None)
 
 
 def test_image_log_keeps_failures_and_every_nth_good_and_replays(tmp_path: Path) -> None:
     log = ImageLog(tmp_path / "images", None, ImageLogConfig(every_nth_good=2, keep_cycles=100, max_mb=100))
     for i, ok in enumerate([True, False, True, True, True], start=1):
-        log.on_event(CycleDone(record(i, ok), frame(i), None))
+        log.on_event(CycleDone(record(i, ok), frame(i, averaged=i == 3), None))
     assert log.wait_written()
     assert [e.row_id for e in log.entries()] == [2, 3, 5]  # the failure, and the 2nd and 4th good cycles
     assert log.find(2) is not None and log.find(2).meta()["reason"] == "no sole in view"  # type: ignore[union-attr]
     replay = ReplayCameras(tmp_path / "images")
-    first = replay.grab_pair()
+    first, second = replay.grab_pair(), replay.grab_pair()
     assert np.array_equal(first.left, frame(2).left) and np.array_equal(first.right, frame(2).right)
+    assert first.averaged is None and second.averaged is not None  # cycle 3 averaged its exposures
+    for logged, made in zip(second.averaged, frame(3, averaged=True).averaged or (), strict=True):
+        assert np.array_equal(logged, made)
     log.on_event(CycleDone(record(6, False), None, None))  # no frame (camera error): nothing to log
     assert log.wait_written()
     assert [e.row_id for e in log.entries()] == [2, 3, 5]
@@ -116,9 +121,10 @@ def test_image_log_keeps_failures_and_every_nth_good_and_replays(tmp_path: Path)
 def test_image_log_retention_by_count_and_by_disk(tmp_path: Path) -> None:
     log = ImageLog(tmp_path / "images", None, ImageLogConfig(keep_cycles=3, max_mb=100))
     for i in range(1, 7):
-        log.on_event(CycleDone(record(i, False), frame(i), None))
+        log.on_event(CycleDone(record(i, False), frame(i, averaged=True), None))
     assert log.wait_written()
     assert [e.row_id for e in log.entries()] == [4, 5, 6]
+    assert len(list((tmp_path / "images").iterdir())) == 3 * 6  # pair, mean pair, overlay, meta: the pruned all gone
     one_entry = sum(p.stat().st_size for p in (tmp_path / "images").iterdir()) / 3
     log.config = ImageLogConfig(keep_cycles=100, max_mb=1.5 * one_entry / 1e6)
     assert log.prune() == 2
