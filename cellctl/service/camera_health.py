@@ -70,8 +70,8 @@ class CameraHealth:
         return True
 
     def grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
-        """The mean of `averaged_frames` pairs exposed after `not_before` (the trigger; frames of a scene that moved
-        meanwhile left out); CycleFailed with the camera's code otherwise."""
+        """The last of `averaged_frames` pairs exposed after `not_before` (the trigger), with the mean of those that
+        show the same still scene (cellctl.cameras.averaging); CycleFailed with the camera's code otherwise."""
         start = time.perf_counter()
         try:
             with self.lock:  # frames exposed after the trigger only
