@@ -37,7 +37,9 @@ MOTION_STRIDE = 8  # every 8th row and column (~20000 pixels of 1280 x 1024): a 
 
 
 def frames_agree(first: np.ndarray, second: np.ndarray) -> bool:
-    """Whether two exposures (BGR or grey uint8, the same size) of one camera show the same still scene."""
+    """Whether two exposures (BGR or grey uint8) of one camera show the same still scene (not if their sizes differ)."""
+    if first.shape != second.shape:
+        return False
     a = _grey(first[::MOTION_STRIDE, ::MOTION_STRIDE]).astype(np.float32)
     b = _grey(second[::MOTION_STRIDE, ::MOTION_STRIDE]).astype(np.float32)  # (green: the grey's largest weight)
     difference = b - a
@@ -51,7 +53,7 @@ def still_frames(frames: list[StereoFrame]) -> list[StereoFrame]:
     """The frames (in order) whose left image agrees with the last frame's (`frames_agree`), the last included: a
     scene that moves moves in both cameras' views, and one comparison per frame costs the cycle ~1 ms."""
     last = frames[-1]
-    return [f for f in frames[:-1] if frames_agree(f.left, last.left)] + [last]
+    return [f for f in frames[:-1] if frames_agree(f.left, last.left) and f.right.shape == last.right.shape] + [last]
 
 
 def average_frames(frames: list[StereoFrame]) -> StereoFrame:

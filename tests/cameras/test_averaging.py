@@ -66,6 +66,13 @@ def test_frames_agree_on_noise_and_flicker_not_on_movement(sigma: float, gain: f
     assert frames_agree(first, second) is agree
 
 
+def test_an_exposure_of_another_size_is_left_out() -> None:
+    small = stereo(exposure(scene(), 0)[::2, ::2], exposure(scene(), 1)[::2, ::2], 0)
+    still = [stereo(exposure(scene(), k), exposure(scene(), 10 + k), k) for k in (1, 2)]
+    frame = average_frames([small, *still])
+    assert frame.info["averaged_frames"] == 2 and frame.info["moved_frames"] == 1
+
+
 def test_one_frame_is_returned_as_it_is_and_none_is_refused() -> None:
     only = stereo(exposure(scene(), 0), exposure(scene(), 1), 0)
     assert average_frames([only]).left is only.left and average_frames([only]).averaged is None
