@@ -8,10 +8,10 @@ four exposures halve the noise. The sole lies still on the table while the cell 
 differ by the sensor's noise alone.
 
 Only the surface fits read the mean (`StereoFrame.averaged`); the matcher, the change against the taught table and
-so the outline read the last exposure, as before: their thresholds were set on single exposures, and on the mean
-the change test's residual noise reads at its floor and its masks moved (lengths 0.15-0.2 mm longer on white and
-grey soles, and one glue inset 1.11 mm off beside a black sole's contact shadow, with a floor restoring the
-single-exposure noise: docs/sole-benchmark.md, twenty-sixth round).
+so the outline read the last exposure, as before: their thresholds were set on single exposures. On the mean the
+change test's residual noise reads at its floor and its masks moved (lengths 0.15-0.2 mm longer on white and grey
+soles), and with that floor restored, or with only the matcher on the mean, one black sole was published with a
+glue point 1.11 mm off its inset beside its contact shadow (docs/sole-benchmark.md, twenty-sixth round).
 
 Where an exposure differs from the last one by more than the noise (the sole still settling after it was laid
 down, the fixture shaken), the mean would blur the surface: it is left out (`still_frames`), and the frame's info
