@@ -27,13 +27,20 @@ from cellctl.vision.teach import average_exposures
 from cellctl.vision.workers import worker
 
 # Two exposures agree where no more than MAX_MOVED_SHARE of their pixels differ by more than MOTION_SIGMAS times
-# the difference's own robust spread (and at least MIN_MOTION_DN, the 8-bit steps): pure sensor noise exceeds
-# 6 sigma at ~1e-9 of the pixels (a bright pixel's shot noise, ~1.5 x the median spread, at ~1e-4); a sole that
-# moved by one pixel changes its whole edge (~0.15-0.3 % of a 1280 x 1024 image for a white sole).
-MOTION_SIGMAS = 6.0
+# the difference's own robust spread (and at least MIN_MOTION_DN, the 8-bit steps). The spread is the median
+# pixel's, and on 8-bit differences it reads low (1.48 DN where the mean pixel's is ~2), while a white sole's
+# pixels carry 1.7 x the median's noise (shot noise): at 6 spreads 0.1-0.13 % of a still white sole's image
+# exceeded it (10 of 168 still matrix scenes taken for moved); at 8, a white pixel needs 3.4 of its own sigmas
+# (~0.02 % of the image). A sole that moved by one pixel changes its whole edge by tens of DN (~0.15-0.3 % of a
+# 1280 x 1024 image for a white sole).
+MOTION_SIGMAS = 8.0
 MIN_MOTION_DN = 4.0
 MAX_MOVED_SHARE = 0.001
 MOTION_STRIDE = 8  # every 8th row and column (~20000 pixels of 1280 x 1024): a moved edge's share stays ~0.2 %
+# Two exposures of one still view differ by the sensor's noise, times sqrt(2): a spread of ~2 DN on the simulated
+# sensors, ~10 DN with their heavy noise. A wider spread, or the whole image brighter or darker by more than this,
+# is another view (a lamp switched, another scene), whatever its own spread would excuse.
+MAX_SAME_VIEW_DN = 16.0
 
 
 def frames_agree(first: np.ndarray, second: np.ndarray) -> bool:
@@ -45,6 +52,8 @@ def frames_agree(first: np.ndarray, second: np.ndarray) -> bool:
     difference = b - a
     centre = float(np.median(difference))  # a light's flicker moves the whole image a little
     spread = 1.4826 * float(np.median(np.abs(difference - centre)))
+    if abs(centre) > MAX_SAME_VIEW_DN or spread > MAX_SAME_VIEW_DN:
+        return False
     limit = max(MOTION_SIGMAS * spread, MIN_MOTION_DN)
     return float(np.mean(np.abs(difference - centre) > limit)) <= MAX_MOVED_SHARE
 

@@ -126,6 +126,16 @@ def run(args: argparse.Namespace) -> int:
             calib.check_image(image)
         except ValueError as exc:
             raise UserError(f"{name} {path}: {exc}") from None
+    if mean is not None:
+        from cellctl.cameras.averaging import frames_agree
+
+        for side, (name, path, single) in enumerate(named[:2]):
+            if not frames_agree(single, mean[side]):  # fitted on another view, the surface would be another sole's
+                raise UserError(
+                    f"MEAN_{name} {args.mean[side]} does not show the same still view as {name} {path}: give the "
+                    "mean of that cycle's exposures (the image log's meanleft_/meanright_ files of the same number), "
+                    "or leave --mean out"
+                )
     depth_range = tuple(args.depth_range) if args.depth_range else DEFAULT_DEPTH_RANGE_MM
     try:  # a table taught beside the calibration (`cellctl teach`) is used when there is one
         taught = load_taught(args.calib, calib)

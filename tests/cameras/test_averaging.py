@@ -58,12 +58,18 @@ def test_an_exposure_of_a_scene_that_moved_is_left_out() -> None:
         (6.0, 1.0, 0, True),  # heavy sensor noise is still noise
         (1.5, 1.02, 0, True),  # a lamp's flicker: a little brighter all over
         (1.5, 1.0, 1, False),  # one pixel of movement moves the whole edge
+        (1.5, 1.5, 0, False),  # a lamp switched on: another view, however evenly it changed
     ],
 )
 def test_frames_agree_on_noise_and_flicker_not_on_movement(sigma: float, gain: float, shift: int, agree: bool) -> None:
     first = exposure(scene(), 0, sigma)
     second = exposure(scene(shift), 1, sigma, gain)
     assert frames_agree(first, second) is agree
+
+
+def test_another_view_altogether_does_not_agree() -> None:
+    other = np.random.default_rng(9).integers(0, 256, (240, 320), dtype=np.uint8)
+    assert not frames_agree(exposure(scene(), 0), other)
 
 
 def test_an_exposure_of_another_size_is_left_out() -> None:

@@ -55,6 +55,8 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     width, height = calib.image_size
     for name, level in (("black", 0), ("grey", 128)):
         cv2.imwrite(str(d / f"{name}.png"), np.full((height, width, 3), level, np.uint8))
+    texture = np.random.default_rng(1).integers(0, 256, (height, width, 3), dtype=np.uint8)
+    cv2.imwrite(str(d / "texture.png"), texture)  # a view unlike the grey one: not its mean
     bomb = bytearray((d / "grey.png").read_bytes())
     bomb[16:24] = (20000).to_bytes(4, "big") * 2  # the IHDR says 20000 x 20000: 3.7 GB if decoded
     (d / "bomb.png").write_bytes(bytes(bomb))
@@ -145,6 +147,20 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
     "measure: no taught table": lambda d, _: Case(
         ["measure", "--calib", str(d / "calib.yaml"), str(d / "grey.png"), str(d / "grey.png")],
         "teach the empty fixture first",
+    ),
+    "measure: a mean of another view": lambda d, _: Case(
+        [
+            "measure",
+            "--untaught",
+            "--calib",
+            str(d / "calib.yaml"),
+            str(d / "grey.png"),
+            str(d / "grey.png"),
+            "--mean",
+            str(d / "texture.png"),
+            str(d / "grey.png"),
+        ],
+        "does not show the same still view as LEFT",
     ),
     "measure: image bomb": lambda d, _: Case(
         ["measure", "--calib", str(d / "calib.yaml"), str(d / "bomb.png"), str(d / "grey.png")],
