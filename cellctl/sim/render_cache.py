@@ -21,6 +21,7 @@ import json
 import os
 import tempfile
 import zipfile
+from collections.abc import Callable
 from dataclasses import asdict
 from functools import lru_cache
 from pathlib import Path
@@ -94,16 +95,7 @@ class RenderCache:
 
     def render_exposures(self, scene: SoleScene, count: int) -> list[RenderedPair]:
         """`count` exposures of the scene with its sole (`render_exposures`): the missing ones rendered in one go."""
-        shots = exposure_shots(count)
-        pairs = {shot: _load(self._path(scene, shot)) for shot in shots}
-        missing = [shot for shot, pair in pairs.items() if pair is None]
-        self.hits += len(shots) - len(missing)
-        self.misses += len(missing)
-        if missing:
-            for shot, pair in zip(missing, render_exposures(scene, missing), strict=True):
-                _store(self._path(scene, shot), pair)
-                pairs[shot] = pair
-        return [p for p in (pairs[shot] for shot in shots) if p is not None]
+        return self._shots(scene, exposure_shots(count), lambda missing: render_exposures(scene, missing))
 
     def render_empty(self, scene: SoleScene, shot: int) -> RenderedPair:
         """An exposure of the empty table (`SoleScene.render_empty`)."""
@@ -113,15 +105,7 @@ class RenderCache:
         """Exposures of the empty table (`SoleScene.render_empties`): the missing ones rendered in one go."""
         if min(shots) < 1:
             raise ValueError(f"empty-table exposures are numbered from 1, got {min(shots)}")
-        pairs = {shot: _load(self._path(scene, shot)) for shot in shots}
-        missing = [shot for shot, pair in pairs.items() if pair is None]
-        self.hits += len(shots) - len(missing)
-        self.misses += len(missing)
-        if missing:
-            for shot, pair in zip(missing, scene.render_empties(missing), strict=True):
-                _store(self._path(scene, shot), pair)
-                pairs[shot] = pair
-        return [p for p in (pairs[shot] for shot in shots) if p is not None]
+        return self._shots(scene, shots, scene.render_empties)
 
     def prefill(self, scene: SoleScene, shots: list[int]) -> int:
         """Render the missing `shots` (0: the scene, -1...: its further exposures, 1...: empty-table exposures) of a
@@ -150,6 +134,20 @@ class RenderCache:
         finally:
             lock.unlink(missing_ok=True)
         return len(missing)
+
+    def _shots(
+        self, scene: SoleScene, shots: list[int], render: Callable[[list[int]], list[RenderedPair]]
+    ) -> list[RenderedPair]:
+        """The `shots` of a scene, loaded, and the missing ones made by one `render(missing)` call and stored."""
+        pairs = {shot: _load(self._path(scene, shot)) for shot in shots}
+        missing = [shot for shot, pair in pairs.items() if pair is None]
+        self.hits += len(shots) - len(missing)
+        self.misses += len(missing)
+        if missing:
+            for shot, pair in zip(missing, render(missing), strict=True):
+                _store(self._path(scene, shot), pair)
+                pairs[shot] = pair
+        return [p for p in (pairs[shot] for shot in shots) if p is not None]
 
     def _path(self, scene: SoleScene, shot: int) -> Path:
         return self.directory / f"{scene_key(scene, shot)}.npz"
