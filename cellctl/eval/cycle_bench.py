@@ -22,10 +22,9 @@ import cv2
 import numpy as np
 
 from cellctl.cameras.averaging import average_frames
-from cellctl.cameras.base import StereoFrame
 from cellctl.cameras.config import AVERAGED_FRAMES
 from cellctl.eval.methods import opencv_sgbm
-from cellctl.sim.render_cache import exposure_shots, render_exposures
+from cellctl.eval.sole_bench import scene_exposures
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
@@ -139,11 +138,7 @@ def bench_cycles(
     one_blas_thread()  # as the service does (cellctl.service.measuring)
     keep_freed_memory()  # as the service does
     scenes = [SoleScene.random(seed, color, calib) for seed, color in soles]
-    exposures = [
-        [StereoFrame(e.left, e.right, 0.0, 0.0) for e in render_exposures(scene, exposure_shots(frames))]
-        for scene in scenes
-    ]
-    pairs = [average_frames(shots) for shots in exposures]
+    exposures = [scene_exposures(scene, frames) for scene in scenes]
     truths = [scene.sole.truth() for scene in scenes if scene.sole is not None]
     # The simulator draws each scene's table texture from its seed: every scene is its own cell, taught on
     # its own empty table (`cellctl teach`) and warmed up as the daemon does before READY.
@@ -159,13 +154,14 @@ def bench_cycles(
         result.timings["average"] = averaging  # as the service times it (CameraHealth.grab)
         return result
 
-    for which in range(len(pairs)):
+    for which in range(len(exposures)):
         cycle(which)  # the warm-up
     settle_garbage_collector()  # as the service does after its warm-up
-    reference = HH4Reference(calib, pairs[0].left, pairs[0].right, disparities)
+    measured = exposures[0][-1]  # the exposure a cycle matches
+    reference = HH4Reference(calib, measured.left, measured.right, disparities)
     bench = CycleBench(calib.image_size, disparities)
     for index in range(cycles):
-        which = index % len(pairs)
+        which = index % len(exposures)
         start = time.perf_counter()
         result = cycle(which)
         bench.cycles_s.append(time.perf_counter() - start)

@@ -123,12 +123,19 @@ def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCach
         return SoleReconstructor(calib)
 
 
-def scene_frame(scene: SoleScene, frames: int = AVERAGED_FRAMES, cache: RenderCache | None = None) -> StereoFrame:
-    """What a cycle of the cell measures: `frames` exposures of the scene, the last with the mean of all
-    (cellctl.cameras.averaging). The scene's own render (shot 0) comes last, so the exposure the outline is found on
-    is the one every run before averaging measured."""
+def scene_exposures(
+    scene: SoleScene, frames: int = AVERAGED_FRAMES, cache: RenderCache | None = None
+) -> list[StereoFrame]:
+    """`frames` exposures of the scene as a cycle grabs them, the scene's own render (shot 0) last: the exposure the
+    outline is found on is the one every run before averaging measured."""
     pairs = cache.render_exposures(scene, frames) if cache else render_exposures(scene, exposure_shots(frames))
-    return average_frames([StereoFrame(p.left, p.right, 0.0, 0.0) for p in reversed(pairs)])
+    return [StereoFrame(p.left, p.right, 0.0, 0.0) for p in reversed(pairs)]
+
+
+def scene_frame(scene: SoleScene, frames: int = AVERAGED_FRAMES, cache: RenderCache | None = None) -> StereoFrame:
+    """What a cycle of the cell measures: the last of the scene's exposures with the mean of all
+    (`scene_exposures`, cellctl.cameras.averaging)."""
+    return average_frames(scene_exposures(scene, frames, cache))
 
 
 def measure_scene(
