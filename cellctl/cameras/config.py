@@ -11,6 +11,16 @@ AVERAGED_FRAMES = 4
 MAX_AVERAGED_FRAMES = 16
 
 
+def frames_option(frames: int | None) -> int:
+    """A benchmark's `--frames` (None: the cycle's AVERAGED_FRAMES); ValueError outside 1..MAX_AVERAGED_FRAMES."""
+    frames = AVERAGED_FRAMES if frames is None else frames
+    if not 1 <= frames <= MAX_AVERAGED_FRAMES:
+        raise ValueError(
+            f"--frames must be 1..{MAX_AVERAGED_FRAMES} (exposures averaged per measurement), got {frames}"
+        )
+    return frames
+
+
 @dataclass(frozen=True)
 class SimulatedCameraConfig:
     """Simulated cameras: scenes rendered through the calibration's rig, one seed per grab in turn."""

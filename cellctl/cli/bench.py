@@ -59,16 +59,14 @@ def run(args: argparse.Namespace) -> int:
 
 def run_cycle(cycles: int, whole_pair: bool, frames: int | None = None) -> int:
     """`cellctl bench --cycle`: cellctl.eval.cycle_bench on the simulated rig of deploy/sim-calib.yaml."""
-    from cellctl.cameras.config import AVERAGED_FRAMES, MAX_AVERAGED_FRAMES
+    from cellctl.cameras.config import frames_option
     from cellctl.cli.demo_cell import DEFAULT_CONFIG
     from cellctl.eval.cycle_bench import bench_cycles
     from cellctl.vision.calibration import Calibration
 
     if cycles < 1:
         raise ValueError(f"--cycles {cycles} must be at least 1")
-    frames = AVERAGED_FRAMES if frames is None else frames
-    if not 1 <= frames <= MAX_AVERAGED_FRAMES:
-        raise ValueError(f"--frames {frames} must be 1..{MAX_AVERAGED_FRAMES}")
+    frames = frames_option(frames)
     calib = Calibration.load(DEFAULT_CONFIG.parent / "sim-calib.yaml")
     bench = bench_cycles(
         calib,

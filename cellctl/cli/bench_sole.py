@@ -97,13 +97,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--combined needs --matrix --variations NAME,... (the variations every sole combines)")
     if args.declared_walls and not args.matrix:
         raise UserError("--declared-walls needs --matrix")
-    from cellctl.cameras.config import AVERAGED_FRAMES, MAX_AVERAGED_FRAMES
+    from cellctl.cameras.config import frames_option
 
-    args.frames = AVERAGED_FRAMES if args.frames is None else args.frames
-    if not 1 <= args.frames <= MAX_AVERAGED_FRAMES:
-        raise UserError(
-            f"--frames must be 1..{MAX_AVERAGED_FRAMES} (exposures averaged per measurement), got {args.frames}"
-        )
+    args.frames = frames_option(args.frames)
     if args.render_only and not args.cache:
         raise UserError("--render-only needs --cache DIR (where the renders go)")
     if args.matrix:
