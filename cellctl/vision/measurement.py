@@ -48,9 +48,9 @@ from cellctl.vision.edge_checks import MIN_CONCAVE_RADIUS_MM
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.glue_path import depth_normals, glue_path
 from cellctl.vision.image_edge import PlacedOutline, onto_image_edge
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN
 from cellctl.vision.outline_checks import outline_problem, wall_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
-from cellctl.vision.sole_region import MAX_IMAGE_NOISE_DN
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
 from cellctl.vision.surface import MIN_CLOUD_POINTS, SoleSurface
 from cellctl.vision.wall_draft import check_draft, check_glue_inset, foot_outline, wall_runs

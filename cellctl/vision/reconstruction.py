@@ -23,10 +23,12 @@ from dataclasses import replace
 import numpy as np
 
 from cellctl.errors import FailureKind, MeasurementInputError
+from cellctl.images import grey_f32
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud, cloud_from_disparity, disparity_range
 from cellctl.vision.defaults import DEPTH_RANGE_MM
 from cellctl.vision.depth_hint import depth_range_hint, view_distance_mm
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, image_noise_dn
 from cellctl.vision.search_region import SearchRegion, coarse_pair, coarse_range, find_region
 from cellctl.vision.segmentation import (
     MIN_HEIGHT_MM,
@@ -101,6 +103,7 @@ class SoleReconstructor:
         self._matchers: dict[tuple[int, int, bool], object] = {}  # (min, num, coarse) -> StereoMatcher
         self.last_region: SearchRegion | None = None  # the region the last reconstruct matched (None: whole pair)
         self.last_fallback: str = ""  # why the last reconstruct matched the whole pair, when it had a plane
+        self.last_from_mean = False  # the last reconstruct measured everything on the mean (a noisy exposure)
 
     def learn_table(self, left: np.ndarray, right: np.ndarray) -> TablePlane | None:
         """Without a taught table: find the table plane on one pair (RANSAC and image refinement; a sole may
@@ -122,11 +125,19 @@ class SoleReconstructor:
         fitted = (left, right) if surface is None else surface
         timings: dict[str, float] = {}
         rect_left, rect_right = self._rectify(left, right, timings)
-        self.last_region, self.last_fallback = None, ""
+        self.last_region, self.last_fallback, self.last_from_mean = None, "", False
+        noise: float | None = image_noise_dn(grey_f32(rect_left))
+        if surface is not None and noise is not None and noise > MAX_IMAGE_NOISE_DN:
+            # One exposure too noisy to measure at all (segmentation refuses it): the mean has half the noise
+            # at four exposures, about what one exposure of a clean camera has, so the matcher, the change test
+            # and the outline read the mean. Not on a clean exposure: there every threshold was set on one
+            # exposure, and on the mean the change test's masks move (docs/sole-benchmark.md, 26th round).
+            rect_left, rect_right = self._rectify(*surface, timings)
+            self.last_from_mean, noise = True, None
         if self.table_plane is not None and self.search_region:
             region, why = self._search_region(rect_left, rect_right, timings)
             if region is not None:
-                result = self.segment(self._cloud(rect_left, rect_right, timings, region))
+                result = self.segment(self._cloud(rect_left, rect_right, timings, region), noise)
                 cut_px = REGION_CUT_MM * self.calib.focal_px / self.table_plane.offset
                 if isinstance(result, ReconstructionRefused):
                     why = f"refused: {result.reason}"
@@ -138,7 +149,7 @@ class SoleReconstructor:
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
-        result = self.segment(self._cloud(rect_left, rect_right, timings, None))
+        result = self.segment(self._cloud(rect_left, rect_right, timings, None), noise)
         if isinstance(result, ReconstructionRefused):
             hint = self._range_hint(rect_left, rect_right, result)
             if hint:
@@ -220,9 +231,10 @@ class SoleReconstructor:
         timings["reproject"] = time.perf_counter() - start
         return cloud
 
-    def segment(self, cloud: StereoCloud) -> ReconstructionResult:
-        """Table plane, background removal, largest region and outlier removal on a measured cloud."""
-        return Segmentation(cloud, self.table_plane, self.min_height_mm, self.taught).run()
+    def segment(self, cloud: StereoCloud, image_noise: float | None = None) -> ReconstructionResult:
+        """Table plane, background removal, largest region and outlier removal on a measured cloud
+        (`image_noise`: its rectified left image's image_noise_dn, when already read)."""
+        return Segmentation(cloud, self.table_plane, self.min_height_mm, self.taught, image_noise).run()
 
     def teach(self, left: np.ndarray, right: np.ndarray) -> TaughtTable:
         """The taught table from a raw pair of the EMPTY fixture (cellctl.vision.teach); TeachError if not empty."""

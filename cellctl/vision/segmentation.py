@@ -29,8 +29,8 @@ from cellctl.errors import FailureKind
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, image_noise_dn
 from cellctl.vision.sole_region import (
-    MAX_IMAGE_NOISE_DN,
     MIN_COLOUR_SEPARATION,
     MIN_SOLE_AREA_MM2,
     PointSpread,
@@ -38,7 +38,6 @@ from cellctl.vision.sole_region import (
     colour_split,
     cut_by_border,
     depth_step,
-    image_noise_dn,
     point_spread,
     sole_mask,
     unmeasured_fraction,
@@ -101,7 +100,7 @@ class Reconstruction(_SolePoints):
     changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
     changed_left: np.ndarray | None = None  # the same for the left image
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
-    image_noise_dn: float | None = None  # the rectified left image's noise (sole_region.image_noise_dn), if read
+    image_noise_dn: float | None = None  # the rectified left image's noise (image_noise.image_noise_dn), if read
 
     @property
     def valid(self) -> bool:
@@ -144,7 +143,9 @@ class _RunState:
         table_plane: TablePlane | None,
         min_height_mm: float,
         taught: TaughtTable | None = None,
+        image_noise: float | None = None,
     ) -> None:
+        """image_noise: image_noise_dn of the cloud's rectified left image, when the caller has read it."""
         self.cloud = cloud
         self.taught = taught
         self.plane = table_plane
@@ -160,7 +161,7 @@ class _RunState:
         self.table_points: Footprint | None = None  # cells with a measured point at the table's height
         self.changed_right: np.ndarray | None = None
         self._changed_left: np.ndarray | None = None
-        self.image_noise: float | None = None  # image_noise_dn of the rectified left image, once read
+        self.image_noise = image_noise  # image_noise_dn of the rectified left image, once read
 
     def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
         """A refusal with what this run found about the table and the cloud, plus the sole's points if any."""
@@ -211,7 +212,9 @@ class Segmentation(_RunState):
                 f"{100 * MIN_VALID_FRACTION:.0f} %); check lighting, focus, the calibration and the depth range",
             )
         if self.cloud.rectified is not None:
-            noise = self.image_noise = image_noise_dn(self.cloud.rectified[0])
+            if self.image_noise is None:
+                self.image_noise = image_noise_dn(self.cloud.rectified[0])
+            noise = self.image_noise
             if noise > MAX_IMAGE_NOISE_DN:
                 return self._refused(
                     FailureKind.SURFACE_NOT_MEASURED,

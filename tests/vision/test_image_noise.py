@@ -1,11 +1,11 @@
-"""The sensor-noise estimate that gates a measurement (sole_region.image_noise_dn)."""
+"""The sensor-noise estimate that gates a measurement (cellctl.vision.image_noise)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cellctl.vision.sole_region import MAX_IMAGE_NOISE_DN, image_noise_dn
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, image_noise_dn
 
 
 def scene(noise_dn: float, seed: int = 0) -> np.ndarray:

@@ -21,8 +21,9 @@ from cellctl.errors import FailureKind, MeasurementInputError
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene, true_cloud
 from cellctl.sim.sole import SoleModel, SolePose
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN
 from cellctl.vision.measurement import MeasurementRefused, SoleMeasurement, measure_sole
-from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor, StereoCloud
+from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, SoleReconstructor, StereoCloud
 
 TOLERANCE_MM = 1.3  # Wang et al. 2022, Table 4
 # Black soles whose glue heights are measured finely enough to publish at the default 1 mm tolerance (median
@@ -177,6 +178,27 @@ def test_the_mean_of_four_exposures_measures_the_black_sole_one_exposure_cannot(
     assert float(np.abs(points[:, 2] - height).max()) < 1.0
     with pytest.raises(MeasurementInputError, match="calibrat"):
         reconstructor.reconstruct(frame.left, frame.right, (frame.left[::2, ::2], frame.right[::2, ::2]))
+
+
+def test_an_exposure_too_noisy_to_measure_is_measured_on_the_mean(rig, reconstructor) -> None:  # noqa: ANN001
+    """Heavy sensor noise (6 DN of read noise) is refused on one exposure; the mean of four has half its noise, and
+    the whole reconstruction (matcher, outline, surface) reads the mean, within the tolerances."""
+    from cellctl.eval.sole_bench import scene_frame
+    from cellctl.sim.look import SceneLook
+
+    scene = SoleScene.random(1, "white", rig, SceneLook(noise="heavy"))
+    frame = scene_frame(scene, 4)
+    assert frame.averaged is not None and frame.info["averaged_frames"] == 4
+    single = reconstructor.reconstruct(frame.left, frame.right)
+    assert isinstance(single, ReconstructionRefused) and single.failure is FailureKind.SURFACE_NOT_MEASURED
+    assert "too noisy" in single.reason
+    assert not reconstructor.last_from_mean
+    averaged = reconstructor.reconstruct(frame.left, frame.right, frame.averaged)
+    assert reconstructor.last_from_mean and isinstance(averaged, Reconstruction)
+    assert averaged.image_noise_dn is not None and averaged.image_noise_dn < MAX_IMAGE_NOISE_DN
+    result = measure_sole(averaged)
+    assert isinstance(result, SoleMeasurement), result
+    assert np.all(np.abs(errors(scene, result)) < [1.0, 0.5, 0.5])
 
 
 def test_the_surface_fits_read_the_sole_rectified_without_rounding(rig, stereo_results) -> None:  # noqa: ANN001
