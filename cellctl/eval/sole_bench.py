@@ -26,7 +26,7 @@ from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.edge_checks import LOW_WALL_QUANTILE, WALL_HEIGHT_INSET_MM
 from cellctl.vision.measurement import MeasurementRefused, MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
-from cellctl.vision.teach import TeachError, average_exposures
+from cellctl.vision.teach import NoisyTeachError, TeachError, average_exposures
 
 CRASHED = "measurement raised"  # reason and failure of a sole whose measurement raised an exception
 
@@ -101,26 +101,35 @@ def untaught_note(rows: list[SoleBenchRow]) -> str:
 
 
 TEACH_SHOTS = 4  # exposures of the empty table averaged for teaching, as `cellctl teach` takes several pairs
+# When a noisy table cannot be taught, the refusal asks for more pairs (NoisyTeachError); the bench follows it once.
+NOISY_TEACH_SHOTS = 4 * TEACH_SHOTS
 
 
-def empty_table_pair(scene: SoleScene, cache: RenderCache | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """TEACH_SHOTS exposures of the scene's empty table, averaged per camera (what `cellctl teach` gets)."""
-    numbers = list(range(1, TEACH_SHOTS + 1))
-    shots = cache.render_empties(scene, numbers) if cache else scene.render_empties(numbers)
-    return average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+def empty_table_pair(
+    scene: SoleScene, cache: RenderCache | None = None, shots: int = TEACH_SHOTS
+) -> tuple[np.ndarray, np.ndarray]:
+    """`shots` exposures of the scene's empty table, averaged per camera (what `cellctl teach` gets)."""
+    numbers = list(range(1, shots + 1))
+    pairs = cache.render_empties(scene, numbers) if cache else scene.render_empties(numbers)
+    return average_exposures([s.left for s in pairs]), average_exposures([s.right for s in pairs])
 
 
 def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCache | None = None) -> SoleReconstructor:
-    """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise).
+    """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise): TEACH_SHOTS
+    of them, NOISY_TEACH_SHOTS where the refusal says the images are too noisy to teach from fewer.
 
-    If the table cannot be taught (e.g. too noisy to match), the reconstructor is an untaught one, as the
-    service runs without a taught table; the row's variations then say "+untaught" (`fallback_note`).
+    If the table cannot be taught all the same, the reconstructor is an untaught one, as the service runs without
+    a taught table; the row's variations then say "+untaught" (`fallback_note`).
     """
-    left, right = empty_table_pair(scene, cache)
-    try:
-        return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
-    except TeachError:
-        return SoleReconstructor(calib)
+    for shots in (TEACH_SHOTS, NOISY_TEACH_SHOTS):
+        left, right = empty_table_pair(scene, cache, shots)
+        try:
+            return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
+        except NoisyTeachError:
+            continue
+        except TeachError:
+            break
+    return SoleReconstructor(calib)
 
 
 def scene_exposures(

@@ -16,7 +16,7 @@ import pytest
 
 from cellctl.cli import main
 from cellctl.errors import FailureKind
-from cellctl.sim.look import look_for
+from cellctl.sim.look import SceneLook, look_for
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene
 from cellctl.vision import checks
@@ -24,7 +24,15 @@ from cellctl.vision.change import ChangeTest
 from cellctl.vision.measurement import measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.table import TablePlane
-from cellctl.vision.teach import TaughtTable, TeachError, calibration_fingerprint, load_taught, save_taught
+from cellctl.vision.teach import (
+    NoisyTeachError,
+    TaughtTable,
+    TeachError,
+    average_exposures,
+    calibration_fingerprint,
+    load_taught,
+    save_taught,
+)
 
 
 @pytest.fixture(scope="module")
@@ -87,8 +95,25 @@ def test_the_taught_disparity_band_covers_the_table_and_the_sole(taught_scene) -
 
 def test_teaching_refuses_a_table_with_a_sole_on_it(taught_scene) -> None:  # noqa: ANN001
     rig, _, pair, _ = taught_scene
-    with pytest.raises(TeachError, match="above the table"):
+    with pytest.raises(TeachError, match="above the table: remove everything from the fixture and teach") as refused:
         SoleReconstructor(rig).teach(pair.left, pair.right)
+    assert not isinstance(refused.value, NoisyTeachError)  # a clean camera: the sole is the cause
+
+
+def test_a_table_too_noisy_to_teach_asks_for_more_pairs_and_more_teach_it(taught_scene) -> None:  # noqa: ANN001
+    """Heavy sensor noise (6 DN): one pair leaves most of the table unmatched, four leave stray matches above it;
+    both refusals name the noise and ask for more pairs, and sixteen teach the table."""
+    rig, _, _, clean = taught_scene  # the same table seen by a clean camera
+    shots = SoleScene.random(2, "white", rig, SceneLook(noise="heavy")).render_empties(list(range(1, 17)))
+    for count, symptom in ((1, "of the view measured"), (4, "above the table")):
+        left = average_exposures([s.left for s in shots[:count]])
+        right = average_exposures([s.right for s in shots[:count]])
+        with pytest.raises(NoisyTeachError, match=f"{symptom}.*noisy .* teach with more pairs"):
+            SoleReconstructor(rig).teach(left, right)
+    left, right = average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+    taught = SoleReconstructor(rig).teach(left, right)
+    assert abs(taught.plane.offset - clean.plane.offset) < 0.2
+    assert float(taught.plane.normal @ clean.plane.normal) > np.cos(np.radians(0.05))
 
 
 def test_a_moved_table_is_refused_not_measured(taught_scene) -> None:  # noqa: ANN001
