@@ -48,7 +48,7 @@ from cellctl.vision.edge_checks import MIN_CONCAVE_RADIUS_MM
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.glue_path import depth_normals, glue_path
 from cellctl.vision.image_edge import PlacedOutline, onto_image_edge
-from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN
+from cellctl.vision.image_noise import CLEAN_IMAGE_NOISE_DN, MAX_IMAGE_NOISE_DN
 from cellctl.vision.outline_checks import outline_problem, wall_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
@@ -216,7 +216,7 @@ def measure_sole(
         return _invalid(
             FailureKind.SURFACE_NOT_MEASURED,
             f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth "
-            f"({_depth_holes_cause(reconstruction.image_noise_dn)}; at most {100 * MAX_UNMEASURED_FRACTION:.0f} %): "
+            f"({_depth_holes_cause(reconstruction)}; at most {100 * MAX_UNMEASURED_FRACTION:.0f} %): "
             "what was measured between them is not trusted",
             **base,
         )
@@ -234,22 +234,31 @@ def _refused_or_unmeasured(
         return _invalid(
             FailureKind.SURFACE_NOT_MEASURED,
             f"{100 * reconstruction.unmeasured_fraction:.0f} % of the sole's pixels have no measured depth "
-            f"({_depth_holes_cause(reconstruction.image_noise_dn)}), so its edge cannot be confirmed "
+            f"({_depth_holes_cause(reconstruction)}), so its edge cannot be confirmed "
             f"({reason})",
             **base,
         )
     return _invalid(failure, reason, **base)
 
 
-def _depth_holes_cause(noise_dn: float | None) -> str:
+def _depth_holes_cause(reconstruction: Reconstruction) -> str:
     """What leaves a sole's pixels without depth, with the image's noise where it was read: the simulator's normal
     sensor reads 0.5-0.75 DN, and a camera with three times its noise (under the image-noise check's
-    limit, reads 1.2) left 21-22 % of black soles' pixels without depth (docs/sole-benchmark.md, sixteenth round)."""
+    limit, reads 1.2) left 21-22 % of black soles' pixels without depth (docs/sole-benchmark.md, sixteenth round).
+    Measured on the mean of the cycle's exposures (the last one too noisy), more exposures lower that noise."""
+    noise_dn = reconstruction.image_noise_dn
     if noise_dn is None:
         return "glare, no texture or image noise"
+    where, remedy = "", ""
+    if reconstruction.from_mean:
+        where = " on the mean of the cycle's exposures (one alone is too noisy)"
+        if noise_dn > CLEAN_IMAGE_NOISE_DN:
+            remedy = (
+                ": check exposure, gain and lighting, or average more exposures per cycle ([cameras] averaged_frames)"
+            )
     return (
-        f"glare, no texture or image noise: the image's noise reads {noise_dn:.1f} DN, refused beyond "
-        f"{MAX_IMAGE_NOISE_DN:g}; a clean camera reads under 0.8"
+        f"glare, no texture or image noise: the image's noise reads {noise_dn:.1f} DN{where}, refused beyond "
+        f"{MAX_IMAGE_NOISE_DN:g}; a clean camera reads under {CLEAN_IMAGE_NOISE_DN:g}{remedy}"
     )
 
 

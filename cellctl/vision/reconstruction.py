@@ -163,7 +163,10 @@ class SoleReconstructor:
         each image rectified from the raw pair without rounding (`Calibration.rectify_grey`), in copies of
         the rectified grey pair. Only the sole's surface is fitted on the images; the whole pair would cost ~4-5
         times as much."""
-        if not isinstance(result, Reconstruction) or result.rectified is None or len(result.sole_pixels) == 0:
+        if not isinstance(result, Reconstruction):
+            return result
+        result.from_mean = self.last_from_mean
+        if result.rectified is None or len(result.sole_pixels) == 0:
             return result
         start = time.perf_counter()
         boxes = _sole_boxes(result, self.calib, result.rectified[0].shape)

@@ -101,6 +101,7 @@ class Reconstruction(_SolePoints):
     changed_left: np.ndarray | None = None  # the same for the left image
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
     image_noise_dn: float | None = None  # the rectified left image's noise (image_noise.image_noise_dn), if read
+    from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was too noisy
 
     @property
     def valid(self) -> bool:
@@ -219,7 +220,8 @@ class Segmentation(_RunState):
                 return self._refused(
                     FailureKind.SURFACE_NOT_MEASURED,
                     f"the image is too noisy to measure the surface within tolerance: sensor noise {noise:.1f} DN "
-                    f"(at most {MAX_IMAGE_NOISE_DN:g}); check exposure, gain and lighting",
+                    f"(at most {MAX_IMAGE_NOISE_DN:g}); check exposure, gain and lighting, or average more exposures per "
+                    "cycle ([cameras] averaged_frames)",
                 )
         start = time.perf_counter()
         if self.plane is None:

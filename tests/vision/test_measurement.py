@@ -168,6 +168,7 @@ def test_the_mean_of_four_exposures_measures_the_black_sole_one_exposure_cannot(
     averaged = reconstructor.reconstruct(frame.left, frame.right, frame.averaged)
     assert isinstance(single, Reconstruction) and isinstance(averaged, Reconstruction)
     np.testing.assert_array_equal(averaged.sole_points, single.sole_points)
+    assert not averaged.from_mean  # a clean exposure: only the surface fits read the mean
     assert isinstance(measure_sole(single), MeasurementRefused)
     result = measure_sole(averaged)
     assert isinstance(result, SoleMeasurement), result
@@ -194,7 +195,7 @@ def test_an_exposure_too_noisy_to_measure_is_measured_on_the_mean(rig, reconstru
     assert "too noisy" in single.reason
     assert not reconstructor.last_from_mean
     averaged = reconstructor.reconstruct(frame.left, frame.right, frame.averaged)
-    assert reconstructor.last_from_mean and isinstance(averaged, Reconstruction)
+    assert reconstructor.last_from_mean and isinstance(averaged, Reconstruction) and averaged.from_mean
     assert averaged.image_noise_dn is not None and averaged.image_noise_dn < MAX_IMAGE_NOISE_DN
     result = measure_sole(averaged)
     assert isinstance(result, SoleMeasurement), result
@@ -267,11 +268,18 @@ def test_the_images_noise_is_kept_and_named_where_depth_has_holes(stereo_results
 
     for _, _, reconstruction, _ in stereo_results:
         assert reconstruction.image_noise_dn is not None and 0.3 < reconstruction.image_noise_dn < 0.9
-    assert _depth_holes_cause(1.24) == (
+    found = stereo_results[0][2]
+    assert _depth_holes_cause(dataclasses.replace(found, image_noise_dn=1.24)) == (
         "glare, no texture or image noise: the image's noise reads 1.2 DN, refused beyond 1.5; a clean camera reads "
         "under 0.8"
     )
-    assert _depth_holes_cause(None) == "glare, no texture or image noise"
+    # On the mean of the cycle's exposures (the last one too noisy), still noisy: more exposures are the remedy.
+    assert _depth_holes_cause(dataclasses.replace(found, image_noise_dn=1.04, from_mean=True)) == (
+        "glare, no texture or image noise: the image's noise reads 1.0 DN on the mean of the cycle's exposures (one "
+        "alone is too noisy), refused beyond 1.5; a clean camera reads under 0.8: check exposure, gain and lighting, "
+        "or average more exposures per cycle ([cameras] averaged_frames)"
+    )
+    assert _depth_holes_cause(dataclasses.replace(found, image_noise_dn=None)) == "glare, no texture or image noise"
 
 
 def test_no_sole_in_view(rig, reconstructor) -> None:  # noqa: ANN001
