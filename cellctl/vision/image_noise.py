@@ -13,6 +13,10 @@ MAX_IMAGE_NOISE_DN = 1.5
 # A clean camera's rectified image reads under this (the simulator's normal sensor: 0.5-0.75 DN): above it, noise
 # is a likely cause of stray or missing depth, and the messages say so.
 CLEAN_IMAGE_NOISE_DN = 0.8
+# What to do about a noisy image in the cell: a cycle measures on the mean of its exposures when one is too noisy.
+NOISY_IMAGE_REMEDY = (
+    "check exposure, gain and lighting, or average more exposures per cycle ([cameras] averaged_frames)"
+)
 
 
 def image_noise_dn(grey: np.ndarray) -> float:

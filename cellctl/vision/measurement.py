@@ -48,7 +48,7 @@ from cellctl.vision.edge_checks import MIN_CONCAVE_RADIUS_MM
 from cellctl.vision.footprint import Footprint, snap_to_inset
 from cellctl.vision.glue_path import depth_normals, glue_path
 from cellctl.vision.image_edge import PlacedOutline, onto_image_edge
-from cellctl.vision.image_noise import CLEAN_IMAGE_NOISE_DN, MAX_IMAGE_NOISE_DN
+from cellctl.vision.image_noise import CLEAN_IMAGE_NOISE_DN, MAX_IMAGE_NOISE_DN, NOISY_IMAGE_REMEDY
 from cellctl.vision.outline_checks import outline_problem, wall_problem
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, ReconstructionResult
 from cellctl.vision.sole_result import GluePath, MeasurementRefused, MeasurementResult, SoleMeasurement
@@ -253,9 +253,7 @@ def _depth_holes_cause(reconstruction: Reconstruction) -> str:
     if reconstruction.from_mean:
         where = " on the mean of the cycle's exposures (one alone is too noisy)"
         if noise_dn > CLEAN_IMAGE_NOISE_DN:
-            remedy = (
-                ": check exposure, gain and lighting, or average more exposures per cycle ([cameras] averaged_frames)"
-            )
+            remedy = f": {NOISY_IMAGE_REMEDY}"
     return (
         f"glare, no texture or image noise: the image's noise reads {noise_dn:.1f} DN{where}, refused beyond "
         f"{MAX_IMAGE_NOISE_DN:g}; a clean camera reads under {CLEAN_IMAGE_NOISE_DN:g}{remedy}"

@@ -126,18 +126,19 @@ class SoleReconstructor:
         timings: dict[str, float] = {}
         rect_left, rect_right = self._rectify(left, right, timings)
         self.last_region, self.last_fallback, self.last_from_mean = None, "", False
-        noise: float | None = image_noise_dn(grey_f32(rect_left))
-        if surface is not None and noise is not None and noise > MAX_IMAGE_NOISE_DN:
+        noise = image_noise_dn(grey_f32(rect_left))
+        if surface is not None and noise > MAX_IMAGE_NOISE_DN:
             # One exposure too noisy to measure at all (segmentation refuses it): the mean has half the noise
             # at four exposures, about what one exposure of a clean camera has, so the matcher, the change test
             # and the outline read the mean. Not on a clean exposure: there every threshold was set on one
             # exposure, and on the mean the change test's masks move (docs/sole-benchmark.md, 26th round).
             rect_left, rect_right = self._rectify(*surface, timings)
-            self.last_from_mean, noise = True, None
+            self.last_from_mean = True
+        read = None if self.last_from_mean else noise  # the mean's noise is read by the segmentation
         if self.table_plane is not None and self.search_region:
             region, why = self._search_region(rect_left, rect_right, timings)
             if region is not None:
-                result = self.segment(self._cloud(rect_left, rect_right, timings, region), noise)
+                result = self.segment(self._cloud(rect_left, rect_right, timings, region), read)
                 cut_px = REGION_CUT_MM * self.calib.focal_px / self.table_plane.offset
                 if isinstance(result, ReconstructionRefused):
                     why = f"refused: {result.reason}"
@@ -145,24 +146,22 @@ class SoleReconstructor:
                     why = "the sole reaches the search region's edge"
                 else:
                     self.last_region = region
-                    return self._with_surface_grey(result, *fitted)
+                    return self._finished(result, *fitted)
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
-        result = self.segment(self._cloud(rect_left, rect_right, timings, None), noise)
+        result = self.segment(self._cloud(rect_left, rect_right, timings, None), read)
         if isinstance(result, ReconstructionRefused):
             hint = self._range_hint(rect_left, rect_right, result)
             if hint:
                 result = replace(result, reason=f"{result.reason}; {hint}")
-        return self._with_surface_grey(result, *fitted)
+        return self._finished(result, *fitted)
 
-    def _with_surface_grey(
-        self, result: ReconstructionResult, left: np.ndarray, right: np.ndarray
-    ) -> ReconstructionResult:
-        """A found sole with its `surface_grey` pair: the sole's box (and SURFACE_GREY_MARGIN_PX round it) of
-        each image rectified from the raw pair without rounding (`Calibration.rectify_grey`), in copies of
-        the rectified grey pair. Only the sole's surface is fitted on the images; the whole pair would cost ~4-5
-        times as much."""
+    def _finished(self, result: ReconstructionResult, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
+        """A found sole as `reconstruct` returns it: whether it was measured on the mean (`from_mean`), and its
+        `surface_grey` pair: the sole's box (and SURFACE_GREY_MARGIN_PX round it) of each image rectified from the
+        raw pair without rounding (`Calibration.rectify_grey`), in copies of the rectified grey pair. Only the sole's
+        surface is fitted on the images; the whole pair would cost ~4-5 times as much."""
         if not isinstance(result, Reconstruction):
             return result
         result.from_mean = self.last_from_mean

@@ -29,7 +29,7 @@ from cellctl.errors import FailureKind
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, image_noise_dn
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, NOISY_IMAGE_REMEDY, image_noise_dn
 from cellctl.vision.sole_region import (
     MIN_COLOUR_SEPARATION,
     MIN_SOLE_AREA_MM2,
@@ -220,8 +220,7 @@ class Segmentation(_RunState):
                 return self._refused(
                     FailureKind.SURFACE_NOT_MEASURED,
                     f"the image is too noisy to measure the surface within tolerance: sensor noise {noise:.1f} DN "
-                    f"(at most {MAX_IMAGE_NOISE_DN:g}); check exposure, gain and lighting, or average more exposures per "
-                    "cycle ([cameras] averaged_frames)",
+                    f"(at most {MAX_IMAGE_NOISE_DN:g}); {NOISY_IMAGE_REMEDY}",
                 )
         start = time.perf_counter()
         if self.plane is None:

@@ -162,10 +162,10 @@ def teach_table(cloud: StereoCloud, calib: Calibration, now: float | None = None
     heights = plane.heights(cloud.points)
     raised = float(np.mean(heights > OBJECT_HEIGHT_MM))
     if raised > MAX_OBJECT_FRACTION:
-        remedy, removed = _noise_remedy(cloud.rectified[0]), "remove everything from the fixture and teach again"
+        remedy = _noise_remedy(cloud.rectified[0])
         raise (NoisyTeachError if remedy else TeachError)(
-            f"{100 * raised:.1f} % of the view lies more than {OBJECT_HEIGHT_MM:g} mm above the table: "
-            + (f"remove everything from the fixture; if it is empty, {remedy}" if remedy else removed)
+            f"{100 * raised:.1f} % of the view lies more than {OBJECT_HEIGHT_MM:g} mm above the table: remove "
+            "everything from the fixture" + (f"; if it is empty, {remedy}" if remedy else " and teach again")
         )
     if flat_fraction(cloud.pixels, heights, cloud.image_size) < MIN_FLAT_FRACTION:
         raise TeachError("the measured view is not one flat table: teach with the empty, flat fixture")
