@@ -13,7 +13,7 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "wide-rig", "narrow-rig" and "tilted-rig" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"light-table", "wide-rig", "narrow-rig", "tilted-rig" and "moderate-noise" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ class SceneLook:
     right_gamma: float = 1.0  # output = input ** gamma on the right camera only (1: linear)
     gloss: bool = False  # strong view-dependent highlights: they sit at different places in the two views
     noise: str = "normal"  # NOISE_LEVELS
+    noise_scale: float = 1.0  # the sensor's noise (read and shot) times this: a camera noisier than the level's
     rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
     camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
     texture_contrast: float = 1.0  # the sole's texture contrast relative to its material's (1: as SOLE_MATERIALS)
@@ -81,6 +82,8 @@ class SceneLook:
             raise ValueError("right camera gain and gamma must be positive")
         if self.texture_contrast <= 0.0:
             raise ValueError("the sole's texture contrast must be positive")
+        if self.noise_scale <= 0.0:
+            raise ValueError("the sensor's noise scale must be positive")
         if not 0.0 <= self.rig_tilt_deg < 30.0:
             raise ValueError("the rig's tilt must be in [0, 30) degrees")
 
@@ -177,6 +180,16 @@ VARIATIONS: dict[str, Variation] = {
             "gloss", "glossy sole: highlights differ between the views", ("gloss",), _set(gloss=True), _SURFACE_LOST
         ),
         Variation("heavy-noise", "heavy sensor noise", ("noise",), _set(noise="heavy"), _SURFACE_LOST),
+        # Outside the matrix so that its sets keep their soles: between a clean camera and heavy noise, where the
+        # cycle chooses between its last exposure and the mean of its exposures (cellctl.vision.image_noise).
+        Variation(
+            "moderate-noise",
+            "a camera 1.5-3.5 times noisier than the normal sensor",
+            ("noise", "noise_scale"),
+            _draw("noise_scale", 1.5, 3.5),
+            _SURFACE_LOST,
+            in_matrix=False,
+        ),
         Variation(
             "camouflage",
             "sole coloured like the grey table: unmeasurable by design",

@@ -225,7 +225,7 @@ class SceneRenderer:
         r2 = ((xs - K[0, 2]) ** 2 + (ys - K[1, 2]) ** 2) / (0.25 * (width**2 + height**2))
         image *= (1.0 - VIGNETTING * r2)[..., None]
         read, shot = SENSOR_NOISE[self.look.noise]
-        sigma = np.sqrt(read**2 + shot * np.maximum(image, 0.0))
+        sigma = self.look.noise_scale * np.sqrt(read**2 + shot * np.maximum(image, 0.0))
         image = image + sigma * self._noise_rng.standard_normal(image.shape, dtype=np.float32)
         if gamma != 1.0:  # the camera's tone curve acts on the noisy signal, as a sensor's LUT does
             image = 255.0 * (np.clip(image, 0.0, 255.0) / 255.0) ** gamma

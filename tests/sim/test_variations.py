@@ -255,6 +255,20 @@ def test_heavy_noise_is_heavy(rim_gain_noise) -> None:  # noqa: ANN001
     assert abs(np.mean(difference[table])) < 0.5
 
 
+def test_moderate_noise_scales_the_sensors_noise() -> None:
+    """Two exposures of one scene differ by the sensor alone; with moderate noise by noise_scale times as much."""
+    from cellctl.sim.render_cache import render_exposures
+
+    look = look_for(("moderate-noise",), 11)
+    assert 1.5 <= look.noise_scale <= 3.5 and look.noise == "normal"
+    spreads = []
+    for scale in (1.0, look.noise_scale):
+        scene = SoleScene.random(11, "grey", half_size_rig(), replace(look, noise_scale=scale))
+        first, second = render_exposures(scene, [0, -1])
+        spreads.append(np.std(first.left.astype(np.float64) - second.left.astype(np.float64)))
+    assert spreads[1] / spreads[0] == pytest.approx(look.noise_scale, rel=0.1)
+
+
 def test_side_light_casts_the_soles_shadow() -> None:
     look = SceneLook(shadows=True, height="tall")
     scene = SoleScene.random(2, "black", half_size_rig(), look)
