@@ -146,7 +146,7 @@ class SoleReconstructor:
                     why = "the sole reaches the search region's edge"
                 else:
                     self.last_region = region
-                    return self._finished(result, *fitted)
+                    return self._finished(result, *fitted, averaged=surface is not None)
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
@@ -155,13 +155,16 @@ class SoleReconstructor:
             hint = self._range_hint(rect_left, rect_right, result)
             if hint:
                 result = replace(result, reason=f"{result.reason}; {hint}")
-        return self._finished(result, *fitted)
+        return self._finished(result, *fitted, averaged=surface is not None)
 
-    def _finished(self, result: ReconstructionResult, left: np.ndarray, right: np.ndarray) -> ReconstructionResult:
+    def _finished(
+        self, result: ReconstructionResult, left: np.ndarray, right: np.ndarray, averaged: bool
+    ) -> ReconstructionResult:
         """A found sole as `reconstruct` returns it: whether it was measured on the mean (`from_mean`), and its
         `surface_grey` pair: the sole's box (and SURFACE_GREY_MARGIN_PX round it) of each image rectified from the
         raw pair without rounding (`Calibration.rectify_grey`), in copies of the rectified grey pair. Only the sole's
-        surface is fitted on the images; the whole pair would cost ~4-5 times as much."""
+        surface is fitted on the images; the whole pair would cost ~4-5 times as much. `averaged`: the raw pair is
+        the mean of several exposures (`surface_averaged`)."""
         if not isinstance(result, Reconstruction):
             return result
         result.from_mean = self.last_from_mean
@@ -175,7 +178,7 @@ class SoleReconstructor:
             fine[box] = self.calib.rectify_grey(raw, side, box)
             pair.append(fine)
         result.timings["surface_grey"] = time.perf_counter() - start
-        return replace(result, surface_grey=(pair[0], pair[1]))
+        return replace(result, surface_grey=(pair[0], pair[1]), surface_averaged=averaged)
 
     def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
         """Rectify, match the whole pair and reproject: every really measured pixel as a 3-D point."""

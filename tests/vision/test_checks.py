@@ -11,6 +11,7 @@ from cellctl.vision import checks
 from cellctl.vision.checks import (
     CALIBRATED_OBLIQUENESS_DEG,
     GLUE_TYPICAL_SD_SHARE,
+    GLUE_TYPICAL_SD_SHARE_AVERAGED,
     check_glue_path,
     check_glue_precision,
     check_outline_depth,
@@ -99,6 +100,25 @@ def test_a_rig_looking_at_the_table_more_obliquely_than_calibrated_asks_for_fine
     assert f"at most {glue_sd_limit(1.0, 9.7):.2f}" in problem.reason
     assert glue_sd_limit(1.0, 9.7) < 0.9 * GLUE_TYPICAL_SD_SHARE < glue_sd_limit(1.0, 0.0)
     assert glue_sd_limit(2.0, 0.0) == 2.0 * glue_sd_limit(1.0, 0.0)
+
+
+def test_glue_heights_fitted_on_the_mean_of_exposures_are_held_to_a_smaller_expected_error() -> None:
+    """On the mean the noise averages and the scene's own bias does not, so the worst point lies more expected errors
+    out: an expected error one exposure may have is refused on the mean, and the refusal says it was the mean's."""
+    assert GLUE_TYPICAL_SD_SHARE_AVERAGED < GLUE_TYPICAL_SD_SHARE
+    sd = np.full(300, 0.5 * (GLUE_TYPICAL_SD_SHARE + GLUE_TYPICAL_SD_SHARE_AVERAGED))
+    assert check_glue_precision(sd, 1.0) is None
+    problem = check_glue_precision(sd, 1.0, quieter_than_one_exposure=True)
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert "on the mean of the exposures" in problem.reason
+    assert f"at most {GLUE_TYPICAL_SD_SHARE_AVERAGED:.2f}" in problem.reason
+    assert (
+        glue_sd_limit(1.0, 9.7, quieter_than_one_exposure=True) < GLUE_TYPICAL_SD_SHARE_AVERAGED
+    )  # oblique: smaller still
+    assert (
+        check_glue_precision(np.full(300, 0.9 * GLUE_TYPICAL_SD_SHARE_AVERAGED), 1.0, quieter_than_one_exposure=True)
+        is None
+    )
 
 
 def test_a_table_planes_obliqueness_is_the_angle_of_its_normal_to_the_viewing_axis() -> None:
