@@ -28,7 +28,7 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud, cloud_from_disparity, disparity_range
 from cellctl.vision.defaults import DEPTH_RANGE_MM
 from cellctl.vision.depth_hint import depth_range_hint, view_distance_mm
-from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, image_noise_dn
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, NOISY_EXPOSURES_DN, exposure_noise_dn, image_noise_dn
 from cellctl.vision.search_region import SearchRegion, coarse_pair, coarse_range, find_region
 from cellctl.vision.segmentation import (
     MIN_HEIGHT_MM,
@@ -127,11 +127,14 @@ class SoleReconstructor:
         rect_left, rect_right = self._rectify(left, right, timings)
         self.last_region, self.last_fallback, self.last_from_mean = None, "", False
         noise = image_noise_dn(grey_f32(rect_left))
-        if surface is not None and noise > MAX_IMAGE_NOISE_DN:
-            # One exposure too noisy to measure at all (segmentation refuses it): the mean has half the noise
-            # at four exposures, about what one exposure of a clean camera has, so the matcher, the change test
-            # and the outline read the mean. Not on a clean exposure: there every threshold was set on one
-            # exposure, and on the mean the change test's masks move (docs/sole-benchmark.md, 26th round).
+        if surface is not None and (
+            noise > MAX_IMAGE_NOISE_DN or exposure_noise_dn(left, surface[0]) > NOISY_EXPOSURES_DN
+        ):
+            # One exposure noisier than a clean camera's (or too noisy to measure at all: segmentation refuses
+            # it): the mean has half the noise at four exposures, about what one exposure of a clean camera has,
+            # so the matcher, the change test and the outline read the mean. Not on a clean exposure: there
+            # every threshold was set on one exposure, and on the mean the change test's masks move
+            # (docs/sole-benchmark.md, 26th round).
             rect_left, rect_right = self._rectify(*surface, timings)
             self.last_from_mean = True
         read = None if self.last_from_mean else noise  # the mean's noise is read by the segmentation

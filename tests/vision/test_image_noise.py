@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, image_noise_dn
+from cellctl.images import grey_f32
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, exposure_noise_dn, image_noise_dn
 
 
 def scene(noise_dn: float, seed: int = 0) -> np.ndarray:
@@ -25,3 +26,52 @@ def test_the_noise_of_an_image_with_edges_and_lines_is_found(noise: float) -> No
 
 def test_the_gate_lies_between_a_normal_and_a_noisy_sensor() -> None:
     assert image_noise_dn(scene(0.7)) < MAX_IMAGE_NOISE_DN < image_noise_dn(scene(2.2))
+
+
+# ---- the noise averaging removes, read from a cycle's exposures ------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def rig():  # noqa: ANN201
+    from cellctl.sim.rig import default_rig
+
+    return default_rig()
+
+
+def exposures(rig, noise_dn: float, count: int, textured: bool, seed: int = 0) -> list[np.ndarray]:  # noqa: ANN001
+    """`count` raw BGR exposures of one still view: a flat grey, or a fine pattern of 2 x 2 pixel cells up to 8 DN
+    apart (a patterned table's grain), each with its own sensor noise, rounded to 8 bits as a camera gives them."""
+    width, height = rig.image_size
+    rng = np.random.default_rng(seed)
+    base = np.full((height, width, 3), 100.0)
+    if textured:
+        cells = rng.uniform(-4.0, 4.0, (height // 2 + 1, width // 2 + 1, 1))
+        base += np.kron(cells, np.ones((2, 2, 3)))[:height, :width]
+    noisy = (base + rng.normal(0.0, noise_dn, base.shape) for _ in range(count))
+    return [np.clip(np.rint(image), 0, 255).astype(np.uint8) for image in noisy]
+
+
+def read(rig, shots: list[np.ndarray]) -> float:  # noqa: ANN001
+    from cellctl.vision.teach import average_exposures
+
+    return exposure_noise_dn(shots[-1], average_exposures(shots))
+
+
+def test_the_noise_averaging_removes_grows_with_the_sensors_noise(rig) -> None:  # noqa: ANN001
+    clean, noisy = read(rig, exposures(rig, 1.0, 4, False)), read(rig, exposures(rig, 3.0, 4, False))
+    assert noisy / clean == pytest.approx(3.0, rel=0.12)
+
+
+def test_a_patterned_view_does_not_read_as_noise_between_exposures(rig) -> None:  # noqa: ANN001
+    """The texture is the same in every exposure and cancels; read on one image, it adds to the noise."""
+    flat, patterned = exposures(rig, 1.0, 4, False), exposures(rig, 1.0, 4, True)
+    assert read(rig, patterned) == pytest.approx(read(rig, flat), rel=0.08)
+    one = [grey_f32(rig.rectify(shots[-1], shots[-1])[0]) for shots in (flat, patterned)]
+    assert image_noise_dn(one[1]) > 1.3 * image_noise_dn(one[0])
+
+
+def test_what_averaging_removes_follows_the_number_of_exposures(rig) -> None:  # noqa: ANN001
+    """sqrt(1 - 1/n) of one exposure's noise: 0 for one exposure, 0.71 at two, 0.87 at four."""
+    four, two = read(rig, exposures(rig, 2.0, 4, True)), read(rig, exposures(rig, 2.0, 2, True))
+    assert two / four == pytest.approx(np.sqrt(0.5 / 0.75), rel=0.08)
+    assert read(rig, exposures(rig, 2.0, 1, True)) == 0.0

@@ -202,6 +202,30 @@ def test_an_exposure_too_noisy_to_measure_is_measured_on_the_mean(rig, reconstru
     assert np.all(np.abs(errors(scene, result)) < [1.0, 0.5, 0.5])
 
 
+def test_a_camera_noisier_than_a_clean_one_is_measured_on_the_mean_and_a_clean_one_on_its_last_exposure(
+    rig,
+    reconstructor,  # noqa: ANN001
+) -> None:
+    """Where averaging removed more than a clean camera's noise (a sensor 2.5 times the simulator's: measurable on one
+    exposure, not to the cell's precision), matcher, outline and surface read the mean; a clean camera's last
+    exposure is measured as it is."""
+    from cellctl.eval.sole_bench import scene_frame
+    from cellctl.sim.look import SceneLook
+    from cellctl.vision.image_noise import NOISY_EXPOSURES_DN, exposure_noise_dn
+
+    for scale, on_mean in ((1.0, False), (2.5, True)):
+        scene = SoleScene.random(1, "white", rig, SceneLook(noise_scale=scale))
+        frame = scene_frame(scene, 4)
+        assert frame.averaged is not None
+        assert (exposure_noise_dn(frame.left, frame.averaged[0]) > NOISY_EXPOSURES_DN) is on_mean
+        reconstruction = reconstructor.reconstruct(frame.left, frame.right, frame.averaged)
+        assert isinstance(reconstruction, Reconstruction) and reconstruction.surface_averaged
+        assert reconstructor.last_from_mean is on_mean and reconstruction.from_mean is on_mean
+        result = measure_sole(reconstruction)
+        assert isinstance(result, SoleMeasurement), result
+        assert np.all(np.abs(errors(scene, result)) < [1.0, 0.5, 0.5])
+
+
 def test_the_surface_fits_read_the_sole_rectified_without_rounding(rig, stereo_results) -> None:  # noqa: ANN001
     """The reconstruction's `surface_grey`: round the sole, the raw pair rectified in float (Calibration.rectify_grey);
     elsewhere the rounded pair; and the surface's image fits read it."""
