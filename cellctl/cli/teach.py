@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.checks import CALIBRATED_OBLIQUENESS_DEG, too_oblique
     from cellctl.vision.defaults import DEPTH_RANGE_MM
+    from cellctl.vision.image_noise import exposure_noise_dn
     from cellctl.vision.reconstruction import SoleReconstructor
     from cellctl.vision.teach import TeachError, average_exposures, save_taught
 
@@ -61,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
     depth_range = tuple(args.depth_range) if args.depth_range else DEPTH_RANGE_MM
     try:
         left, right = average_exposures(images[0::2]), average_exposures(images[1::2])
-        taught = SoleReconstructor(calib, depth_range).teach(left, right)
+        # What averaging removed from the last left image: a noisy camera named as such if teaching fails.
+        noise = exposure_noise_dn(images[-2], left) if len(images) > 2 else None
+        taught = SoleReconstructor(calib, depth_range).teach(left, right, noise)
     except TeachError as exc:
         raise UserError(f"table not taught: {exc}") from None
     arrays, meta = save_taught(taught, args.calib)

@@ -24,6 +24,7 @@ from cellctl.vision.calibration import Calibration
 from cellctl.vision.checks import MIN_GLUE_NZ
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.edge_checks import LOW_WALL_QUANTILE, WALL_HEIGHT_INSET_MM
+from cellctl.vision.image_noise import exposure_noise_dn
 from cellctl.vision.measurement import MeasurementRefused, MeasurementResult, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.teach import NoisyTeachError, TeachError, average_exposures
@@ -107,11 +108,13 @@ NOISY_TEACH_SHOTS = 4 * TEACH_SHOTS
 
 def empty_table_pair(
     scene: SoleScene, cache: RenderCache | None = None, shots: int = TEACH_SHOTS
-) -> tuple[np.ndarray, np.ndarray]:
-    """`shots` exposures of the scene's empty table, averaged per camera (what `cellctl teach` gets)."""
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """`shots` exposures of the scene's empty table, averaged per camera, and what the averaging removed from the
+    last left one (`exposure_noise_dn`): what `cellctl teach` gets and reads."""
     numbers = list(range(1, shots + 1))
     pairs = cache.render_empties(scene, numbers) if cache else scene.render_empties(numbers)
-    return average_exposures([s.left for s in pairs]), average_exposures([s.right for s in pairs])
+    left = average_exposures([s.left for s in pairs])
+    return left, average_exposures([s.right for s in pairs]), exposure_noise_dn(pairs[-1].left, left)
 
 
 def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCache | None = None) -> SoleReconstructor:
@@ -122,9 +125,9 @@ def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCach
     a taught table; the row's variations then say "+untaught" (`fallback_note`).
     """
     for shots in (TEACH_SHOTS, NOISY_TEACH_SHOTS):
-        left, right = empty_table_pair(scene, cache, shots)
+        left, right, noise = empty_table_pair(scene, cache, shots)
         try:
-            return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right))
+            return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right, noise))
         except NoisyTeachError:
             continue
         except TeachError:

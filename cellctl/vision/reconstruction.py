@@ -244,11 +244,12 @@ class SoleReconstructor:
         (`image_noise`: its rectified left image's image_noise_dn, when already read)."""
         return Segmentation(cloud, self.table_plane, self.min_height_mm, self.taught, image_noise).run()
 
-    def teach(self, left: np.ndarray, right: np.ndarray) -> TaughtTable:
-        """The taught table from a raw pair of the EMPTY fixture (cellctl.vision.teach); TeachError if not empty."""
+    def teach(self, left: np.ndarray, right: np.ndarray, exposure_noise: float | None = None) -> TaughtTable:
+        """The taught table from a raw pair of the EMPTY fixture (cellctl.vision.teach); TeachError if not empty.
+        exposure_noise: what averaging the pair's exposures removed (image_noise.exposure_noise_dn), if known."""
         cloud = self.points_from_disparity(left, right)
         try:
-            taught = teach_table(cloud, self.calib)
+            taught = teach_table(cloud, self.calib, exposure_noise=exposure_noise)
         except TeachError as exc:
             hint = "" if cloud.rectified is None else self._range_hint(*cloud.rectified)
             if not hint:

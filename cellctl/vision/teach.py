@@ -26,7 +26,7 @@ import numpy as np
 
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud
-from cellctl.vision.image_noise import CLEAN_IMAGE_NOISE_DN, image_noise_dn
+from cellctl.vision.image_noise import CLEAN_IMAGE_NOISE_DN, NOISY_EXPOSURES_DN, image_noise_dn
 from cellctl.vision.table import TABLE_INLIER_MM, TablePlane, find_table, refine_table
 
 FORMAT_VERSION = 1
@@ -143,14 +143,18 @@ def flat_fraction(pixels: np.ndarray, heights: np.ndarray, image_size: tuple[int
     return float(np.mean(np.abs(sums[full] / counts[full]) < TABLE_INLIER_MM))
 
 
-def teach_table(cloud: StereoCloud, calib: Calibration, now: float | None = None) -> TaughtTable:
-    """The taught table from one measured pair of the EMPTY fixture; TeachError if it is not empty or not seen."""
+def teach_table(
+    cloud: StereoCloud, calib: Calibration, now: float | None = None, exposure_noise: float | None = None
+) -> TaughtTable:
+    """The taught table from one measured pair of the EMPTY fixture; TeachError if it is not empty or not seen.
+    exposure_noise: what averaging the pair's exposures removed (`image_noise.exposure_noise_dn`), if known: a
+    refusal names a noisy camera by it."""
     width, height = cloud.image_size
     if cloud.rectified is None:
         raise TeachError("teaching needs the rectified pair of a stereo measurement, not a cloud from elsewhere")
     fraction = len(cloud.points) / float(width * height)
     if fraction < MIN_TABLE_FRACTION:
-        remedy = _noise_remedy(cloud.rectified[0])
+        remedy = _noise_remedy(cloud.rectified[0], exposure_noise)
         raise (NoisyTeachError if remedy else TeachError)(
             f"only {100 * fraction:.0f} % of the view measured (need {100 * MIN_TABLE_FRACTION:.0f} %): "
             + (remedy or "check lighting, focus and that the cameras see the table")
@@ -162,7 +166,7 @@ def teach_table(cloud: StereoCloud, calib: Calibration, now: float | None = None
     heights = plane.heights(cloud.points)
     raised = float(np.mean(heights > OBJECT_HEIGHT_MM))
     if raised > MAX_OBJECT_FRACTION:
-        remedy = _noise_remedy(cloud.rectified[0])
+        remedy = _noise_remedy(cloud.rectified[0], exposure_noise)
         raise (NoisyTeachError if remedy else TeachError)(
             f"{100 * raised:.1f} % of the view lies more than {OBJECT_HEIGHT_MM:g} mm above the table: remove "
             "everything from the fixture" + (f"; if it is empty, {remedy}" if remedy else " and teach again")
@@ -178,17 +182,22 @@ def teach_table(cloud: StereoCloud, calib: Calibration, now: float | None = None
     )
 
 
-def _noise_remedy(grey: np.ndarray) -> str | None:
+def _noise_remedy(grey: np.ndarray, exposure_noise: float | None = None) -> str | None:
     """The remedy when the images are noisier than a clean camera's, else None. Noise leaves a matcher with holes
     and stray matches above the table (a 6 DN sensor: 24 % of the view measured from one pair; averaged over
-    four, 2.6 % of it 3 mm above the table; over sixteen, taught)."""
+    four, 2.6 % of it 3 mm above the table; over sixteen, taught). The mean of the pairs may read clean on its own
+    (a sensor three times as noisy as the simulator's: four pairs left 0.2-0.4 % of the view above the table),
+    so what averaging removed (`exposure_noise`) is read too."""
+    more = "teach with more pairs of the empty table (four times as many halve the noise), or check exposure, gain and lighting"
     noise = image_noise_dn(grey)
-    if noise <= CLEAN_IMAGE_NOISE_DN:
-        return None
-    return (
-        f"the images are noisy ({noise:.1f} DN, a clean camera reads under {CLEAN_IMAGE_NOISE_DN:g}): teach with more "
-        "pairs of the empty table (four times as many halve the noise), or check exposure, gain and lighting"
-    )
+    if noise > CLEAN_IMAGE_NOISE_DN:
+        return f"the images are noisy ({noise:.1f} DN, a clean camera reads under {CLEAN_IMAGE_NOISE_DN:g}): {more}"
+    if exposure_noise is not None and exposure_noise > NOISY_EXPOSURES_DN:
+        return (
+            f"the camera is noisy (its exposures differ from their mean by {exposure_noise:.1f} DN, a clean "
+            f"camera's by under {NOISY_EXPOSURES_DN:g}): {more}"
+        )
+    return None
 
 
 def check_drift(taught: TaughtTable, points: np.ndarray, exclude: np.ndarray | None = None) -> Drift:

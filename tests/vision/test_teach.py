@@ -21,6 +21,7 @@ from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene
 from cellctl.vision import checks
 from cellctl.vision.change import ChangeTest
+from cellctl.vision.image_noise import NOISY_EXPOSURES_DN, exposure_noise_dn
 from cellctl.vision.measurement import measure_sole
 from cellctl.vision.reconstruction import SoleReconstructor
 from cellctl.vision.table import TablePlane
@@ -114,6 +115,23 @@ def test_a_table_too_noisy_to_teach_asks_for_more_pairs_and_more_teach_it(taught
     taught = SoleReconstructor(rig).teach(left, right)
     assert abs(taught.plane.offset - clean.plane.offset) < 0.2
     assert float(taught.plane.normal @ clean.plane.normal) > np.cos(np.radians(0.05))
+
+
+def test_a_camera_whose_mean_reads_clean_is_still_named_noisy_when_teaching_fails(taught_scene) -> None:  # noqa: ANN001
+    """A sensor 3.3 times the simulator's: the mean of four pairs reads like a clean image, yet leaves stray matches
+    above the table. What the averaging removed names the camera as noisy (not "remove everything from the
+    fixture"), and sixteen pairs teach the table."""
+    rig, _, _, clean = taught_scene
+    shots = SoleScene.random(2, "white", rig, SceneLook(noise_scale=3.3)).render_empties(list(range(1, 17)))
+    left = average_exposures([s.left for s in shots[:4]])
+    right = average_exposures([s.right for s in shots[:4]])
+    noise = exposure_noise_dn(shots[3].left, left)
+    assert noise > NOISY_EXPOSURES_DN
+    with pytest.raises(NoisyTeachError, match="above the table.*camera is noisy .* teach with more pairs"):
+        SoleReconstructor(rig).teach(left, right, noise)
+    left, right = average_exposures([s.left for s in shots]), average_exposures([s.right for s in shots])
+    taught = SoleReconstructor(rig).teach(left, right, exposure_noise_dn(shots[-1].left, left))
+    assert abs(taught.plane.offset - clean.plane.offset) < 0.2
 
 
 def test_a_moved_table_is_refused_not_measured(taught_scene) -> None:  # noqa: ANN001
