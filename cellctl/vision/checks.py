@@ -370,13 +370,13 @@ def check_glue_precision(
             if too_oblique(obliqueness_deg)
             else ""
         )
+        on_mean = " on the mean of the exposures" if quieter_than_one_exposure else ""
         return CheckFailure(
             FailureKind.SURFACE_NOT_MEASURED,
             f"the sole's top is measured too coarsely for its glue heights: their expected error is {typical:.2f} mm "
-            f"(median along the path{' on the mean of the exposures' if quieter_than_one_exposure else ''}; at most {limit:.2f} for the "
-            f"{tolerance_mm:g} mm tolerance{oblique}): too "
-            "little texture on the top or too much image noise; light the sole more brightly or raise the exposure, "
-            "or set [measure] glue_height_tolerance_mm to what the dispenser really allows",
+            f"(median along the path{on_mean}; at most {limit:.2f} for the {tolerance_mm:g} mm tolerance{oblique}): "
+            "too little texture on the top or too much image noise; light the sole more brightly or raise the "
+            "exposure, or set [measure] glue_height_tolerance_mm to what the dispenser really allows",
         )
     return None
 

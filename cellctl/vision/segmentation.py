@@ -101,7 +101,7 @@ class Reconstruction(_SolePoints):
     changed_left: np.ndarray | None = None  # the same for the left image
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
     image_noise_dn: float | None = None  # the rectified left image's noise (image_noise.image_noise_dn), if read
-    from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was too noisy
+    from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was noisier than a clean one
     surface_averaged: bool = False  # the surface's image fits read the mean of several exposures (`surface_grey`)
 
     @property

@@ -188,7 +188,10 @@ def _noise_remedy(grey: np.ndarray, exposure_noise: float | None = None) -> str 
     four, 2.6 % of it 3 mm above the table; over sixteen, taught). The mean of the pairs may read clean on its own
     (a sensor three times as noisy as the simulator's: four pairs left 0.2-0.4 % of the view above the table),
     so what averaging removed (`exposure_noise`) is read too."""
-    more = "teach with more pairs of the empty table (four times as many halve the noise), or check exposure, gain and lighting"
+    more = (
+        "teach with more pairs of the empty table (four times as many halve the noise), or check exposure, gain and "
+        "lighting"
+    )
     noise = image_noise_dn(grey)
     if noise > CLEAN_IMAGE_NOISE_DN:
         return f"the images are noisy ({noise:.1f} DN, a clean camera reads under {CLEAN_IMAGE_NOISE_DN:g}): {more}"
