@@ -97,7 +97,7 @@ MIN_HEIGHT_SUPPORT = 0.5
 GLUE_TYPICAL_SD_SHARE = 0.28
 # On the mean of a cycle's four exposures (cellctl.cameras.averaging) the expected error falls with the sensor's noise
 # (black soles 0.11-0.22 mm in the median, against 0.25-0.46 on one exposure), but part of the worst point's error is
-# the scene's own (a patch fit's bias where the top bends or its faint texture misleads) and does not average: the
+# the scene's own (where image fits fail, the cloud's plane that replaces them) and does not average: the
 # same bump sits in every exposure (fresh sole 29073, black: 0.91-0.97 mm on each of four exposures, each refused at
 # 0.30-0.32; 1.01 mm on their mean, published at 0.19). So the multiple is larger on the mean: over 127 black and grey
 # valid results on the mean (four matrix sets and the fresh set 29000) its median is 2.7 (2.2 on one exposure),
