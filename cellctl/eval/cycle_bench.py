@@ -149,7 +149,9 @@ def bench_cycles(
         start = time.perf_counter()
         pair = average_frames(exposures[which])
         averaging = time.perf_counter() - start
-        reconstruction = reconstructors[which].reconstruct(pair.left, pair.right, pair.averaged)
+        reconstruction = reconstructors[which].reconstruct(
+            pair.left, pair.right, pair.averaged, pair.info.get("averaged_frames")
+        )
         result = measure_sole(reconstruction, GLUE_OFFSET_MM, GLUE_SPACING_MM)
         result.timings["average"] = averaging  # as the service times it (CameraHealth.grab)
         return result

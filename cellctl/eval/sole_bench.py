@@ -167,7 +167,10 @@ def measure_scene(
     start = time.perf_counter()
     result: MeasurementResult | None
     try:
-        result = measure_sole(reconstructor.reconstruct(pair.left, pair.right, pair.averaged), wall_draft_deg=draft)
+        reconstruction = reconstructor.reconstruct(
+            pair.left, pair.right, pair.averaged, pair.info.get("averaged_frames")
+        )
+        result = measure_sole(reconstruction, wall_draft_deg=draft)
         reason, failure = (
             (result.reason, result.failure.value) if isinstance(result, MeasurementRefused) else (None, None)
         )

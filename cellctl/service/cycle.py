@@ -59,7 +59,9 @@ CycleResult = Measured | Refused
 def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings: MeasureSettings) -> CycleResult:
     """Reconstruct and measure the sole in one synchronised pair."""
     try:
-        reconstruction = reconstructor.reconstruct(frame.left, frame.right, frame.averaged)
+        reconstruction = reconstructor.reconstruct(
+            frame.left, frame.right, frame.averaged, frame.info.get("averaged_frames")
+        )
     except MeasurementInputError as exc:  # e.g. frames of another size than the calibration
         return Refused(exc.kind, f"cameras deliver frames the measurement cannot use: {exc}")
     measurement = measure_sole(

@@ -28,6 +28,7 @@ import numpy as np
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import (
     GLUE_COVER_RADIUS_MM,
+    NOISY_MEAN_MAX_EXPOSURES,
     check_glue_coverage,
     check_glue_path,
     check_glue_precision,
@@ -102,6 +103,17 @@ def check_glue_settings(
     low, high = GLUE_HEIGHT_TOLERANCE_RANGE_MM
     if not low <= glue_height_tolerance_mm <= high:
         raise ValueError(f"glue height tolerance must be in {low:g}..{high:g} mm, got {glue_height_tolerance_mm:g}")
+
+
+def _quieter_than_one_exposure(reconstruction: Reconstruction) -> bool:
+    """Whether the surface was fitted on a mean quieter than one clean exposure (checks.glue_sd_limit). A clean
+    camera's mean is. A noisy camera measured on the mean (`from_mean`: over image_noise.NOISY_EXPOSURES_DN, one
+    exposure at least twice a clean one's noise) is not at up to NOISY_MEAN_MAX_EXPOSURES exposures, the regime
+    the single-exposure share holds in; more exposures (the noisy-camera remedy) may make it so."""
+    if not reconstruction.surface_averaged:
+        return False
+    count = reconstruction.surface_exposures
+    return not (reconstruction.from_mean and (count is None or count <= NOISY_MEAN_MAX_EXPOSURES))
 
 
 def measure_sole(
@@ -204,9 +216,7 @@ def measure_sole(
             path.height_sd,
             glue_height_tolerance_mm,
             reconstruction.table_plane.obliqueness_deg(),
-            # A noisy camera measured on the mean (`from_mean`) has a mean about as noisy as one clean exposure, the
-            # regime the single-exposure share was calibrated in; a clean camera's mean is quieter (checks).
-            quieter_than_one_exposure=reconstruction.surface_averaged and not reconstruction.from_mean,
+            quieter_than_one_exposure=_quieter_than_one_exposure(reconstruction),
         )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)

@@ -114,11 +114,15 @@ class SoleReconstructor:
         return plane
 
     def reconstruct(
-        self, left: np.ndarray, right: np.ndarray, surface: tuple[np.ndarray, np.ndarray] | None = None
+        self,
+        left: np.ndarray,
+        right: np.ndarray,
+        surface: tuple[np.ndarray, np.ndarray] | None = None,
+        exposures: int | None = None,
     ) -> ReconstructionResult:
         """The sole's cloud from one raw (unrectified) stereo pair. `surface`: the mean of several exposures of the
         same view (cellctl.cameras.averaging), from which the sole's surface is fitted (`surface_grey`); default
-        the pair itself."""
+        the pair itself. `exposures`: how many exposures that mean holds, where known (`surface_exposures`)."""
         self._check_pair(left, right)
         if surface is not None:
             self._check_pair(*surface)
@@ -149,7 +153,7 @@ class SoleReconstructor:
                     why = "the sole reaches the search region's edge"
                 else:
                     self.last_region = region
-                    return self._finished(result, *fitted, averaged=surface is not None)
+                    return self._finished(result, *fitted, averaged=surface is not None, exposures=exposures)
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
@@ -158,16 +162,21 @@ class SoleReconstructor:
             hint = self._range_hint(rect_left, rect_right, result)
             if hint:
                 result = replace(result, reason=f"{result.reason}; {hint}")
-        return self._finished(result, *fitted, averaged=surface is not None)
+        return self._finished(result, *fitted, averaged=surface is not None, exposures=exposures)
 
     def _finished(
-        self, result: ReconstructionResult, left: np.ndarray, right: np.ndarray, averaged: bool
+        self,
+        result: ReconstructionResult,
+        left: np.ndarray,
+        right: np.ndarray,
+        averaged: bool,
+        exposures: int | None = None,
     ) -> ReconstructionResult:
         """A found sole as `reconstruct` returns it: whether it was measured on the mean (`from_mean`), and its
         `surface_grey` pair: the sole's box (and SURFACE_GREY_MARGIN_PX round it) of each image rectified from the
         raw pair without rounding (`Calibration.rectify_grey`), in copies of the rectified grey pair. Only the sole's
         surface is fitted on the images; the whole pair would cost ~4-5 times as much. `averaged`: the raw pair is
-        the mean of several exposures (`surface_averaged`)."""
+        the mean of several exposures (`surface_averaged`), `exposures` of them where known."""
         if not isinstance(result, Reconstruction):
             return result
         result.from_mean = self.last_from_mean
@@ -181,7 +190,7 @@ class SoleReconstructor:
             fine[box] = self.calib.rectify_grey(raw, side, box)
             pair.append(fine)
         result.timings["surface_grey"] = time.perf_counter() - start
-        return replace(result, surface_grey=(pair[0], pair[1]), surface_averaged=averaged)
+        return replace(result, surface_grey=(pair[0], pair[1]), surface_averaged=averaged, surface_exposures=exposures)
 
     def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
         """Rectify, match the whole pair and reproject: every really measured pixel as a 3-D point."""

@@ -103,6 +103,7 @@ class Reconstruction(_SolePoints):
     image_noise_dn: float | None = None  # the rectified left image's noise (image_noise.image_noise_dn), if read
     from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was noisier than a clean one
     surface_averaged: bool = False  # the surface's image fits read the mean of several exposures (`surface_grey`)
+    surface_exposures: int | None = None  # how many, where the caller said
 
     @property
     def valid(self) -> bool:
