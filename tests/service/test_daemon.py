@@ -296,7 +296,11 @@ class FailingReconstructor:
         self.reason = f"simulated failure: {kind.value}"
 
     def reconstruct(
-        self, left: np.ndarray, right: np.ndarray, surface: tuple[np.ndarray, np.ndarray] | None = None
+        self,
+        left: np.ndarray,
+        right: np.ndarray,
+        surface: tuple[np.ndarray, np.ndarray] | None = None,
+        exposures: int | None = None,
     ) -> ReconstructionResult:
         if self.kind is FailureKind.CALIBRATION_MISMATCH:
             return self.real.reconstruct(left[::2, ::2], right[::2, ::2])
@@ -347,10 +351,14 @@ class StuckReconstructor:
         self.real, self.release = real, threading.Event()
 
     def reconstruct(
-        self, left: np.ndarray, right: np.ndarray, surface: tuple[np.ndarray, np.ndarray] | None = None
+        self,
+        left: np.ndarray,
+        right: np.ndarray,
+        surface: tuple[np.ndarray, np.ndarray] | None = None,
+        exposures: int | None = None,
     ) -> ReconstructionResult:
         assert self.release.wait(30)
-        return self.real.reconstruct(left, right, surface)
+        return self.real.reconstruct(left, right, surface, exposures)
 
 
 def test_a_slow_cycle_keeps_the_heartbeat_and_an_overrun_is_answered_cycle_timeout(tmp_path: Path) -> None:

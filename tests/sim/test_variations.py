@@ -541,7 +541,9 @@ def test_distorted_rig_bends_straight_lines_and_is_the_looks_rig() -> None:
 
 def test_a_measurement_that_raises_is_a_crash_not_the_end_of_the_run() -> None:
     class Raising:
-        def reconstruct(self, left: np.ndarray, right: np.ndarray, surface: object = None) -> None:
+        def reconstruct(
+            self, left: np.ndarray, right: np.ndarray, surface: object = None, exposures: object = None
+        ) -> None:
             raise np.linalg.LinAlgError("Singular matrix")
 
     scene = SoleScene.random(5, "white", half_size_rig())
