@@ -54,6 +54,9 @@ def image_noise_dn(grey: np.ndarray) -> float:
 # single exposure, on which the change test's and the outline's thresholds were set; below it the last exposure is
 # measured, as every earlier round did (docs/sole-benchmark.md, twenty-eighth round).
 NOISY_EXPOSURES_DN = 1.75
+# One clean exposure's noise on the same scale: what a mean of four exposures holds at the limit above. A mean
+# noisier than this is as noisy as a clean camera's single exposure (`mean_noise_dn`).
+CLEAN_EXPOSURE_NOISE_DN = NOISY_EXPOSURES_DN / float(np.sqrt(3.0))
 # Raw rows the exposures' difference is read on (`exposure_noise_dn`): every 2nd row and column of a band across the
 # middle of the view, where the table and usually the sole lie; ~40000 pixels, ~1-2 ms.
 EXPOSURE_NOISE_ROWS = 128
@@ -77,3 +80,11 @@ def exposure_noise_dn(last: np.ndarray, mean: np.ndarray) -> float:
     )
     centre = float(np.median(difference))  # a lamp's flicker brightens or darkens the whole exposure a little
     return 1.4826 * float(np.median(np.abs(difference - centre)))
+
+
+def mean_noise_dn(exposure_noise: float, count: int) -> float:
+    """The noise of the mean of `count` exposures (count >= 2), from what averaging removed from the last of them
+    (`exposure_noise_dn`, sigma sqrt(1 - 1/n)): sigma / sqrt(n) = exposure_noise / sqrt(n - 1)."""
+    if count < 2:
+        raise ValueError(f"a mean of {count} exposure(s) removes no noise to read")
+    return exposure_noise / float(np.sqrt(count - 1))

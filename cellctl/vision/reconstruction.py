@@ -104,6 +104,7 @@ class SoleReconstructor:
         self.last_region: SearchRegion | None = None  # the region the last reconstruct matched (None: whole pair)
         self.last_fallback: str = ""  # why the last reconstruct matched the whole pair, when it had a plane
         self.last_from_mean = False  # the last reconstruct measured everything on the mean (a noisy exposure)
+        self.last_exposure_noise: float | None = None  # what averaging removed from the last exposure, if averaged
 
     def learn_table(self, left: np.ndarray, right: np.ndarray) -> TablePlane | None:
         """Without a taught table: find the table plane on one pair (RANSAC and image refinement; a sole may
@@ -131,8 +132,11 @@ class SoleReconstructor:
         rect_left, rect_right = self._rectify(left, right, timings)
         self.last_region, self.last_fallback, self.last_from_mean = None, "", False
         noise = image_noise_dn(grey_f32(rect_left))
-        if surface is not None and (
-            noise > MAX_IMAGE_NOISE_DN or exposure_noise_dn(left, surface[0]) > NOISY_EXPOSURES_DN
+        self.last_exposure_noise = None if surface is None else exposure_noise_dn(left, surface[0])
+        if (
+            surface is not None
+            and self.last_exposure_noise is not None
+            and (noise > MAX_IMAGE_NOISE_DN or self.last_exposure_noise > NOISY_EXPOSURES_DN)
         ):
             # One exposure noisier than a clean camera's (or too noisy to measure at all: segmentation refuses
             # it): the mean has half the noise at four exposures, about what one exposure of a clean camera has,
@@ -179,7 +183,7 @@ class SoleReconstructor:
         the mean of several exposures (`surface_averaged`), `exposures` of them where known."""
         if not isinstance(result, Reconstruction):
             return result
-        result.from_mean = self.last_from_mean
+        result.from_mean, result.exposure_noise_dn = self.last_from_mean, self.last_exposure_noise
         if result.rectified is None or len(result.sole_pixels) == 0:
             return result
         start = time.perf_counter()

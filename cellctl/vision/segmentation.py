@@ -104,6 +104,7 @@ class Reconstruction(_SolePoints):
     from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was noisier than a clean one
     surface_averaged: bool = False  # the surface's image fits read the mean of several exposures (`surface_grey`)
     surface_exposures: int | None = None  # how many, where the caller said
+    exposure_noise_dn: float | None = None  # what averaging removed from the last exposure (image_noise)
 
     @property
     def valid(self) -> bool:

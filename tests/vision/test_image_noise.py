@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cellctl.images import grey_f32
-from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, exposure_noise_dn, image_noise_dn
+from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, exposure_noise_dn, image_noise_dn, mean_noise_dn
 
 
 def scene(noise_dn: float, seed: int = 0) -> np.ndarray:
@@ -75,3 +75,16 @@ def test_what_averaging_removes_follows_the_number_of_exposures(rig) -> None:  #
     four, two = read(rig, exposures(rig, 2.0, 4, True)), read(rig, exposures(rig, 2.0, 2, True))
     assert two / four == pytest.approx(np.sqrt(0.5 / 0.75), rel=0.08)
     assert read(rig, exposures(rig, 2.0, 1, True)) == 0.0
+
+
+def test_the_noise_of_the_mean_follows_from_what_averaging_removed(rig) -> None:  # noqa: ANN001
+    """sigma / sqrt(n) = removed / sqrt(n - 1): the mean of four exposures of a 2 DN camera holds half its noise."""
+    from cellctl.vision.teach import average_exposures
+
+    for count in (4, 8):
+        shots = exposures(rig, 2.0, count, True)
+        mean = average_exposures(shots)
+        direct = float(np.std(mean.astype(np.float64) - exposures(rig, 0.0, 1, True)[0].astype(np.float64)))
+        assert mean_noise_dn(exposure_noise_dn(shots[-1], mean), count) == pytest.approx(direct * 0.67, rel=0.15)
+    with pytest.raises(ValueError, match="no noise"):
+        mean_noise_dn(1.0, 1)

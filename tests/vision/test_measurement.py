@@ -21,7 +21,12 @@ from cellctl.errors import FailureKind, MeasurementInputError
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene, true_cloud
 from cellctl.sim.sole import SoleModel, SolePose
-from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN
+from cellctl.vision.image_noise import (
+    CLEAN_EXPOSURE_NOISE_DN,
+    MAX_IMAGE_NOISE_DN,
+    NOISY_EXPOSURES_DN,
+    mean_noise_dn,
+)
 from cellctl.vision.measurement import MeasurementRefused, SoleMeasurement, measure_sole
 from cellctl.vision.reconstruction import Reconstruction, ReconstructionRefused, SoleReconstructor, StereoCloud
 
@@ -200,10 +205,14 @@ def test_an_exposure_too_noisy_to_measure_is_measured_on_the_mean(rig, reconstru
     result = measure_sole(averaged)
     assert isinstance(result, SoleMeasurement), result
     assert np.all(np.abs(errors(scene, result)) < [1.0, 0.5, 0.5])
-    # The same mean said to hold sixteen exposures would be quieter than one clean exposure: the glue heights' share
-    # for a clean camera's mean applies, and this sole's expected error (~0.21 mm) is over it.
-    assert measure_sole(dataclasses.replace(averaged, surface_exposures=4)).valid
-    many = measure_sole(dataclasses.replace(averaged, surface_exposures=16))
+    # The mean's own noise (what averaging removed, over sqrt(n - 1)) decides the glue heights' share: as noisy as
+    # one clean exposure here; a camera 2.5 times the simulator's averaged over sixteen would be quieter, and then
+    # the share for a clean camera's mean applies, which this sole's expected error (~0.21 mm) is over.
+    assert averaged.exposure_noise_dn is not None and averaged.exposure_noise_dn > NOISY_EXPOSURES_DN
+    assert mean_noise_dn(averaged.exposure_noise_dn, 4) > CLEAN_EXPOSURE_NOISE_DN
+    quieter = dataclasses.replace(averaged, surface_exposures=16, exposure_noise_dn=2.5)
+    assert mean_noise_dn(2.5, 16) < CLEAN_EXPOSURE_NOISE_DN
+    many = measure_sole(quieter)
     assert not many.valid and many.failure is FailureKind.SURFACE_NOT_MEASURED
     assert "on the mean of the exposures" in many.reason
 
