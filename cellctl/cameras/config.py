@@ -5,9 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-# Pairs grabbed per cycle and averaged (cellctl.cameras.averaging): the sensor's noise falls by sqrt(n), which black
-# soles need for their glue heights; a cycle waits (n - 1) frame periods longer for them (~100 ms at 30 fps).
-AVERAGED_FRAMES = 4
+from cellctl.vision.defaults import AVERAGED_FRAMES  # its home: the measurement assumes it for a replayed mean
+
 MAX_AVERAGED_FRAMES = 16
 
 

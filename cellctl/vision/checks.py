@@ -109,8 +109,6 @@ GLUE_TYPICAL_SD_SHARE = 0.28
 # about as noisy as one clean exposure, where GLUE_TYPICAL_SD_SHARE holds (its multiples 2.5 on heavy noise; 57
 # valid results on the heavy- and moderate-noise sets at that share, none wrong, worst glue height 0.70 mm).
 GLUE_TYPICAL_SD_SHARE_AVERAGED = 0.19
-# Where the number of exposures a mean holds is not known (a mean replayed from the image log): the cycle's default.
-ASSUMED_EXPOSURES = 4
 # That calibration covers rigs that look at the table within CALIBRATED_OBLIQUENESS_DEG of its normal
 # (TablePlane.obliqueness_deg): the simulator's rigs (2.5-3.3 degrees) and probes of the standard soles 7000-7015 on
 # rigs tilted to 5.0 and 6.8 degrees (black soles' multiples up to 2.78). On probes at 9.7 and 12.2 degrees 3 of 15

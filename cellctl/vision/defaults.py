@@ -21,6 +21,10 @@ GLUE_HEIGHT_TOLERANCE_RANGE_MM: tuple[float, float] = (0.1, 10.0)
 #: vertical wall): a mould's draft is a few degrees; beyond 10 the wall shows to the cameras and the edge checks
 #: refuse it whatever the recipe says.
 WALL_DRAFT_RANGE_DEG: tuple[float, float] = (0.0, 10.0)
+#: Pairs a cycle grabs and averages (cellctl.cameras.averaging): the sensor's noise falls by sqrt(n), which black soles
+#: need for their glue heights; a cycle waits (n - 1) frame periods longer for them (~100 ms at 30 fps). The
+#: measurement assumes it where a mean's count is not known (a mean replayed from the image log).
+AVERAGED_FRAMES = 4
 #: Results outside these ranges are no sole on this cell: refused, never published.
 PLAUSIBLE_LENGTH_MM: tuple[float, float] = (100.0, 400.0)
 PLAUSIBLE_HEIGHT_MM: tuple[float, float] = (0.5, 150.0)

@@ -27,7 +27,6 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.checks import (
-    ASSUMED_EXPOSURES,
     GLUE_COVER_RADIUS_MM,
     check_glue_coverage,
     check_glue_path,
@@ -36,6 +35,7 @@ from cellctl.vision.checks import (
 )
 from cellctl.vision.closed_path import smooth_closed
 from cellctl.vision.defaults import (
+    AVERAGED_FRAMES,
     GLUE_HEIGHT_TOLERANCE_MM,
     GLUE_HEIGHT_TOLERANCE_RANGE_MM,
     GLUE_OFFSET_MM,
@@ -121,7 +121,7 @@ def _quieter_than_one_exposure(reconstruction: Reconstruction) -> bool:
         return False
     if not reconstruction.from_mean:
         return True
-    count = reconstruction.surface_exposures or ASSUMED_EXPOSURES
+    count = reconstruction.surface_exposures or AVERAGED_FRAMES
     noise = reconstruction.exposure_noise_dn
     if noise is None or count < 2:
         return False

@@ -104,7 +104,6 @@ class SoleReconstructor:
         self.last_region: SearchRegion | None = None  # the region the last reconstruct matched (None: whole pair)
         self.last_fallback: str = ""  # why the last reconstruct matched the whole pair, when it had a plane
         self.last_from_mean = False  # the last reconstruct measured everything on the mean (a noisy exposure)
-        self.last_exposure_noise: float | None = None  # what averaging removed from the last exposure, if averaged
 
     def learn_table(self, left: np.ndarray, right: np.ndarray) -> TablePlane | None:
         """Without a taught table: find the table plane on one pair (RANSAC and image refinement; a sole may
@@ -132,19 +131,17 @@ class SoleReconstructor:
         rect_left, rect_right = self._rectify(left, right, timings)
         self.last_region, self.last_fallback, self.last_from_mean = None, "", False
         noise = image_noise_dn(grey_f32(rect_left))
-        self.last_exposure_noise = None if surface is None else exposure_noise_dn(left, surface[0])
-        if (
-            surface is not None
-            and self.last_exposure_noise is not None
-            and (noise > MAX_IMAGE_NOISE_DN or self.last_exposure_noise > NOISY_EXPOSURES_DN)
-        ):
-            # One exposure noisier than a clean camera's (or too noisy to measure at all: segmentation refuses
-            # it): the mean has half the noise at four exposures, about what one exposure of a clean camera has,
-            # so the matcher, the change test and the outline read the mean. Not on a clean exposure: there
-            # every threshold was set on one exposure, and on the mean the change test's masks move
-            # (docs/sole-benchmark.md, 26th round).
-            rect_left, rect_right = self._rectify(*surface, timings)
-            self.last_from_mean = True
+        removed = None  # what averaging removed from the last exposure (image_noise.exposure_noise_dn)
+        if surface is not None:
+            removed = exposure_noise_dn(left, surface[0])
+            if noise > MAX_IMAGE_NOISE_DN or removed > NOISY_EXPOSURES_DN:
+                # One exposure noisier than a clean camera's (or too noisy to measure at all: segmentation refuses
+                # it): the mean has half the noise at four exposures, about what one exposure of a clean camera
+                # has, so the matcher, the change test and the outline read the mean. Not on a clean exposure:
+                # there every threshold was set on one exposure, and on the mean the change test's masks move
+                # (docs/sole-benchmark.md, 26th round).
+                rect_left, rect_right = self._rectify(*surface, timings)
+                self.last_from_mean = True
         read = None if self.last_from_mean else noise  # the mean's noise is read by the segmentation
         if self.table_plane is not None and self.search_region:
             region, why = self._search_region(rect_left, rect_right, timings)
@@ -157,7 +154,7 @@ class SoleReconstructor:
                     why = "the sole reaches the search region's edge"
                 else:
                     self.last_region = region
-                    return self._finished(result, *fitted, averaged=surface is not None, exposures=exposures)
+                    return self._finished(result, *fitted, removed, exposures)
                 spent = sum(v for k, v in result.timings.items() if k not in ("rectify", "coarse"))
                 timings = {"rectify": timings["rectify"], "coarse": timings["coarse"], "region_attempt": spent}
             self.last_fallback = why
@@ -166,24 +163,25 @@ class SoleReconstructor:
             hint = self._range_hint(rect_left, rect_right, result)
             if hint:
                 result = replace(result, reason=f"{result.reason}; {hint}")
-        return self._finished(result, *fitted, averaged=surface is not None, exposures=exposures)
+        return self._finished(result, *fitted, removed, exposures)
 
     def _finished(
         self,
         result: ReconstructionResult,
         left: np.ndarray,
         right: np.ndarray,
-        averaged: bool,
-        exposures: int | None = None,
+        removed: float | None,
+        exposures: int | None,
     ) -> ReconstructionResult:
         """A found sole as `reconstruct` returns it: whether it was measured on the mean (`from_mean`), and its
         `surface_grey` pair: the sole's box (and SURFACE_GREY_MARGIN_PX round it) of each image rectified from the
         raw pair without rounding (`Calibration.rectify_grey`), in copies of the rectified grey pair. Only the sole's
-        surface is fitted on the images; the whole pair would cost ~4-5 times as much. `averaged`: the raw pair is
-        the mean of several exposures (`surface_averaged`), `exposures` of them where known."""
+        surface is fitted on the images; the whole pair would cost ~4-5 times as much. Where the raw pair is the mean of
+        several exposures (`exposures` of them where known), `removed` is what averaging removed from the last one
+        (`exposure_noise_dn`; None: the pair itself)."""
         if not isinstance(result, Reconstruction):
             return result
-        result.from_mean, result.exposure_noise_dn = self.last_from_mean, self.last_exposure_noise
+        result.from_mean = self.last_from_mean
         if result.rectified is None or len(result.sole_pixels) == 0:
             return result
         start = time.perf_counter()
@@ -194,7 +192,7 @@ class SoleReconstructor:
             fine[box] = self.calib.rectify_grey(raw, side, box)
             pair.append(fine)
         result.timings["surface_grey"] = time.perf_counter() - start
-        return replace(result, surface_grey=(pair[0], pair[1]), surface_averaged=averaged, surface_exposures=exposures)
+        return replace(result, surface_grey=(pair[0], pair[1]), exposure_noise_dn=removed, surface_exposures=exposures)
 
     def points_from_disparity(self, left: np.ndarray, right: np.ndarray) -> StereoCloud:
         """Rectify, match the whole pair and reproject: every really measured pixel as a 3-D point."""

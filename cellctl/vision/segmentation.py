@@ -102,9 +102,15 @@ class Reconstruction(_SolePoints):
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
     image_noise_dn: float | None = None  # the rectified left image's noise (image_noise.image_noise_dn), if read
     from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was noisier than a clean one
-    surface_averaged: bool = False  # the surface's image fits read the mean of several exposures (`surface_grey`)
-    surface_exposures: int | None = None  # how many, where the caller said
-    exposure_noise_dn: float | None = None  # what averaging removed from the last exposure (image_noise)
+    # Where the surface's image fits read the mean of several exposures (`surface_grey`): what averaging removed from
+    # the last exposure (image_noise.exposure_noise_dn), and how many exposures, where the caller said.
+    exposure_noise_dn: float | None = None
+    surface_exposures: int | None = None
+
+    @property
+    def surface_averaged(self) -> bool:
+        """The surface's image fits read the mean of several exposures."""
+        return self.exposure_noise_dn is not None
 
     @property
     def valid(self) -> bool:
