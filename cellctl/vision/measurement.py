@@ -121,11 +121,11 @@ def _quieter_than_one_exposure(reconstruction: Reconstruction) -> bool:
         return False
     if not reconstruction.from_mean:
         return True
-    count = reconstruction.surface_exposures or AVERAGED_FRAMES
+    count = reconstruction.surface_exposures
+    if count is None or count < 2:  # not said, or a mean this cycle did not make (replayed: its frame says 1)
+        count = AVERAGED_FRAMES
     noise = reconstruction.exposure_noise_dn
-    if noise is None or count < 2:
-        return False
-    return mean_noise_dn(noise, count) < CLEAN_EXPOSURE_NOISE_DN
+    return noise is not None and mean_noise_dn(noise, count) < CLEAN_EXPOSURE_NOISE_DN
 
 
 def measure_sole(

@@ -215,6 +215,11 @@ def test_an_exposure_too_noisy_to_measure_is_measured_on_the_mean(rig, reconstru
     many = measure_sole(quieter)
     assert not many.valid and many.failure is FailureKind.SURFACE_NOT_MEASURED
     assert "on the mean of the exposures" in many.reason
+    # A replayed mean's count is not known (the replayed frame says 1, `cellctl measure --mean` says nothing): both
+    # are taken as the cycle's four, so a replay decides as the cycle did.
+    for unknown in (None, 1):
+        replayed = measure_sole(dataclasses.replace(averaged, surface_exposures=unknown, exposure_noise_dn=1.5))
+        assert mean_noise_dn(1.5, 4) < CLEAN_EXPOSURE_NOISE_DN and not replayed.valid
 
 
 def test_a_camera_noisier_than_a_clean_one_is_measured_on_the_mean_and_a_clean_one_on_its_last_exposure(
