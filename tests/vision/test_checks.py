@@ -10,6 +10,7 @@ from cellctl.errors import FailureKind
 from cellctl.vision import checks
 from cellctl.vision.checks import (
     CALIBRATED_OBLIQUENESS_DEG,
+    GLUE_POINT_SD_SHARE,
     GLUE_TYPICAL_SD_SHARE,
     GLUE_TYPICAL_SD_SHARE_AVERAGED,
     check_glue_path,
@@ -69,10 +70,10 @@ def test_a_height_jump_and_a_path_off_its_samples_are_refused() -> None:
 
 
 def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
-    """The median expected error along the path decides: a few coarse points (a pointed end's narrow fits) pass,
+    """The median expected error along the path decides: a few coarser points (a pointed end's narrow fits) pass,
     a path coarse over most of its length does not, with the reason and the remedy."""
     sd = np.full(300, 0.75 * GLUE_TYPICAL_SD_SHARE)
-    sd[:40] = 2.0
+    sd[:40] = GLUE_POINT_SD_SHARE - 0.01
     assert check_glue_precision(sd) is None
     sd[:] = GLUE_TYPICAL_SD_SHARE * 1.0 + 0.05
     sd[:100] = 0.5 * GLUE_TYPICAL_SD_SHARE
@@ -82,10 +83,25 @@ def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
         f"expected error is {GLUE_TYPICAL_SD_SHARE + 0.05:.2f} mm" in problem.reason
         and "1 mm tolerance" in problem.reason
     )
-    assert "exposure" in problem.reason and "glue_height_tolerance_mm" in problem.reason
+    assert "exposure" in problem.reason and "focus" in problem.reason and "glue_height_tolerance_mm" in problem.reason
     assert check_glue_precision(sd, 2.0) is None  # a cell whose dispenser allows 2 mm takes it
     unknown = check_glue_precision(np.full(10, np.nan))
     assert unknown is not None and unknown.kind is FailureKind.SURFACE_NOT_MEASURED
+
+
+def test_a_stretch_of_glue_heights_coarser_than_half_the_tolerance_is_refused_whatever_the_median() -> None:
+    """A path fine in the median but with a stretch whose own expected error exceeds half the tolerance (sweep sole
+    50010: 0.18 mm in the median, 0.61 at a bump published 1.15 mm off) is refused, naming the point and the count;
+    a wider tolerance takes it."""
+    sd = np.full(300, 0.5 * GLUE_TYPICAL_SD_SHARE)
+    sd[40:52] = np.linspace(0.45, 0.61, 12)
+    problem = check_glue_precision(sd, 1.0)
+    assert problem is not None and problem.kind is FailureKind.SURFACE_NOT_MEASURED
+    assert "at glue point 51" in problem.reason and "0.61 mm" in problem.reason
+    assert "(8 points beyond 0.50, half the 1 mm tolerance" in problem.reason and "focus" in problem.reason
+    assert check_glue_precision(sd, 1.25) is None
+    sd[40:52] = GLUE_POINT_SD_SHARE - 0.001
+    assert check_glue_precision(sd, 1.0) is None
 
 
 def test_a_rig_looking_at_the_table_more_obliquely_than_calibrated_asks_for_finer_glue_heights() -> None:
