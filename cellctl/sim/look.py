@@ -13,7 +13,7 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "wide-rig", "narrow-rig", "tilted-rig" and "moderate-noise" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus" and "dim-exposure" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -55,6 +55,11 @@ class SceneLook:
     gloss: bool = False  # strong view-dependent highlights: they sit at different places in the two views
     noise: str = "normal"  # NOISE_LEVELS
     noise_scale: float = 1.0  # the sensor's noise (read and shot) times this: a camera noisier than the level's
+    # Defocus beyond the lens's usual blur (render.LENS_BLUR_PX), as a Gaussian sigma in pixels added in quadrature,
+    # per camera: a lens focused off the table or a softer optic than the simulator's (0: in focus).
+    left_defocus_px: float = 0.0
+    right_defocus_px: float = 0.0
+    exposure_scale: float = 1.0  # both cameras' exposure against the usual (render.EXPOSURE_DN): dim below 1
     rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
     camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
     texture_contrast: float = 1.0  # the sole's texture contrast relative to its material's (1: as SOLE_MATERIALS)
@@ -84,6 +89,10 @@ class SceneLook:
             raise ValueError("the sole's texture contrast must be positive")
         if self.noise_scale <= 0.0:
             raise ValueError("the sensor's noise scale must be positive")
+        if self.left_defocus_px < 0.0 or self.right_defocus_px < 0.0:
+            raise ValueError("the cameras' defocus must be >= 0 px")
+        if self.exposure_scale <= 0.0:
+            raise ValueError("the cameras' exposure scale must be positive")
         if not 0.0 <= self.rig_tilt_deg < 30.0:
             raise ValueError("the rig's tilt must be in [0, 30) degrees")
 
@@ -187,6 +196,29 @@ VARIATIONS: dict[str, Variation] = {
             "a camera 1.5-3.5 times noisier than the normal sensor",
             ("noise", "noise_scale"),
             _draw("noise_scale", 1.5, 3.5),
+            _SURFACE_LOST,
+            in_matrix=False,
+        ),
+        # Outside the matrix so that its sets keep their soles: optics and exposure the simulator's cameras never
+        # had, as another simulator's or a real cell's may (judged like any entry: a softer image has less texture
+        # for the matcher and the glue heights' fits, so too few points or an unmeasured surface are fair).
+        Variation(
+            "soft-focus",
+            "each camera defocused by its own 0.3-1.2 px (Gaussian sigma beyond the usual blur)",
+            ("left_defocus_px", "right_defocus_px"),
+            lambda look, rng: replace(
+                look,
+                left_defocus_px=float(rng.uniform(0.3, 1.2)),
+                right_defocus_px=float(rng.uniform(0.3, 1.2)),
+            ),
+            _SURFACE_LOST,
+            in_matrix=False,
+        ),
+        Variation(
+            "dim-exposure",
+            "both cameras exposed at 0.4-0.8 of the usual level (darker images, coarser quantisation)",
+            ("exposure_scale",),
+            _draw("exposure_scale", 0.4, 0.8),
             _SURFACE_LOST,
             in_matrix=False,
         ),

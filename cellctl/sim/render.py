@@ -167,7 +167,9 @@ class SceneRenderer:
         """The camera's image of a radiance image: its gain, gamma and the sensor (noise from _noise_rng)."""
         K = self.calib.K1 if side == "left" else self.calib.K2
         gain, gamma = (1.0, 1.0) if side == "left" else (self.look.right_gain, self.look.right_gamma)
-        return self._sensor(radiance * gain, self.calib.image_size, K, gamma)
+        defocus = self.look.left_defocus_px if side == "left" else self.look.right_defocus_px
+        blur = float(np.hypot(LENS_BLUR_PX, defocus))
+        return self._sensor(radiance * (gain * self.look.exposure_scale), self.calib.image_size, K, gamma, blur)
 
     def _shade(self, hits: dict[str, np.ndarray], pose: np.ndarray) -> np.ndarray:
         """Linear radiance (BGR, exposure-scaled DN before sensor effects) of every ray's hit."""
@@ -218,9 +220,11 @@ class SceneRenderer:
         radiance = self._shade(self.rays.cast(sub, K, D, pose), pose)
         return radiance.reshape(len(pixels), SUPERSAMPLE * SUPERSAMPLE, 3).mean(axis=1)
 
-    def _sensor(self, radiance: np.ndarray, size: tuple[int, int], K: np.ndarray, gamma: float) -> np.ndarray:
+    def _sensor(
+        self, radiance: np.ndarray, size: tuple[int, int], K: np.ndarray, gamma: float, blur_px: float
+    ) -> np.ndarray:
         width, height = size
-        image = cv2.GaussianBlur(radiance.astype(np.float32), (0, 0), LENS_BLUR_PX)
+        image = cv2.GaussianBlur(radiance.astype(np.float32), (0, 0), blur_px)
         ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
         r2 = ((xs - K[0, 2]) ** 2 + (ys - K[1, 2]) ** 2) / (0.25 * (width**2 + height**2))
         image *= (1.0 - VIGNETTING * r2)[..., None]

@@ -269,6 +269,37 @@ def test_moderate_noise_scales_the_sensors_noise() -> None:
     assert spreads[1] / spreads[0] == pytest.approx(look.noise_scale, rel=0.1)
 
 
+def test_soft_focus_blurs_each_camera_by_its_own_amount() -> None:
+    """Each camera's image loses fine contrast by its own drawn defocus: the sharper camera keeps more of the
+    table's texture gradient, both keep less than an in-focus pair of the same scene."""
+    look = look_for(("soft-focus",), 5)
+    assert 0.3 <= look.left_defocus_px <= 1.2 and 0.3 <= look.right_defocus_px <= 1.2
+    assert look.left_defocus_px != look.right_defocus_px
+
+    def sharpness(image: np.ndarray) -> float:
+        grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY).astype(np.float64)
+        return float(np.mean(np.abs(cv2.Laplacian(grey, cv2.CV_64F))))
+
+    sharp = SoleScene.random(5, "white", half_size_rig(), replace(look, left_defocus_px=0.0, right_defocus_px=0.0))
+    soft = SoleScene.random(5, "white", half_size_rig(), look)
+    sharp_pair, soft_pair = sharp.render(), soft.render()
+    left, right = (
+        sharpness(soft_pair.left) / sharpness(sharp_pair.left),
+        sharpness(soft_pair.right) / sharpness(sharp_pair.right),
+    )
+    assert left < 0.95 and right < 0.95
+    assert (left < right) == (look.left_defocus_px > look.right_defocus_px)
+
+
+def test_dim_exposure_darkens_both_cameras_by_the_drawn_factor() -> None:
+    look = look_for(("dim-exposure",), 7)
+    assert 0.4 <= look.exposure_scale <= 0.8
+    bright = SoleScene.random(7, "white", half_size_rig(), replace(look, exposure_scale=1.0)).render()
+    dim = SoleScene.random(7, "white", half_size_rig(), look).render()
+    for a, b in ((dim.left, bright.left), (dim.right, bright.right)):
+        assert float(np.mean(a)) / float(np.mean(b)) == pytest.approx(look.exposure_scale, rel=0.05)
+
+
 def test_side_light_casts_the_soles_shadow() -> None:
     look = SceneLook(shadows=True, height="tall")
     scene = SoleScene.random(2, "black", half_size_rig(), look)
