@@ -362,11 +362,14 @@ def check_glue_precision(
     tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM,
     obliqueness_deg: float = 0.0,
     quieter_than_one_exposure: bool = False,
+    soft_edges: bool = False,
 ) -> CheckFailure | None:
     """The glue heights' expected errors (per point, mm) against what a glue-height tolerance of `tolerance_mm`
     allows: in the median along the path (`glue_sd_limit`, on a rig looking at the table `obliqueness_deg` off its
     normal; `quieter_than_one_exposure`: fitted on the mean of a clean camera's exposures), and at every point
-    (GLUE_POINT_SD_SHARE)."""
+    (GLUE_POINT_SD_SHARE); `soft_edges`: the images are soft at the sole's edge (cellctl.vision.edge_blur), which
+    the refusal names first."""
+    remedy = (SOFT_EDGES_FIRST if soft_edges else "") + _COARSE_REMEDY
     if not np.any(np.isfinite(height_sd)):
         return CheckFailure(FailureKind.SURFACE_NOT_MEASURED, "the glue heights' expected error is unknown")
     typical, limit = (
@@ -385,7 +388,7 @@ def check_glue_precision(
             FailureKind.SURFACE_NOT_MEASURED,
             f"the sole's top is measured too coarsely for its glue heights: their expected error is {typical:.2f} mm "
             f"(median along the path{on_mean}; at most {limit:.2f} for the {tolerance_mm:g} mm tolerance{oblique}): "
-            + _COARSE_REMEDY,
+            + remedy,
         )
     worst, point_limit = int(np.nanargmax(height_sd)), GLUE_POINT_SD_SHARE * tolerance_mm
     if height_sd[worst] > point_limit:
@@ -394,11 +397,13 @@ def check_glue_precision(
             FailureKind.SURFACE_NOT_MEASURED,
             f"part of the sole's top is measured too coarsely for its glue heights: at glue point {worst} their expected "
             f"error is {height_sd[worst]:.2f} mm ({over} points beyond {point_limit:.2f}, half the {tolerance_mm:g} mm "
-            f"tolerance; {typical:.2f} in the median along the path): " + _COARSE_REMEDY,
+            f"tolerance; {typical:.2f} in the median along the path): " + remedy,
         )
     return None
 
 
+# Where the images are soft at the sole's edge, the likeliest cause, named before the others.
+SOFT_EDGES_FIRST = "the images are soft at the sole's edge (a camera out of focus?); "
 # Why a top is measured too coarsely, and what the line can do about it.
 _COARSE_REMEDY = (
     "too little texture on the top, too much image noise or a camera out of focus; light the sole more brightly or "

@@ -229,6 +229,7 @@ def measure_sole(
             glue_height_tolerance_mm,
             reconstruction.table_plane.obliqueness_deg(),
             quieter_than_one_exposure=_quieter_than_one_exposure(reconstruction),
+            soft_edges=reconstruction.soft_edges,
         )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)

@@ -101,6 +101,7 @@ class Reconstruction(_SolePoints):
     changed_left: np.ndarray | None = None  # the same for the left image
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
     image_noise_dn: float | None = None  # the rectified left image's noise (image_noise.image_noise_dn), if read
+    soft_edges: bool = False  # the images are soft at the sole's edge (cellctl.vision.edge_blur): a lens out of focus
     from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was noisier than a clean one
     # Where the surface's image fits read the mean of several exposures (`surface_grey`): what averaging removed from
     # the last exposure (image_noise.exposure_noise_dn), and how many exposures, where the caller said.
@@ -318,6 +319,7 @@ class Segmentation(_RunState):
         index = without_outliers(self.cloud, index, points, None if spread is None else spread.distance[inside])
         self.timings["outliers"] = spent + time.perf_counter() - start
         failure, reason = cut_by_border(self.cloud, index)
+        mask, soft = sole_mask(self.cloud, index)
         return self._result(
             failure,
             reason,
@@ -326,7 +328,8 @@ class Segmentation(_RunState):
             sole_pixels=np.take(self.cloud.pixels, index, axis=0),
             footprint=footprint,
             rectified=self.cloud.rectified,
-            sole_mask=sole_mask(self.cloud, index),
+            sole_mask=mask,
+            soft_edges=soft,
             unmeasured_fraction=unmeasured_fraction(self.cloud, self._changed_left, index),
         )
 

@@ -16,6 +16,7 @@ from cellctl.errors import FailureKind
 from cellctl.stereo.kernels import disc_dilate, mark_pixels
 from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
+from cellctl.vision.edge_blur import soft_edges
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.outliers import ISOLATED_SPACINGS, inliers_by_mean, mean_neighbour_distances
 from cellctl.vision.table import TABLE_INLIER_MM, TablePlane
@@ -23,6 +24,10 @@ from cellctl.vision.teach import TaughtTable
 
 BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
+# On images soft at the sole's edge (cellctl.vision.edge_blur) the mixed band is wider: the fits keep 3 px away.
+# Not on sharp ones: there the glue path's patches (2 mm from the edge) lost the pixels that average their noise,
+# and their expected errors rose by a third (set 32000: 17 of 44 soles refused for it, none made more right).
+SOFT_SOLE_MASK_ERODE_PX = 3
 WALL_FOOT_MM = 1.0  # ~5 sigma of the table's height noise: lower changed points are table (a shadow)
 EDGE_BAND_MM = 6.0  # low points this close to the raised footprint may be sole (a leaning wall's foot)
 UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches of glare
@@ -273,14 +278,17 @@ def without_outliers(
     return index[inliers_by_mean(distance)]
 
 
-def sole_mask(cloud: StereoCloud, index: np.ndarray) -> np.ndarray | None:
-    """Rectified left pixels on the sole: measured ones, small holes closed, the edge pixel dropped."""
+def sole_mask(cloud: StereoCloud, index: np.ndarray) -> tuple[np.ndarray | None, bool]:
+    """Rectified left pixels on the sole (measured ones, small holes closed, the edge's mixed pixels dropped), and
+    whether the images are soft at its edge (`edge_blur.soft_edges`: more pixels dropped)."""
     if cloud.rectified is None:
-        return None
+        return None, False
     width, height = cloud.image_size
     mask, _ = mark_pixels(cloud.pixels, None, index, (height, width))  # in C: one pass over the points
     closed = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-    return cv2.erode(closed, np.ones((SOLE_MASK_ERODE_PX * 2 + 1,) * 2, np.uint8)) > 0
+    soft = index.size > 0 and soft_edges(*cloud.rectified, closed > 0, float(np.median(cloud.disparity[index])))
+    erode = SOFT_SOLE_MASK_ERODE_PX if soft else SOLE_MASK_ERODE_PX
+    return cv2.erode(closed, np.ones((erode * 2 + 1,) * 2, np.uint8)) > 0, soft
 
 
 def unmeasured_fraction(cloud: StereoCloud, changed_left: np.ndarray | None, index: np.ndarray) -> float:

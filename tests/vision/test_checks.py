@@ -100,6 +100,9 @@ def test_a_stretch_of_glue_heights_coarser_than_half_the_tolerance_is_refused_wh
     assert "at glue point 51" in problem.reason and "0.61 mm" in problem.reason
     assert "(8 points beyond 0.50, half the 1 mm tolerance" in problem.reason and "focus" in problem.reason
     assert check_glue_precision(sd, 1.25) is None
+    soft = check_glue_precision(sd, 1.0, soft_edges=True)
+    assert soft is not None and "soft at the sole's edge (a camera out of focus?)" in soft.reason
+    assert "soft at the sole's edge" not in problem.reason
     sd[40:52] = GLUE_POINT_SD_SHARE - 0.001
     assert check_glue_precision(sd, 1.0) is None
 
