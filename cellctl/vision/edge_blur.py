@@ -22,9 +22,11 @@ import numpy as np
 REBLUR_PX = 1.0
 EDGE_BAND_PX = 6  # either side of the sole mask's border: the edge lies within it where the mask is short or long
 STRONGEST_SHARE = 0.1  # the band's pixels of strongest gradient read (the edge itself, not the texture beside it)
-# The simulator's cameras (lens blur 0.5 px, the edges supersampled) read 0.67-0.69 on the default rig and 0.60-0.65
-# on the distorted one over 30 soles of every look of set 32000; a camera defocused by 0.4 px more read 0.72, by
-# 1.2 px 0.83 (sets 32000 and 42000). Above this the images are soft at the sole's edge.
+# The simulator's cameras (lens blur 0.5 px, the edges supersampled) read 0.65-0.71 on the default rig (70 soles of
+# every look of set 32000 but the two below; the highest a glossy tall sole, 0.707) and 0.60-0.65 on the distorted
+# one; cameras defocused by 0.3-0.5 px more read 0.71-0.74, by 1.2 px 0.83 (soft-focus set 42000). Edges soft in the
+# scene read soft too (rounded top edges 0.76-0.83, sloped walls 0.66-0.73): the wider band left out costs their
+# fits pixels, no more. Above this the images are soft at the sole's edge.
 SOFT_EDGE_RATIO = 0.71
 
 
