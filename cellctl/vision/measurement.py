@@ -32,6 +32,7 @@ from cellctl.vision.checks import (
     check_glue_path,
     check_glue_precision,
     check_height_support,
+    glue_deviation_limit,
 )
 from cellctl.vision.closed_path import smooth_closed
 from cellctl.vision.defaults import (
@@ -222,6 +223,7 @@ def measure_sole(
         (float(sole_z[0]), float(sole_z[1])),
         glue_spacing_mm,
         lambda index: depth_normals(surface, glue_xy, index, glue_spacing_mm),
+        glue_deviation_limit(_depth_per_pixel_mm(reconstruction)),
     )
     if problem is None and path.height_sd is not None:
         problem = check_glue_precision(
@@ -384,6 +386,15 @@ def _pixel_mm(reconstruction: Reconstruction) -> float | None:
     if calib is None or to_table is None:
         return None
     return abs(float(to_table[2, 3])) / calib.focal_px
+
+
+def _depth_per_pixel_mm(reconstruction: Reconstruction) -> float | None:
+    """The depth one disparity pixel spans at the table (mm): Z^2 / (f B); None without a stereo calibration."""
+    calib, to_table = reconstruction.calibration, reconstruction.camera_to_table
+    if calib is None or to_table is None:
+        return None
+    distance = abs(float(to_table[2, 3]))
+    return distance * distance / (calib.focal_px * calib.baseline_mm)
 
 
 def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:

@@ -5,17 +5,21 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import pytest
 
 from cellctl.errors import FailureKind
 from cellctl.vision import checks
 from cellctl.vision.checks import (
     CALIBRATED_OBLIQUENESS_DEG,
+    GLUE_DEVIATION_DEPTH_PX_MM,
+    GLUE_MAX_DEVIATION_MM,
     GLUE_POINT_SD_SHARE,
     GLUE_TYPICAL_SD_SHARE,
     GLUE_TYPICAL_SD_SHARE_AVERAGED,
     check_glue_path,
     check_glue_precision,
     check_outline_depth,
+    glue_deviation_limit,
     glue_sd_limit,
 )
 from cellctl.vision.footprint import Footprint
@@ -87,6 +91,19 @@ def test_glue_heights_too_coarse_for_the_tolerance_are_refused() -> None:
     assert check_glue_precision(sd, 2.0) is None  # a cell whose dispenser allows 2 mm takes it
     unknown = check_glue_precision(np.full(10, np.nan))
     assert unknown is not None and unknown.kind is FailureKind.SURFACE_NOT_MEASURED
+
+
+def test_the_glue_points_deviation_limit_grows_with_a_coarser_rigs_depth_pixel() -> None:
+    """Set on the default rig (a disparity pixel 3.56-3.6 mm of depth at the table): unchanged there and where
+    unknown, twice as large where a pixel spans twice the depth (the half-size rig)."""
+    assert glue_deviation_limit(3.56) == glue_deviation_limit(None) == GLUE_MAX_DEVIATION_MM
+    assert glue_deviation_limit(2 * GLUE_DEVIATION_DEPTH_PX_MM) == pytest.approx(2 * GLUE_MAX_DEVIATION_MM)
+    points, normals = _glue(np.full(150, 20.0))
+    raw = np.full(150, 20.0)
+    raw[30:32] = 23.0  # two in a row: kept, 3 mm from the smoothed path
+    assert check_glue_path(points, normals, raw, normals, (15.0, 25.0), 2.0, _upright) is not None
+    limit = glue_deviation_limit(7.12)
+    assert check_glue_path(points, normals, raw, normals, (15.0, 25.0), 2.0, _upright, limit) is None
 
 
 def test_a_stretch_of_glue_heights_coarser_than_half_the_tolerance_is_refused_whatever_the_median() -> None:
