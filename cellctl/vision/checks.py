@@ -376,7 +376,7 @@ def check_glue_precision(
     normal; `quieter_than_one_exposure`: fitted on the mean of a clean camera's exposures), and at every point
     (GLUE_POINT_SD_SHARE); `soft_edges`: the images are soft at the sole's edge (cellctl.vision.edge_blur), which
     the refusal names first."""
-    remedy = (SOFT_EDGES_FIRST if soft_edges else "") + _COARSE_REMEDY
+    remedy = (_SOFT_EDGES_FIRST if soft_edges else "") + _COARSE_REMEDY
     if not np.any(np.isfinite(height_sd)):
         return CheckFailure(FailureKind.SURFACE_NOT_MEASURED, "the glue heights' expected error is unknown")
     typical, limit = (
@@ -410,7 +410,7 @@ def check_glue_precision(
 
 
 # Where the images are soft at the sole's edge, the likeliest cause, named before the others.
-SOFT_EDGES_FIRST = "the images are soft at the sole's edge (a camera out of focus?); "
+_SOFT_EDGES_FIRST = "the images are soft at the sole's edge (a camera out of focus?); "
 # Why a top is measured too coarsely, and what the line can do about it.
 _COARSE_REMEDY = (
     "too little texture on the top, too much image noise or a camera out of focus; light the sole more brightly or "

@@ -319,7 +319,8 @@ class Segmentation(_RunState):
         index = without_outliers(self.cloud, index, points, None if spread is None else spread.distance[inside])
         self.timings["outliers"] = spent + time.perf_counter() - start
         failure, reason = cut_by_border(self.cloud, index)
-        mask, soft = sole_mask(self.cloud, index)
+        # A refusal keeps no mask (`_result`): neither it nor the edge's sharpness is read for one.
+        mask, soft = (None, False) if failure is not None or reason is not None else sole_mask(self.cloud, index)
         return self._result(
             failure,
             reason,
