@@ -124,6 +124,19 @@ class Footprint:
             cv2.drawContours(mask, contours, -1, 1, thickness=cv2.FILLED)
         return Footprint(mask, self.origin, self.cell_mm)
 
+    def without_specks(self, max_area_mm2: float, min_gap_mm: float) -> Footprint:
+        """Without the specks: regions smaller than `max_area_mm2` that lie farther than `min_gap_mm` from the
+        largest region (which is kept, holes and all, as is every region near it or larger)."""
+        labels, largest = largest_component(self.mask)
+        if largest == 0:
+            return self
+        areas = label_areas(labels, int(labels.max()) + 1).astype(np.float64) * self.cell_mm**2
+        near = Footprint((labels == largest).astype(np.uint8), self.origin, self.cell_mm).dilated(min_gap_mm)
+        keep = areas >= max_area_mm2
+        keep[labels[near.mask > 0]] = True
+        keep[0] = False
+        return Footprint(keep[labels].astype(np.uint8), self.origin, self.cell_mm)
+
     def morphology(self, close_mm: float, open_mm: float) -> Footprint:
         """Close gaps between sampled cells, then open away specks thinner than `open_mm`."""
         mask = self.mask

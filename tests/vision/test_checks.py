@@ -24,6 +24,7 @@ from cellctl.vision.checks import (
 )
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.glue_path import without_single_outliers
+from cellctl.vision.sole_region import depth_step
 from cellctl.vision.table import TablePlane
 
 
@@ -226,6 +227,37 @@ def test_outline_on_the_depth_step_passes_one_inside_it_is_refused() -> None:
     problem = check_outline_depth(inner, inner_out, raised, measured)
     assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
     assert "still raised" in problem.reason
+
+
+def _depth_step_with(extra: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> tuple[Footprint, Footprint]:
+    """sole_region.depth_step: points measured everywhere within 75 mm, raised within 60 mm (the sole, 3 mm of
+    fattening included) and where `extra(x, y)` says."""
+    grid = _disc_footprint(75.0)
+    centres = (np.arange(grid.mask.shape[0]) + 0.5) * grid.cell_mm + grid.origin[0]
+    xx, yy = np.meshgrid(centres, centres)
+    every = (np.hypot(xx, yy) <= 75.0).astype(np.float32)
+    high = ((np.hypot(xx, yy) <= 60.0) | extra(xx, yy)).astype(np.float32)
+    return depth_step(grid, every, high)
+
+
+def test_a_speck_of_depth_apart_from_the_sole_is_no_evidence_a_part_joined_to_it_is(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    outline, outward = _ring(57.0, 358)  # the true edge, points 1 mm apart
+    # A 9 x 1 mm streak of mismatched depth 7 mm beyond the edge (past an occlusion band): not sole, dropped.
+    streak = lambda x, y: (np.abs(x) < 4.5) & (np.abs(y - 64.0) < 0.5)  # noqa: E731
+    assert check_outline_depth(outline, outward, *_depth_step_with(streak)) is None
+    monkeypatch.setattr(checks, "RAISED_SPECK_MM2", 0.0)  # kept, it is most of a 12 mm stretch raised 7 mm out
+    problem = check_outline_depth(outline, outward, *_depth_step_with(streak))
+    assert problem is not None and "stretch" in problem.reason
+    monkeypatch.undo()
+    # A part of the sole the outline left out (a 9 mm wide tongue to 70 mm) joins the sole, or lies near it (its
+    # depth broken off 2 mm beyond the sole's, small as a speck): still refused.
+    tongue = lambda x, y: (np.abs(x) < 4.5) & (y > 0) & (y < 70.0)  # noqa: E731
+    broken = lambda x, y: (np.abs(x) < 4.5) & (y > 62.0) & (y < 66.0)  # noqa: E731
+    for part in (tongue, broken):
+        problem = check_outline_depth(outline, outward, *_depth_step_with(part))
+        assert problem is not None and "stretch" in problem.reason
 
 
 def test_untaught_the_outline_is_also_held_to_the_nearer_distance() -> None:
