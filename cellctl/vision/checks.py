@@ -54,6 +54,11 @@ RIGHT_OUTSIDE_MM = 3.0
 # Past the top edge of a wall facing away from the camera, at the edge's height: unchanged if the outline is
 # on the edge. The projection's error from the edge height (~2 mm at a ~10 degree view) is ~0.4 mm.
 RIGHT_EDGE_OUT_MM = 0.75
+# The table RIGHT_OUTSIDE_MM out counts as seen only if the table this much nearer is seen too: a ray that just
+# grazes a tall wall's top edge lands within a pixel or two of it in the image, where the change mask's blurred
+# boundary (or a contact shadow at the wall's foot) marks the table changed (set 33000: a white sole's 22 mm
+# waist, 12 mm of an outline within 0.69 mm of the truth refused for it).
+RIGHT_CLEAR_MM = 1.0
 CLAIMED_CELL_MM = 0.5  # raster of the outline's interior for the right camera's view past the edge
 HIDDEN_STEP_MM = 1.0  # the ray to the camera is followed in these steps of height...
 HIDDEN_MAX_MM = 60.0  # ...up to the tallest sole
@@ -280,7 +285,8 @@ def check_outline_right(
     # The sole as the outline claims it: where the last mm of the top has no depth (the height map stops short
     # of the edge), the ray from the table just outside to the camera still passes below the top edge.
     claimed = Footprint.empty_like(outline, CLAIMED_CELL_MM, 2.0).filled(outline)
-    visible = ~_hidden(outside, right_centre, surface_height, (claimed, edge))
+    clear = np.column_stack([outline + (RIGHT_OUTSIDE_MM - RIGHT_CLEAR_MM) * outward, np.zeros(len(outline))])
+    visible = ~_hidden(clear, right_centre, surface_height, (claimed, edge))
 
     def sample(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         px = np.round(project(points)).astype(np.int64)
