@@ -38,7 +38,6 @@ import numpy as np
 
 from cellctl.vision.closed_path import closed_runs, outward_normals, resample_closed, run_lengths, smooth_along
 from cellctl.vision.edge_checks import (
-    MAX_EDGE_OFFSET_MM,
     NOTCH_MAX_HALF_CHORD_MM,
     edge_offset_pair,
     running_median,
@@ -64,10 +63,12 @@ FILL_NOTCHES = True
 NOTCH_RIM_POINTS = 3
 # A notch is local: the rim's chord no longer than the notch check's widest window (edge_checks, 14 mm).
 NOTCH_MAX_CHORD_MM = 2 * NOTCH_MAX_HALF_CHORD_MM
-# A dent the edge-offset check accepts is no notch to fill: the outline must lie inside its own course by more
-# than that check's limit (the 1 mm glue tolerance less the outline's scatter) before one camera may move it.
-NOTCH_MIN_DEPTH_MM = MAX_EDGE_OFFSET_MM
 EDGE_MOVE_MIN_MM = 0.5  # a sharp edge's offsets scatter by ~0.2 mm in the images: smaller is no evidence
+# A dent is a notch to fill once the outline lies inside its own course by more than the readings' scatter. Not only
+# beyond the edge-offset check's limit (0.8 mm, sessions 8-30): the notch check refuses a sharp dent shallower than
+# that (standard sole 15, taught: 0.7 mm below its course over 2 mm, 0.9 by the notch check's chords, 1.4 mm inside
+# the true edge), which one camera showed 0.6-0.9 mm further out (docs/sole-benchmark.md, thirtieth round).
+NOTCH_MIN_DEPTH_MM = EDGE_MOVE_MIN_MM
 EDGE_MOVE_AGREE_MM = 0.5  # both cameras' local edges this close (a shadow or a texture line fools one mask)
 EDGE_MOVE_SMOOTHING_MM = 1.5
 # The depth outline's own errors the move corrects: ~1 mm (a dark top edge's last mm without depth; a textured

@@ -300,13 +300,23 @@ def test_a_filled_notch_is_judged_by_the_camera_that_filled_it() -> None:
     assert np.all(PlacedOutline.unmoved(ring).cameras_at(ring) == -1)
 
 
+def test_a_notch_shallower_than_the_edge_offset_limit_is_filled() -> None:
+    """A dent 0.7 mm deep over 5 points passes the edge-offset check's 0.8 mm but not the notch check where it is
+    sharp: the camera that shows the edge fills it as it fills a deeper one."""
+    ring, outward, dent = notched(0.7)
+    zero = np.zeros(len(ring))
+    move, by = notch_fill(ring, outward, (zero, dent), (zero, dent), always, disc_depth(RADIUS))
+    filled = dent > EDGE_MOVE_MIN_MM
+    assert filled.any() and np.allclose(move[filled], dent[filled]) and np.all(by[filled] == 1)
+
+
 @pytest.mark.parametrize("case", ["no notch", "shallow", "overshoot", "no depth", "table in the gap", "ambiguous"])
 def test_no_fill_without_a_notch_depth_and_one_clear_edge(case: str) -> None:
-    """The notch is filled only where the outline has one (deeper than the edge-offset check's limit below its
-    course either side), the camera's edge stays on that course (a bulge beyond it is a shadow or a reflection
+    """The notch is filled only where the outline has one (deeper than the readings' scatter below its course
+    either side), the camera's edge stays on that course (a bulge beyond it is a shadow or a reflection
     in one mask), depth measured the sole's height across the gap and no table point in it, and both of the
     camera's readings put the edge beyond."""
-    depth = {"shallow": 0.7}.get(case, 1.5)
+    depth = {"shallow": 0.45}.get(case, 1.5)
     ring, outward, dent = notched(depth)
     right = dent + (1.5 if case == "overshoot" else 0.0)
     if case == "no notch":
