@@ -389,12 +389,12 @@ def _pixel_mm(reconstruction: Reconstruction) -> float | None:
 
 
 def _depth_per_pixel_mm(reconstruction: Reconstruction) -> float | None:
-    """The depth one disparity pixel spans at the table (mm): Z^2 / (f B); None without a stereo calibration."""
-    calib, to_table = reconstruction.calibration, reconstruction.camera_to_table
-    if calib is None or to_table is None:
+    """The depth one disparity pixel spans at the table (mm): Z^2 / (f B), with Z = f x `_pixel_mm`; None without a
+    stereo calibration."""
+    pixel = _pixel_mm(reconstruction)
+    if pixel is None or reconstruction.calibration is None:
         return None
-    distance = abs(float(to_table[2, 3]))
-    return distance * distance / (calib.focal_px * calib.baseline_mm)
+    return pixel * pixel * reconstruction.calibration.focal_px / reconstruction.calibration.baseline_mm
 
 
 def _implausible(length: float, heel_z: float, toe_z: float) -> str | None:
