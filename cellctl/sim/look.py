@@ -13,7 +13,8 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus" and "dim-exposure" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole" and
+"large-sole" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ NOISE_LEVELS = ("normal", "heavy")
 RIGS = ("default", "distorted", "wide", "narrow")  # cellctl.sim.rig.rig_for
 HEADINGS = ("along", "any")
 PLACEMENTS = ("in-view", "off-image")
+SIZES = ("normal", "small", "large")  # cellctl.sim.sole.SIZE_LENGTH_RANGES_MM
 DEFAULT_RIGHT_GAIN = 0.97  # the two cameras never expose identically
 
 
@@ -66,6 +68,7 @@ class SceneLook:
     rig_tilt_deg: float = 0.0  # the rig mounted this far off square to the table (0: the usual, render.RIG_TILT_DEG)
     heading: str = "along"  # HEADINGS: along = heel-toe axis within 35 degrees of the image rows, any = any heading
     placement: str = "in-view"  # PLACEMENTS: off-image = one end runs up to OFF_IMAGE_PX beyond an image's edge
+    size: str = "normal"  # SIZES: the sole's length range (normal 240-300 mm, small 170-240, large 300-340)
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -78,6 +81,7 @@ class SceneLook:
             ("rig", RIGS),
             ("heading", HEADINGS),
             ("placement", PLACEMENTS),
+            ("size", SIZES),
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
@@ -283,6 +287,10 @@ VARIATIONS: dict[str, Variation] = {
             _SURFACE_LOST,
             in_matrix=False,
         ),
+        # Outside the matrix for the same reason: the matrix's soles are 240-300 mm long; another cell feeds
+        # children's and small women's soles, or the largest men's. Measurable like any sole.
+        Variation("small-sole", "a short sole, 170-240 mm long", ("size",), _set(size="small"), in_matrix=False),
+        Variation("large-sole", "a long sole, 300-340 mm long", ("size",), _set(size="large"), in_matrix=False),
         Variation(
             "off-image",
             "the sole runs off the image at one end: unmeasurable by design",

@@ -34,6 +34,13 @@ from cellctl.sim.sole_profile import EdgeProfile, EndShape
 
 # Parameter ranges of the generated soles (mm unless noted).
 LENGTH_RANGE_MM = (240.0, 300.0)
+# Per SceneLook.size: the sole's length range. "normal" is the matrix's (men's and most women's sizes); the others
+# are what another cell feeds: children's and small women's soles, and the largest men's.
+SIZE_LENGTH_RANGES_MM: dict[str, tuple[float, float]] = {
+    "normal": LENGTH_RANGE_MM,
+    "small": (170.0, 240.0),
+    "large": (300.0, 340.0),
+}
 HEEL_HEIGHT_RANGE_MM = (20.0, 35.0)
 TOE_HEIGHT_RANGE_MM = (8.0, 28.0)
 # Per SceneLook.height: heel and toe height ranges and the cross curvature's bound.
@@ -198,7 +205,7 @@ class SoleShape:
 def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
     """A plausible sole with the parameter ranges of the simulator, and the ends and edge of `look`."""
     heel_range, toe_range, cross_bound = HEIGHT_CLASS_RANGES_MM[look.height]
-    length = rng.uniform(*LENGTH_RANGE_MM)
+    length = rng.uniform(*SIZE_LENGTH_RANGES_MM[look.size])
     heel_half = length * rng.uniform(0.115, 0.135)
     ball_half = length * rng.uniform(0.170, 0.190)
     heel_height = rng.uniform(*heel_range)

@@ -217,6 +217,24 @@ def test_height_classes(height: str, heel_range: tuple[float, float]) -> None:
         assert low <= max(truth.heel_height_mm, truth.toe_height_mm) <= high
 
 
+@pytest.mark.parametrize(("variation", "low", "high"), [("small-sole", 170.0, 240.0), ("large-sole", 300.0, 340.0)])
+def test_sole_sizes_outside_the_matrix(variation: str, low: float, high: float) -> None:
+    """The matrix's soles are 240-300 mm long; small-sole and large-sole draw other lengths from the same shapes
+    (the true length is the model's, so within a mm of the drawn one), and a plain look draws as it always did."""
+    lengths = []
+    for seed in range(6):
+        shape = shape_with(look_for((variation,), seed), seed)
+        lengths.append(SoleModel(shape, SolePose(0, 0, 0, False)).truth().length_mm)
+    assert low - 1.0 <= min(lengths) and max(lengths) <= high + 1.0
+    assert variation not in MATRIX_ENTRIES and not fair_refusals((variation,))
+    # The plain draws of every earlier session (the rendered matrices' soles): the size switch took no draw.
+    assert [shape_with(SceneLook(), seed).length for seed in range(3)] == pytest.approx(
+        [278.218, 270.709, 255.697], abs=1e-3
+    )
+    with pytest.raises(ValueError, match="size"):
+        SceneLook(size="huge")
+
+
 # ---- appearance -----------------------------------------------------------------------------------------
 
 
