@@ -13,8 +13,8 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole" and
-"large-sole" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
+"large-sole", "narrow-sole" and "wide-sole" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ RIGS = ("default", "distorted", "wide", "narrow")  # cellctl.sim.rig.rig_for
 HEADINGS = ("along", "any")
 PLACEMENTS = ("in-view", "off-image")
 SIZES = ("normal", "small", "large")  # cellctl.sim.sole.SIZE_LENGTH_RANGES_MM
+WIDTHS = ("normal", "narrow", "wide")  # cellctl.sim.sole.WIDTH_FRACTIONS
 DEFAULT_RIGHT_GAIN = 0.97  # the two cameras never expose identically
 
 
@@ -69,6 +70,7 @@ class SceneLook:
     heading: str = "along"  # HEADINGS: along = heel-toe axis within 35 degrees of the image rows, any = any heading
     placement: str = "in-view"  # PLACEMENTS: off-image = one end runs up to OFF_IMAGE_PX beyond an image's edge
     size: str = "normal"  # SIZES: the sole's length range (normal 240-300 mm, small 170-240, large 300-340)
+    width: str = "normal"  # WIDTHS: the ball's half-width 17-19 % of the length (narrow 14-16 %, wide 20-23 %)
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -82,6 +84,7 @@ class SceneLook:
             ("heading", HEADINGS),
             ("placement", PLACEMENTS),
             ("size", SIZES),
+            ("width", WIDTHS),
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
@@ -291,6 +294,16 @@ VARIATIONS: dict[str, Variation] = {
         # children's and small women's soles, or the largest men's. Measurable like any sole.
         Variation("small-sole", "a short sole, 170-240 mm long", ("size",), _set(size="small"), in_matrix=False),
         Variation("large-sole", "a long sole, 300-340 mm long", ("size",), _set(size="large"), in_matrix=False),
+        Variation(
+            "narrow-sole",
+            "a narrow sole (ball 28-32 % of the length)",
+            ("width",),
+            _set(width="narrow"),
+            in_matrix=False,
+        ),
+        Variation(
+            "wide-sole", "a wide sole (ball 40-46 % of the length)", ("width",), _set(width="wide"), in_matrix=False
+        ),
         Variation(
             "off-image",
             "the sole runs off the image at one end: unmeasurable by design",

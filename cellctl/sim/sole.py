@@ -41,6 +41,13 @@ SIZE_LENGTH_RANGES_MM: dict[str, tuple[float, float]] = {
     "small": (170.0, 240.0),
     "large": (300.0, 340.0),
 }
+# Per SceneLook.width: the heel's and the ball's half-widths as fractions of the length. "normal" is the matrix's;
+# a court shoe's or racing flat's sole is narrower, a boot's or a work shoe's wider.
+WIDTH_FRACTIONS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
+    "normal": ((0.115, 0.135), (0.170, 0.190)),
+    "narrow": ((0.095, 0.110), (0.140, 0.160)),
+    "wide": ((0.140, 0.160), (0.200, 0.230)),
+}
 HEEL_HEIGHT_RANGE_MM = (20.0, 35.0)
 TOE_HEIGHT_RANGE_MM = (8.0, 28.0)
 # Per SceneLook.height: heel and toe height ranges and the cross curvature's bound.
@@ -206,8 +213,9 @@ def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
     """A plausible sole with the parameter ranges of the simulator, and the ends and edge of `look`."""
     heel_range, toe_range, cross_bound = HEIGHT_CLASS_RANGES_MM[look.height]
     length = rng.uniform(*SIZE_LENGTH_RANGES_MM[look.size])
-    heel_half = length * rng.uniform(0.115, 0.135)
-    ball_half = length * rng.uniform(0.170, 0.190)
+    heel_fraction, ball_fraction = WIDTH_FRACTIONS[look.width]
+    heel_half = length * rng.uniform(*heel_fraction)
+    ball_half = length * rng.uniform(*ball_fraction)
     heel_height = rng.uniform(*heel_range)
     # A toe higher than the heel is not a shoe: draw the toe height up to the heel height.
     toe_height = rng.uniform(toe_range[0], min(toe_range[1], heel_height))

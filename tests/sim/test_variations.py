@@ -235,6 +235,16 @@ def test_sole_sizes_outside_the_matrix(variation: str, low: float, high: float) 
         SceneLook(size="huge")
 
 
+@pytest.mark.parametrize(("variation", "low", "high"), [("narrow-sole", 0.28, 0.32), ("wide-sole", 0.40, 0.46)])
+def test_sole_widths_outside_the_matrix(variation: str, low: float, high: float) -> None:
+    """The ball's width as a share of the length: 34-38 % in the matrix, narrower or wider here."""
+    for seed in range(6):
+        shape = shape_with(look_for((variation,), seed), seed)
+        assert low <= 2 * shape.ball_half_width / shape.length <= high
+        assert 2 * shape_with(SceneLook(), seed).ball_half_width / shape.length == pytest.approx(0.36, abs=0.021)
+    assert variation not in MATRIX_ENTRIES and not fair_refusals((variation,))
+
+
 # ---- appearance -----------------------------------------------------------------------------------------
 
 
