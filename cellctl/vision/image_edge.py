@@ -446,10 +446,10 @@ def blob_length_mm(reconstruction: Reconstruction) -> float:
 
 
 def mm_per_pixel(reconstruction: Reconstruction) -> float:
-    """Millimetres on the table per rectified pixel, at the left camera's height above the table."""
-    calib = reconstruction.calibration
-    assert calib is not None
-    return abs(float(reconstruction.camera_to_table[2, 3])) / calib.focal_px
+    """Millimetres on the table per rectified pixel (`Reconstruction.pixel_mm`) of a stereo reconstruction."""
+    pixel = reconstruction.pixel_mm
+    assert pixel is not None
+    return pixel
 
 
 @dataclass(frozen=True)

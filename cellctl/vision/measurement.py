@@ -326,7 +326,7 @@ def _outline_and_heights(
             )
     heel_z, toe_z = float(heights.z[0]), float(heights.z[1])
     base.update(heel_point=np.array([*heel_xy, heel_z]), toe_point=np.array([*toe_xy, toe_z]))
-    pixel_mm = _pixel_mm(reconstruction)
+    pixel_mm = reconstruction.pixel_mm
     if pixel_mm is not None:
         counts, _ = surface.grid.radius_medians(np.vstack([heel_xy, toe_xy]), HEIGHT_RADIUS_MM)
         sparse = check_height_support(("heel", "toe"), counts, np.pi * HEIGHT_RADIUS_MM**2 / pixel_mm**2)
@@ -373,25 +373,16 @@ def _glue(
 def _cover_radius(reconstruction: Reconstruction) -> float:
     """Radius holding MIN_CLOUD_POINTS where about half the pixels are measured (GLUE_COVER_RADIUS_MM at least):
     the same density of measurement asked of any rig, also one whose pixels cover more of the table."""
-    pixel_mm = _pixel_mm(reconstruction)
+    pixel_mm = reconstruction.pixel_mm
     if pixel_mm is None:
         return GLUE_COVER_RADIUS_MM
     return max(GLUE_COVER_RADIUS_MM, float(np.sqrt(2.0 * MIN_CLOUD_POINTS / np.pi)) * pixel_mm)
 
 
-def _pixel_mm(reconstruction: Reconstruction) -> float | None:
-    """A pixel's footprint on the table (mm): the camera's height above it over the focal length; None without a
-    stereo calibration (a true depth map)."""
-    calib, to_table = reconstruction.calibration, reconstruction.camera_to_table
-    if calib is None or to_table is None:
-        return None
-    return abs(float(to_table[2, 3])) / calib.focal_px
-
-
 def _depth_per_pixel_mm(reconstruction: Reconstruction) -> float | None:
-    """The depth one disparity pixel spans at the table (mm): Z^2 / (f B), with Z = f x `_pixel_mm`; None without a
-    stereo calibration."""
-    pixel = _pixel_mm(reconstruction)
+    """The depth one disparity pixel spans at the table (mm): Z^2 / (f B), with Z = f x `Reconstruction.pixel_mm`;
+    None without a stereo calibration."""
+    pixel = reconstruction.pixel_mm
     if pixel is None or reconstruction.calibration is None:
         return None
     return pixel * pixel * reconstruction.calibration.focal_px / reconstruction.calibration.baseline_mm

@@ -114,6 +114,14 @@ class Reconstruction(_SolePoints):
         return self.exposure_noise_dn is not None
 
     @property
+    def pixel_mm(self) -> float | None:
+        """A rectified pixel's footprint on the table (mm): the left camera's height above it over the focal
+        length; None without a stereo calibration (a true depth map)."""
+        if self.calibration is None:
+            return None
+        return abs(float(self.camera_to_table[2, 3])) / self.calibration.focal_px
+
+    @property
     def valid(self) -> bool:
         return True
 
