@@ -36,6 +36,7 @@ from cellctl.vision.change import (
     TEXTURE_SIGMAS,
     UNANIMOUS,
     ChangeTest,
+    _raised_change,
     _rim_ring,
 )
 
@@ -190,6 +191,8 @@ def changed_reference(
         fill &= cv2.erode((raw | fill).view(np.uint8), np.ones((3, 3), np.uint8)) > 0
         raw |= fill
     mask = np.greater(raw, still_table).view(np.uint8)
+    if raised is not None:
+        mask |= _raised_change(raw, residual, PIXEL_SIGMAS * test.sigma, raised).view(np.uint8)
     changed = cv2.medianBlur(mask, 3) > 0
     if raised is not None and RIM_RING:
         changed |= _rim_ring(changed, residual, PIXEL_SIGMAS * test.sigma, raised, raw, still_table)

@@ -307,3 +307,31 @@ def test_depth_alone_does_not_change_a_dark_tables_faintly_textured_pixels() -> 
         test.changed(current, reference, lifted=lifted)[beyond], test.changed(current, reference)[beyond]
     )
     assert not test.changed(current, reference, lifted=lifted)[beyond].any()
+
+
+def test_a_blotch_of_the_sole_that_passes_for_the_table_is_changed_where_depth_raises_it() -> None:
+    # A sole brighter than the textured table, with a blotch at its edge that shows the table's texture at a gain
+    # of 1, brighter by 4 noise floors (as a blotch of weakly textured black rubber fits the taught table by chance):
+    # the texture vote calls it still table and the mask bites into the sole there. On the raised sole its change
+    # of brightness, with the sole's sign, makes it the sole's; the fattened band of table beside the sole,
+    # unchanged, stays table.
+    rng = np.random.default_rng(41)
+    shape = (160, 200)
+    table_texture = 110.0 + 6.0 * _smooth_noise(rng, shape)
+    reference = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    sole, table = _sole_with(shape)
+    current[sole] = 150.0 + rng.normal(0.0, 1.0, int(sole.sum())).astype(np.float32)
+    test = ChangeTest.fit(current, reference, table)
+    assert test is not None
+    blotch = np.zeros(shape, bool)
+    blotch[94:120, 70:120] = True  # 26 px deep at the sole's lower edge (row 119)
+    current[blotch] = table_texture[blotch] + 4.0 * change.PIXEL_SIGMAS * test.sigma
+    current[blotch] += rng.normal(0.0, 1.0, int(blotch.sum())).astype(np.float32)
+    inner = cv2.erode(blotch.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+    raised = cv2.dilate(sole.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0  # fattened 4 px beyond the edge
+    beyond = ~(cv2.dilate(sole.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+    assert test.changed(current, reference)[inner].mean() < 0.5
+    changed = test.changed(current, reference, raised=raised)
+    assert changed[inner].all()
+    assert not changed[beyond & raised].any()
