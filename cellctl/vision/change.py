@@ -86,7 +86,9 @@ RIM_RING = True
 # table, and the half-contrast test takes its pixels for the blended edge: both cameras' masks bit 1.5 mm into the
 # sole over 8 mm at the same spot, the outline followed, and the result was published with a glue point 1.27 mm
 # off (wide-sole 37319; docs/sole-benchmark.md, thirty-first round). The table beside a fattened depth step is
-# unchanged (its residual within the noise), so depth adds nothing there, and a shadow on it is lit as carried.
+# unchanged (its residual within the noise), so depth adds nothing there; only the sign of the change that
+# dominates round the pixel counts, so a cast shadow's contact band beside a white sole, darker than the table
+# under the sole's fattened depth, is not taken (test_change's contact shadow failed without that).
 RAISED_CHANGE_FLOORS = 2.0
 # Where the caller's depth lifts a pixel onto the sole (`lifted`: a high point on it, no table-level point within
 # reach), the pixel is changed unless the table's own texture still votes near it. A grey sole on a grey table
