@@ -192,7 +192,7 @@ def changed_reference(
         raw |= fill
     mask = np.greater(raw, still_table).view(np.uint8)
     if raised is not None:
-        mask |= _raised_change(raw, residual, PIXEL_SIGMAS * test.sigma, raised).view(np.uint8)
+        mask |= _raised_change(raw, residual, PIXEL_SIGMAS * test.sigma, raised, still_table).view(np.uint8)
     changed = cv2.medianBlur(mask, 3) > 0
     if raised is not None and RIM_RING:
         changed |= _rim_ring(changed, residual, PIXEL_SIGMAS * test.sigma, raised, raw, still_table)
