@@ -235,7 +235,7 @@ class ChangeTest:
             )
             # Not the outermost pixel of what is changed with it: a pixel partly covered by a strong step (a white
             # sole's edge) is placed by the half-contrast test, not by depth (fattened, it lifts that pixel too).
-            fill &= cv2.erode((raw | fill).view(np.uint8), np.ones((3, 3), np.uint8)) > 0
+            fill &= _not_outermost(raw, fill)
             raw |= fill
         mask = np.greater(raw, still_table).view(np.uint8)  # (raw or texture gone) and not still table
         if raised is not None:
@@ -353,7 +353,14 @@ def _raised_change(
     clear = np.where(np.abs(residual) > floor, residual, 0.0).astype(np.float32)
     dominant = cv2.boxFilter(clear, -1, (CONTRAST_WINDOW_PX, CONTRAST_WINDOW_PX), normalize=False)
     over = raised & still_table & (np.abs(residual) > RAISED_CHANGE_FLOORS * floor) & (residual * dominant > 0)
-    return over & (cv2.erode((raw | over).view(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+    return over & _not_outermost(raw, over)
+
+
+def _not_outermost(raw: np.ndarray, added: np.ndarray) -> np.ndarray:
+    """Pixels all of whose 3 x 3 neighbours pass the pixel test (`raw`) or are `added` by depth: a pixel partly
+    covered by the sole's edge stays the half-contrast test's to place, not depth's (fattened, it lifts that
+    pixel too)."""
+    return cv2.erode((raw | added).view(np.uint8), np.ones((3, 3), np.uint8)) > 0
 
 
 def _rim_ring(

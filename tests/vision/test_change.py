@@ -185,6 +185,15 @@ def _sole_with(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     return sole, table
 
 
+def _grey_table(rng: np.random.Generator, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A grey table's texture (110 DN, 6 DN of texture) and two views of it, taught (reference) and now (current),
+    each with 1 DN of sensor noise."""
+    table_texture = 110.0 + 6.0 * _smooth_noise(rng, shape)
+    reference = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    current = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    return table_texture, reference, current
+
+
 def test_a_black_sole_on_a_grey_table_is_not_a_shadow_where_depth_raises_it() -> None:
     # A black sole at half the grey table's brightness, where a few windows (7 px patches in a 14 px grid, a
     # quarter of the windows at most) show the table's texture at that factor, as a black sole's own texture
@@ -192,9 +201,7 @@ def test_a_black_sole_on_a_grey_table_is_not_a_shadow_where_depth_raises_it() ->
     # pixels round them (15 % of the sole lost); on the raised sole a minority of windows does not make a shadow.
     rng = np.random.default_rng(22)
     shape = (160, 200)
-    table_texture = 110.0 + 6.0 * _smooth_noise(rng, shape)
-    reference = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    table_texture, reference, current = _grey_table(rng, shape)
     sole, table = _sole_with(shape)
     own = 60.0 + _smooth_noise(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
     current[sole] = own[sole]
@@ -266,9 +273,7 @@ def _grey_on_grey(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.
     """A grey table (texture 6 DN, noise 1 DN) with a grey sole of its mean brightness whose own texture is
     fainter (3.5 DN, as the simulated grey rubber): (current, reference, sole, table fitted round it)."""
     shape = (160, 200)
-    table_texture = 110.0 + 6.0 * _smooth_noise(rng, shape)
-    reference = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    _, reference, current = _grey_table(rng, shape)
     sole, table = _sole_with(shape)
     own = 110.0 + 3.5 * _smooth_noise(rng, shape) + rng.normal(0.0, 1.0, shape).astype(np.float32)
     current[sole] = own[sole]
@@ -317,9 +322,7 @@ def test_a_blotch_of_the_sole_that_passes_for_the_table_is_changed_where_depth_r
     # unchanged, stays table.
     rng = np.random.default_rng(41)
     shape = (160, 200)
-    table_texture = 110.0 + 6.0 * _smooth_noise(rng, shape)
-    reference = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
-    current = table_texture + rng.normal(0.0, 1.0, shape).astype(np.float32)
+    table_texture, reference, current = _grey_table(rng, shape)
     sole, table = _sole_with(shape)
     current[sole] = 150.0 + rng.normal(0.0, 1.0, int(sole.sum())).astype(np.float32)
     test = ChangeTest.fit(current, reference, table)
