@@ -32,6 +32,7 @@ GLUE_HEIGHT_RING_MM = 6.0
 GLUE_RING_STRIDE = 2
 GLUE_OUTLIER_MM = 1.5  # a lone patch height this far from its neighbours' median is a failed fit
 GLUE_NORMAL_SMOOTHING_MM = 12.0  # slopes for the normals: width of the local plane fit
+GLUE_NORMAL_TIP_SMOOTHING_MM = 16.0  # round a tip: width of the quadratic fit (local_fit.TIP_TURN_DEG)
 # The patch-overlap noise model (sample_variance) against the slopes' true errors: over the 113 measured soles of
 # the three matrix sets (72k gradient components) the cubic fits' errors are 1.45 x their propagated sd
 # (median-based; 1.25 on black soles, where the noise dominates) and 1.68 x at the 95th percentile (the standard
@@ -143,8 +144,9 @@ def _slopes(
     # normal down (black: 5.1 -> 5.0, 6.1 -> 4.1, 4.6 -> 3.6, 3.7 -> 2.3 degrees), a sole's top being far
     # flatter over 15 mm than the tolerance's 5 degrees.
     # Where the slope changes along the path within the fit (a tall sole's heel seat running into its waist)
-    # the plane takes up the slope a few mm away; there the fit adds the slope's change along the path, where
-    # that lowers the expected error (cellctl.vision.local_fit.slope_gradients).
+    # the plane takes up the slope a few mm away; there the fit adds the slope's change along the path, and round
+    # a tip (a toe rising to it) a wider full quadratic, where that lowers the expected error
+    # (cellctl.vision.local_fit.slope_gradients).
     variance = np.concatenate([path_variance, inner_variance])
     gradient, _ = slope_gradients(
         path_xy,
@@ -154,6 +156,7 @@ def _slopes(
         variance,
         GLUE_NORMAL_SMOOTHING_MM,
         spacing_mm,
+        GLUE_NORMAL_TIP_SMOOTHING_MM,
     )
     normals = np.column_stack([-gradient, np.ones(len(path_xy))])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)

@@ -55,7 +55,7 @@ def test_slope_change_along_the_path_is_followed_where_the_plane_would_take_up_t
     xy = np.vstack([path, ring])
     z = _seat_into_ramp(xy) + np.random.default_rng(1).normal(0.0, 0.03, len(xy))
     variance = np.full(len(xy), 0.03**2)
-    gradient, cubic = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
+    gradient, cubic = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0, 16.0)
     _, plane = local_planes(path, xy, z, 12.0)
     seat = np.flatnonzero((path[:, 0] > -8.0) & (path[:, 0] < -2.0))  # flat, 2-8 mm before the ramp starts
     assert np.all(plane[seat, 0] > 0.02)  # the plane takes up the ramp: > 1.1 degrees off
@@ -63,18 +63,35 @@ def test_slope_change_along_the_path_is_followed_where_the_plane_would_take_up_t
     assert cubic[seat].all()
 
 
+def test_a_slope_across_the_path_is_not_shrunk() -> None:
+    # A top rising 0.45 mm per mm inward (24 degrees): the path and its ring 15 mm in fix the slope across, so
+    # the fit's ridge must not pull it towards flat (GRADIENT_RIDGE_MM2 took 2 % off it: 0.441).
+    path, ring, tangent = _straight_path_with_ring()
+    xy = np.vstack([path, ring])
+    z = 20.0 + 0.45 * xy[:, 1]
+    gradient, _ = slope_gradients(path, tangent, xy, z, np.full(len(xy), 0.05**2), 12.0, 2.0, 16.0)
+    middle = slice(20, -20)  # the open ends of this straight stretch have samples on one side only
+    np.testing.assert_allclose(gradient[middle, 1], 0.45, rtol=0.005)
+    np.testing.assert_allclose(gradient[middle, 0], 0.0, atol=1e-9)
+
+
 def test_noise_alone_keeps_the_plane() -> None:
     path, ring, tangent = _straight_path_with_ring()
     xy = np.vstack([path, ring])
     rng = np.random.default_rng(2)
-    worse = []
-    for _ in range(10):
+    errors, plane_errors, taken = [], [], []
+    for _ in range(40):
         z = 10.0 + 0.05 * xy[:, 0] + rng.normal(0.0, 0.3, len(xy))  # a sloping plane, black rubber's noise
-        gradient, cubic = slope_gradients(path, tangent, xy, z, np.full(len(xy), 0.3**2), 12.0, 2.0)
+        gradient, cubic = slope_gradients(path, tangent, xy, z, np.full(len(xy), 0.3**2), 12.0, 2.0, 16.0)
         _, plane = local_planes(path, xy, z, 12.0)
-        assert cubic.mean() < 0.4  # the expected-error rule takes the cubic by chance at ~30 % of the points...
-        worse.append(np.max(np.abs(gradient[:, 0] - 0.05)) / np.max(np.abs(plane[:, 0] - 0.05)))
-    assert np.median(worse) < 1.3  # ...where it costs little
+        errors.append(np.abs(gradient[:, 0] - 0.05))
+        plane_errors.append(np.abs(plane[:, 0] - 0.05))
+        taken.append(cubic.mean())
+    # The expected-error rule takes the cubic by chance at ~7 % of the points (measured 0.07 over these 40 paths),
+    # and there its noise is larger: the 95th percentile of the slope errors is 1.6 x the plane's (the same before
+    # and after SLOPE_RIDGE_MM2; 10 paths and their worst points, as this test read before, scatter 1.05-6.5 x).
+    assert np.mean(taken) < 0.15
+    assert np.quantile(np.concatenate(errors), 0.95) < 1.8 * np.quantile(np.concatenate(plane_errors), 0.95)
 
 
 def test_no_cubic_where_the_path_folds_round_a_pointed_end() -> None:
@@ -84,8 +101,53 @@ def test_no_cubic_where_the_path_folds_round_a_pointed_end() -> None:
     tangent = np.gradient(path, axis=0)
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
     z = 20.0 + 0.3 * path[:, 0] + 0.01 * path[:, 0] ** 2
-    _, cubic = slope_gradients(path, tangent, path, z, np.full(len(z), 0.01), 12.0, 2.0)
+    _, cubic = slope_gradients(path, tangent, path, z, np.full(len(z), 0.01), 12.0, 2.0, 16.0)
     assert not cubic[20:41].any()  # within 2 widths of the tip
+
+
+def _stadium_path(radius: float, length: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed path round two half circles of `radius` (centres (-25, 0) and (-25 - length, 0)) joined by straight
+    sides, points `spacing` apart (counter-clockwise), and its unit inward normals."""
+    arc = np.pi * radius
+    s = np.arange(0.0, 2.0 * (arc + length), spacing)
+    points, inward = [], []
+    for t in s:
+        if t < arc:  # the toe's half circle, from (-25, -radius) round the tip to (-25, radius)
+            angle = -np.pi / 2 + t / radius
+            centre = np.array([-25.0, 0.0])
+        elif t < arc + length:  # the upper side, towards -x
+            points.append([-25.0 - (t - arc), radius])
+            inward.append([0.0, -1.0])
+            continue
+        elif t < 2.0 * arc + length:  # the heel's half circle
+            angle = np.pi / 2 + (t - arc - length) / radius
+            centre = np.array([-25.0 - length, 0.0])
+        else:  # the lower side, back towards the toe
+            points.append([-25.0 - length + (t - 2.0 * arc - length), -radius])
+            inward.append([0.0, 1.0])
+            continue
+        outward = np.array([np.cos(angle), np.sin(angle)])
+        points.append(centre + radius * outward)
+        inward.append(-outward)
+    return np.array(points), np.array(inward)
+
+
+def test_a_toe_rising_to_its_tip_keeps_its_slope_where_the_path_turns_round_it() -> None:
+    # A round toe (the path 23 mm round its cap's centre, the ring 15 mm further in) whose top rises to the tip and
+    # curves up as a toe spring does: z = 20 + 0.37 x' + 0.008 x'^2 (x' = x + 2, 0 at the path's tip). At the tip
+    # the slope is 0.37 (20 degrees); a plane through the path and the ring takes their mean slope, 0.25.
+    path, inward = _stadium_path(23.0, 100.0, 2.0)
+    ring = path + 15.0 * inward
+    tangent = np.column_stack([inward[:, 1], -inward[:, 0]])
+    xy = np.vstack([path, ring])
+    ahead = xy[:, 0] + 2.0
+    z = 20.0 + 0.37 * ahead + 0.008 * ahead**2 + np.random.default_rng(4).normal(0.0, 0.05, len(xy))
+    gradient, _ = slope_gradients(path, tangent, xy, z, np.full(len(xy), 0.05**2), 12.0, 2.0, 16.0)
+    tip = int(np.argmax(path[:, 0]))
+    true = 0.37 + 2.0 * 0.008 * (path[tip, 0] + 2.0)
+    np.testing.assert_allclose(gradient[tip], [true, 0.0], atol=0.02)  # 1 degree; the plane alone: 0.12 short
+    _, plane = local_planes(path[tip : tip + 1], xy, z, 12.0)
+    assert plane[0, 0] < true - 0.08
 
 
 def test_disc_overlap() -> None:
@@ -123,10 +185,10 @@ def test_gradients_in_passes_over_the_samples_within_reach_are_those_over_all(mo
     assert len(path) > 2 * local_fit.QUERY_CHUNK and len(path) % local_fit.QUERY_CHUNK
     # the path is longer than a pass's reach: the passes leave samples out
     assert np.ptp(path[:, 0]) > 2.0 * local_fit.FIT_REACH_SIGMAS * 12.0
-    in_passes = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
+    in_passes = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0, 16.0)
     monkeypatch.setattr(local_fit, "QUERY_CHUNK", len(path))
     monkeypatch.setattr(local_fit, "FIT_REACH_SIGMAS", np.inf)
-    one_pass = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0)
+    one_pass = slope_gradients(path, tangent, xy, z, variance, 12.0, 2.0, 16.0)
     np.testing.assert_allclose(in_passes[0], one_pass[0], rtol=0.0, atol=1e-6)
     np.testing.assert_array_equal(in_passes[1], one_pass[1])
     assert in_passes[1].any() and not in_passes[1].all()
