@@ -75,6 +75,21 @@ def test_a_slope_across_the_path_is_not_shrunk() -> None:
     np.testing.assert_allclose(gradient[middle, 0], 0.0, atol=1e-9)
 
 
+def test_a_flat_seat_keeps_its_slope_just_before_the_top_starts_to_bend() -> None:
+    # A flat seat whose top starts to curve down into the waist at x = 0 (z rising 0.012 x^2 beyond it, the
+    # curvature jumping there): the cubic along the path, smooth through the jump, tilts the seat's normal a few mm
+    # before it; the knee model is the top's own shape.
+    path, ring, tangent = _straight_path_with_ring()
+    xy = np.vstack([path, ring])
+    z = 40.0 + 0.012 * np.clip(xy[:, 0], 0.0, None) ** 2 + np.random.default_rng(5).normal(0.0, 0.03, len(xy))
+    gradient, cubic = slope_gradients(path, tangent, xy, z, np.full(len(xy), 0.03**2), 12.0, 2.0, 16.0)
+    seat = np.flatnonzero((path[:, 0] > -7.0) & (path[:, 0] < -1.0))  # 2-6 mm before the bend
+    assert cubic[seat].all()
+    assert np.max(np.abs(gradient[seat, 0])) < 0.005  # measured 0.001; the cubic alone: 0.007-0.036
+    bend = np.flatnonzero((path[:, 0] > 2.0) & (path[:, 0] < 10.0))
+    np.testing.assert_allclose(gradient[bend, 0], 0.024 * path[bend, 0], atol=0.005)
+
+
 def test_noise_alone_keeps_the_plane() -> None:
     path, ring, tangent = _straight_path_with_ring()
     xy = np.vstack([path, ring])
