@@ -197,11 +197,12 @@ def _moment_fit(
     normal = sums.copy()
     ridge = np.full(sums.shape[1], 1e-9)
     ridge[0], ridge[1:3] = 0.0, SLOPE_RIDGE_MM2
-    normal += (ridge[None, :] * total[:, None])[:, :, None] * np.eye(sums.shape[1])
+    # (and an absolute 1e-12 for a query with no sample within reach: it fits as nothing)
+    normal += (ridge[None, :] * total[:, None] + 1e-12)[:, :, None] * np.eye(sums.shape[1])
     solution = np.linalg.solve(normal, zsums[..., None])[..., 0]
     # sum w (z - B b)^2 = sum w z^2 - 2 b . (B' W z) + b' (B' W B) b, with the unridged sums.
     residual = zz - 2.0 * np.sum(solution * zsums, axis=1) + np.einsum("kp,kpq,kq->k", solution, sums, solution)
-    return solution, np.maximum(residual, 0.0) / total
+    return solution, np.maximum(residual, 0.0) / np.maximum(total, 1e-300)
 
 
 def _knee(
@@ -223,23 +224,35 @@ def _knee(
 
     cubic_sums, cubic_z = moments(plane_terms + [u * u, u * u * u])
     _, cubic_residual = _moment_fit(cubic_sums, cubic_z, zz, total)
-    sums, zsums = np.zeros((len(at), 4, 4)), np.zeros((len(at), 4))
-    sums[:, :3, :3], zsums[:, :3] = cubic_sums[:, :3, :3], cubic_z[:, :3]
-    best, gradient = np.full(len(at), np.inf), np.zeros((len(at), 2))
-    for knot in np.arange(-KNEE_KNOT_REACH_MM, KNEE_KNOT_REACH_MM + 1e-9, KNEE_KNOT_STEP_MM):
-        for side in (1.0, -1.0):
-            bend = np.clip(side * (u - knot), 0.0, None) ** 2
-            weighted = w * bend
-            cross = [weighted.sum(axis=1), np.einsum("km,km->k", weighted, dx), np.einsum("km,km->k", weighted, dy)]
-            sums[:, 3, :3] = sums[:, :3, 3] = np.column_stack(cross)
-            sums[:, 3, 3] = np.einsum("km,km->k", weighted, bend)
-            zsums[:, 3] = weighted @ z
-            solution, residual = _moment_fit(sums, zsums, zz, total)
-            # The slope at the query: the plane's, and the bend's where the query lies on its curving side.
-            slope = solution[:, 1:3] + tangent * (2.0 * side * max(0.0, -side * knot) * solution[:, 3])[:, None]
-            fitter = residual < best
-            best[fitter], gradient[fitter] = residual[fitter], slope[fitter]
-    return gradient, best / cubic_residual
+    # Every knot and side at once (B = 2 x knots, on K queries and M samples): few queries take the cubic in a pass,
+    # so a loop over the knots would spend its time in numpy's per-call overhead.
+    knots = np.arange(-KNEE_KNOT_REACH_MM, KNEE_KNOT_REACH_MM + 1e-9, KNEE_KNOT_STEP_MM)
+    knot = np.concatenate([knots, knots])[:, None, None]
+    side = np.repeat([1.0, -1.0], len(knots))[:, None, None]
+    bend = np.clip(side * (u[None] - knot), 0.0, None) ** 2  # B x K x M
+    weighted = w[None] * bend
+    sums = np.broadcast_to(np.zeros((4, 4)), (len(bend), len(at), 4, 4)).copy()
+    sums[:, :, :3, :3] = cubic_sums[None, :, :3, :3]
+    sums[:, :, 3, 0] = sums[:, :, 0, 3] = weighted.sum(axis=2)
+    sums[:, :, 3, 1] = sums[:, :, 1, 3] = np.einsum("bkm,km->bk", weighted, dx)
+    sums[:, :, 3, 2] = sums[:, :, 2, 3] = np.einsum("bkm,km->bk", weighted, dy)
+    sums[:, :, 3, 3] = np.einsum("bkm,bkm->bk", weighted, bend)
+    zsums = np.concatenate(
+        [np.broadcast_to(cubic_z[None, :, :3], (len(bend), len(at), 3)), (weighted @ z)[..., None]], axis=2
+    )
+    flat = len(bend) * len(at)
+    solution, residual = _moment_fit(
+        sums.reshape(flat, 4, 4), zsums.reshape(flat, 4), np.tile(zz, len(bend)), np.tile(total, len(bend))
+    )
+    solution, residual = solution.reshape(len(bend), len(at), 4), residual.reshape(len(bend), len(at))
+    # The slope at the query: the plane's, and the bend's where the query lies on its curving side.
+    lever = 2.0 * side[:, :, 0] * np.clip(-side[:, :, 0] * knot[:, :, 0], 0.0, None)  # B x 1
+    slopes = solution[..., 1:3] + tangent[None] * (lever * solution[..., 3])[..., None]
+    fittest = np.argmin(residual, axis=0)
+    best = residual[fittest, np.arange(len(at))]
+    gradient = slopes[fittest, np.arange(len(at))]
+    # A cubic that fits exactly (or no samples) leaves a knee nothing to explain.
+    return gradient, np.where(cubic_residual > 0.0, best / np.maximum(cubic_residual, 1e-300), np.inf)
 
 
 def slope_gradients(
