@@ -10,6 +10,8 @@ around it, is fitted exactly.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 # Weight of a zero gradient (mm^2, like a sample at that squared distance): keeps a fit over samples along
@@ -132,42 +134,71 @@ def unfolded(tangent: np.ndarray, sigma_mm: float, spacing_mm: float) -> np.ndar
     """Per point of a closed path (unit tangents K x 2, samples `spacing_mm` apart): whether the path turns less
     than FOLD_TURN_DEG within 2 sigma either side, so that the distance along its tangent means something over a
     fit of width `sigma_mm` (round a pointed end it mixes both sides)."""
-    reach = max(1, int(round(2.0 * sigma_mm / spacing_mm)))
-    turn = np.min([np.sum(tangent * np.roll(tangent, k, axis=0), axis=1) for k in range(-reach, reach + 1)], axis=0)
+    angles = _tangent_windows(tangent, sigma_mm, spacing_mm)
+    turn = np.min(np.cos(angles - angles[:, angles.shape[1] // 2, None]), axis=1)
     return turn > np.cos(np.radians(FOLD_TURN_DEG))
 
 
 def round_a_tip(tangent: np.ndarray, sigma_mm: float, spacing_mm: float) -> np.ndarray:
     """Per point of a closed path (unit tangents K x 2, samples `spacing_mm` apart): whether the path turns by more
-    than TIP_TURN_DEG in all within 2 sigma either side (any two of its tangents there that far apart)."""
+    than TIP_TURN_DEG in all within 2 sigma either side (any two of its tangents there that far apart). With the
+    tangents' directions unwrapped along the path (steps below 180 degrees), two are more than 90 degrees apart
+    exactly where the window's directions span more than 90 degrees: every difference lies within the span, and a
+    span beyond 90 degrees is a difference beyond 90 or, past 270, is walked in steps of under 180 that land between."""
+    angles = _tangent_windows(tangent, sigma_mm, spacing_mm)
+    return np.ptp(angles, axis=1) > np.radians(TIP_TURN_DEG)
+
+
+def _tangent_windows(tangent: np.ndarray, sigma_mm: float, spacing_mm: float) -> np.ndarray:
+    """Per point of a closed path: the directions (radians, K x (2 reach + 1)) of its tangents within 2 sigma either
+    side, unwrapped along the path so that each window is continuous (the path closes on itself: the window round
+    its seam reads past it)."""
     reach = max(1, int(round(2.0 * sigma_mm / spacing_mm)))
-    window = np.stack([np.roll(tangent, k, axis=0) for k in range(-reach, reach + 1)])  # (2 reach + 1) x K x 2
-    closest = np.ones(len(tangent))
-    for first in range(len(window)):
-        closest = np.minimum(closest, np.min(np.sum(window[first][None] * window[first:], axis=2), axis=0))
-    return closest < np.cos(np.radians(TIP_TURN_DEG))
+    around = tangent[np.arange(-reach, len(tangent) + reach) % len(tangent)]
+    angles = np.unwrap(np.arctan2(around[:, 1], around[:, 0]))
+    return np.lib.stride_tricks.sliding_window_view(angles, 2 * reach + 1)
 
 
-def _plane_and_cubic(
-    at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float, tangent: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per query: the gradients (K x 2) and the rows of the linear estimators giving them (K x 2 x M) of two
-    weighted fits, z = a + g . d and z = a + g . d + c2 u^2 + c3 u^3 (u = d . tangent); the same weights as
-    local_planes, the ridge SLOPE_RIDGE_MM2 on g. Samples must be finite."""
+class _Offsets(NamedTuple):
+    """A pass's samples seen from each of its queries (K x M): offsets in the table plane, Gaussian weights, and
+    the distance along the path (u = d . tangent)."""
+
+    dx: np.ndarray
+    dy: np.ndarray
+    w: np.ndarray
+    u: np.ndarray
+
+    def rows(self, index: np.ndarray) -> _Offsets:
+        return _Offsets(self.dx[index], self.dy[index], self.w[index], self.u[index])
+
+
+def _offsets(at: np.ndarray, xy: np.ndarray, sigma_mm: float, tangent: np.ndarray) -> _Offsets:
+    """The samples xy (M x 2) from the queries `at` (K x 2, unit tangents K x 2), weighted as local_planes."""
     dx = xy[None, :, 0] - at[:, None, 0]
     dy = xy[None, :, 1] - at[:, None, 1]
     w = np.exp(-(dx * dx + dy * dy) / (2.0 * sigma_mm**2))
-    u = dx * tangent[:, 0:1] + dy * tangent[:, 1:2]
+    return _Offsets(dx, dy, w, dx * tangent[:, 0:1] + dy * tangent[:, 1:2])
+
+
+def _plane_and_cubic(
+    seen: _Offsets, z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Per query: the gradients (K x 2) and the rows of the linear estimators giving them (K x 2 x M) of two
+    weighted fits, z = a + g . d and z = a + g . d + c2 u^2 + c3 u^3; the ridge SLOPE_RIDGE_MM2 on g. Also the
+    cubic's moments for _knee: its terms' weighted cross sums (K x 5 x 5, unridged) and their sums with z (K x 5).
+    Samples must be finite."""
+    dx, dy, w, u = seen
     u2 = u * u
     basis = np.stack([np.ones_like(dx), dx, dy, u2, u2 * u], axis=1)  # K x 5 x M
     weighted = basis * w[:, None, :]
-    normal = weighted @ basis.transpose(0, 2, 1)  # K x 5 x 5
+    moments = weighted @ basis.transpose(0, 2, 1)  # K x 5 x 5
+    normal = moments.copy()
     ridge = SLOPE_RIDGE_MM2 * w.sum(axis=1)
     normal[:, 1, 1] += ridge
     normal[:, 2, 2] += ridge
     plane_rows = np.linalg.inv(normal[:, :3, :3])[:, 1:3] @ weighted[:, :3]  # K x 2 x M
     cubic_rows = np.linalg.inv(normal)[:, 1:3] @ weighted
-    return plane_rows @ z, plane_rows, cubic_rows @ z, cubic_rows
+    return plane_rows @ z, plane_rows, cubic_rows @ z, cubic_rows, (moments, weighted @ z)
 
 
 def _quadratic(at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float) -> tuple[np.ndarray, np.ndarray]:
@@ -206,53 +237,78 @@ def _moment_fit(
 
 
 def _knee(
-    at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float, tangent: np.ndarray
+    seen: _Offsets, z: np.ndarray, tangent: np.ndarray, cubic_sums: np.ndarray, cubic_z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per query: the gradient (K x 2) of the best knee (KNEE_RSS_RATIO) and its weighted mean squared residual
-    against the cubic's (K), with the cubic's weights. The fits share the plane's moments; each knot adds five sums."""
-    dx = xy[None, :, 0] - at[:, None, 0]
-    dy = xy[None, :, 1] - at[:, None, 1]
-    w = np.exp(-(dx * dx + dy * dy) / (2.0 * sigma_mm**2))
-    u = dx * tangent[:, 0:1] + dy * tangent[:, 1:2]
-    plane_terms = [np.ones_like(dx), dx, dy]
+    against the cubic's (K), with the cubic's weights and moments (_plane_and_cubic). The fits share the plane's
+    moments; each knot adds five sums."""
+    dx, dy, w, u = seen
     total, zz = w.sum(axis=1), w @ (z * z)
-
-    def moments(terms: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        weighted = [w * term for term in terms]
-        sums = np.stack([np.stack([np.einsum("km,km->k", a, b) for b in terms], axis=1) for a in weighted], axis=1)
-        return sums, np.stack([a @ z for a in weighted], axis=1)
-
-    cubic_sums, cubic_z = moments(plane_terms + [u * u, u * u * u])
     _, cubic_residual = _moment_fit(cubic_sums, cubic_z, zz, total)
-    # Every knot and side at once (B = 2 x knots, on K queries and M samples): few queries take the cubic in a pass,
-    # so a loop over the knots would spend its time in numpy's per-call overhead.
-    knots = np.arange(-KNEE_KNOT_REACH_MM, KNEE_KNOT_REACH_MM + 1e-9, KNEE_KNOT_STEP_MM)
-    knot = np.concatenate([knots, knots])[:, None, None]
-    side = np.repeat([1.0, -1.0], len(knots))[:, None, None]
-    bend = np.clip(side * (u[None] - knot), 0.0, None) ** 2  # B x K x M
-    weighted = w[None] * bend
-    sums = np.broadcast_to(np.zeros((4, 4)), (len(bend), len(at), 4, 4)).copy()
-    sums[:, :, :3, :3] = cubic_sums[None, :, :3, :3]
-    sums[:, :, 3, 0] = sums[:, :, 0, 3] = weighted.sum(axis=2)
-    sums[:, :, 3, 1] = sums[:, :, 1, 3] = np.einsum("bkm,km->bk", weighted, dx)
-    sums[:, :, 3, 2] = sums[:, :, 2, 3] = np.einsum("bkm,km->bk", weighted, dy)
-    sums[:, :, 3, 3] = np.einsum("bkm,bkm->bk", weighted, bend)
-    zsums = np.concatenate(
-        [np.broadcast_to(cubic_z[None, :, :3], (len(bend), len(at), 3)), (weighted @ z)[..., None]], axis=2
-    )
-    flat = len(bend) * len(at)
+    queries = len(w)
+    sums, zsums = _knee_moments(w, dx, dy, u, z)  # B x K x 4 (x 4): the bend's row, B = knots x sides
+    full = np.zeros(sums.shape[:2] + (4, 4))
+    full[..., :3, :3] = cubic_sums[None, :, :3, :3]
+    full[..., 3, :], full[..., :, 3] = sums, sums
+    zfull = np.concatenate([np.broadcast_to(cubic_z[None, :, :3], zsums.shape[:2] + (3,)), zsums[..., None]], axis=2)
+    count, flat = len(sums), len(sums) * queries
     solution, residual = _moment_fit(
-        sums.reshape(flat, 4, 4), zsums.reshape(flat, 4), np.tile(zz, len(bend)), np.tile(total, len(bend))
+        full.reshape(flat, 4, 4), zfull.reshape(flat, 4), np.tile(zz, count), np.tile(total, count)
     )
-    solution, residual = solution.reshape(len(bend), len(at), 4), residual.reshape(len(bend), len(at))
+    solution, residual = solution.reshape(count, queries, 4), residual.reshape(count, queries)
     # The slope at the query: the plane's, and the bend's where the query lies on its curving side.
-    lever = 2.0 * side[:, :, 0] * np.clip(-side[:, :, 0] * knot[:, :, 0], 0.0, None)  # B x 1
+    knot, side = _knee_knots()
+    lever = (2.0 * side * np.clip(-side * knot, 0.0, None))[:, None]  # B x 1
     slopes = solution[..., 1:3] + tangent[None] * (lever * solution[..., 3])[..., None]
     fittest = np.argmin(residual, axis=0)
-    best = residual[fittest, np.arange(len(at))]
-    gradient = slopes[fittest, np.arange(len(at))]
+    best = residual[fittest, np.arange(queries)]
+    gradient = slopes[fittest, np.arange(queries)]
     # A cubic that fits exactly (or no samples) leaves a knee nothing to explain.
     return gradient, np.where(cubic_residual > 0.0, best / np.maximum(cubic_residual, 1e-300), np.inf)
+
+
+def _knee_knots() -> tuple[np.ndarray, np.ndarray]:
+    """The knees' knots u0 (B) and sides s (B): every knot with s = +1, then every knot with s = -1."""
+    knots = np.arange(-KNEE_KNOT_REACH_MM, KNEE_KNOT_REACH_MM + 1e-9, KNEE_KNOT_STEP_MM)
+    return np.concatenate([knots, knots]), np.repeat([1.0, -1.0], len(knots))
+
+
+def _knee_moments(
+    w: np.ndarray, dx: np.ndarray, dy: np.ndarray, u: np.ndarray, z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The knees' bend term b = ((s (u - u0))_+)^2 against the plane's terms and itself, sum w b (1, dx, dy, b)
+    (B x K x 4), and sum w b z (B x K), for every knot and side of _knee_knots. b = (u - u0)^2 on the curving side,
+    so each sum is a polynomial in u0 of the power sums sum w u^j (1, dx, dy, z) over the samples on that side: those
+    are summed per interval between knots (a bincount per power) and accumulated from either end, instead of summing
+    B x K x M products over every knot and side (26 times the arithmetic: 2-3 times the knee's time per pass)."""
+    knot, side = _knee_knots()
+    knots = knot[side > 0]
+    rows = len(u)
+    bins = len(knots) + 1
+    # The interval of each sample: the number of knots below its u (a sample on a knot has a zero bend either side).
+    interval = (np.searchsorted(knots, u) + bins * np.arange(rows)[:, None]).ravel()
+
+    def per_bin(channel: np.ndarray) -> np.ndarray:  # K x M -> K x bins
+        return np.bincount(interval, channel.ravel(), minlength=rows * bins).reshape(rows, bins)
+
+    # Channels: w u^0..4, w dx u^0..2, w dy u^0..2, w z u^0..2; one at a time (a C x K x M stack is megabytes of
+    # fresh pages per call, which cost more than the arithmetic).
+    up = [w]
+    for _ in range(4):
+        up.append(up[-1] * u)
+    per_bin_sums = np.stack(
+        [per_bin(a) for a in up] + [per_bin(a * t) for t in (dx, dy, z[None, :]) for a in up[:3]]
+    )  # C x K x bins
+    above = np.cumsum(per_bin_sums[..., ::-1], axis=2)[..., ::-1][..., 1:]  # C x K x knots: u beyond knot i
+    below = np.cumsum(per_bin_sums, axis=2)[..., :-1]  # u up to knot i
+    power = np.concatenate([above, below], axis=2).transpose(0, 2, 1)  # C x B x K
+    c = knot[:, None]
+
+    def square(first: int) -> np.ndarray:  # sum w t (u - c)^2 from the power sums t u^0, t u^1, t u^2
+        return power[first + 2] - 2.0 * c * power[first + 1] + c * c * power[first]
+
+    fourth = power[4] - 4.0 * c * power[3] + 6.0 * c * c * power[2] - 4.0 * c**3 * power[1] + c**4 * power[0]
+    return np.stack([square(0), square(5), square(8), fourth], axis=2), square(11)
 
 
 def slope_gradients(
@@ -297,7 +353,8 @@ def slope_gradients(
 
     for part in query_chunks(len(at)):
         near = within_reach(at[part], xy, max(sigma_mm, tip_sigma_mm) if tip[part].any() else sigma_mm)
-        plane, plane_rows, cubic, cubic_rows = _plane_and_cubic(at[part], xy[near], z[near], sigma_mm, tangent[part])
+        seen = _offsets(at[part], xy[near], sigma_mm, tangent[part])
+        plane, plane_rows, cubic, cubic_rows, (cubic_sums, cubic_z) = _plane_and_cubic(seen, z[near])
         noise = known[near]
         better[part] &= lowers_the_error(cubic, cubic_rows, plane, plane_rows)
         gradient[part] = np.where(better[part, None], cubic, plane)
@@ -308,7 +365,9 @@ def slope_gradients(
             gradient[part][rounding[taken]] = quadratic[taken]
         if better[part].any():
             curving = np.flatnonzero(better[part])
-            knee, ratio = _knee(at[part][curving], xy[near], z[near], sigma_mm, tangent[part][curving])
+            knee, ratio = _knee(
+                seen.rows(curving), z[near], tangent[part][curving], cubic_sums[curving], cubic_z[curving]
+            )
             gradient[part][curving[ratio < KNEE_RSS_RATIO]] = knee[ratio < KNEE_RSS_RATIO]
     return gradient, better
 

@@ -220,3 +220,58 @@ def test_within_reach_keeps_every_sample_near_a_query() -> None:
     chosen[within_reach(at, xy, 8.0)] = True
     assert np.all(chosen[distance <= FIT_REACH_SIGMAS * 8.0])
     assert not np.any(chosen[distance > FIT_REACH_SIGMAS * 8.0 * np.sqrt(2.0) + 60.0])  # the box grown
+
+
+def _wobbly_closed_path(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Unit tangents of a random closed outline with lobes, pointed ends and jitter."""
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    radius = 1.0 + rng.uniform(0.2, 1.5) * sum(
+        rng.uniform(0, 0.4) * np.cos(k * t + rng.uniform(0, 6)) for k in range(1, 6)
+    )
+    radius = np.abs(radius) + 0.1
+    points = np.stack([radius * np.cos(t) * rng.uniform(50, 150), radius * np.sin(t) * 40], 1)
+    points += rng.normal(0.0, rng.choice([0.0, 0.2, 2.0]), points.shape)
+    tangent = np.roll(points, -1, axis=0) - np.roll(points, 1, axis=0)
+    return tangent / np.linalg.norm(tangent, axis=1)[:, None]
+
+
+def test_tip_and_fold_windows_are_their_pairwise_definitions() -> None:
+    """round_a_tip (any two tangents within 2 sigma more than TIP_TURN_DEG apart) and unfolded (every tangent within
+    FOLD_TURN_DEG of the point's own) read from unwrapped directions: the same as the pairwise dot products."""
+    from cellctl.vision.local_fit import FOLD_TURN_DEG, TIP_TURN_DEG, round_a_tip, unfolded
+
+    rng = np.random.default_rng(5)
+    tips = folds = 0
+    for _ in range(60):
+        tangent = _wobbly_closed_path(rng, int(rng.integers(40, 400)))
+        spacing, sigma = rng.uniform(0.5, 4.0), float(rng.choice([8.0, 12.0, 16.0]))
+        reach = max(1, int(round(2.0 * sigma / spacing)))
+        window = np.stack([np.roll(tangent, k, axis=0) for k in range(-reach, reach + 1)])
+        pairwise = np.einsum("akd,bkd->kab", window, window).min(axis=(1, 2))
+        centre = np.einsum("akd,kd->ka", window, tangent).min(axis=1)
+        expected_tip = pairwise < np.cos(np.radians(TIP_TURN_DEG))
+        expected_unfolded = centre > np.cos(np.radians(FOLD_TURN_DEG))
+        np.testing.assert_array_equal(round_a_tip(tangent, sigma, spacing), expected_tip)
+        np.testing.assert_array_equal(unfolded(tangent, sigma, spacing), expected_unfolded)
+        tips, folds = tips + expected_tip.sum(), folds + (~expected_unfolded).sum()
+    assert tips > 1000 and folds > 1000
+
+
+def test_knee_sums_from_power_sums_are_the_direct_sums() -> None:
+    """The knees' moments summed per interval between knots and accumulated (_knee_moments) against the B x K x M
+    sums of the bend term itself."""
+    from cellctl.vision.local_fit import _knee_knots, _knee_moments, _offsets
+
+    rng = np.random.default_rng(6)
+    at, xy = rng.uniform(-5.0, 5.0, (9, 2)), rng.uniform(-60.0, 60.0, (500, 2))
+    xy[:20, 0] = np.round(xy[:20, 0])  # samples on knots
+    tangent = np.tile([1.0, 0.0], (9, 1))
+    z = rng.normal(0.0, 5.0, 500)
+    dx, dy, w, u = _offsets(at, xy, 12.0, tangent)
+    sums, zsums = _knee_moments(w, dx, dy, u, z)
+    knot, side = _knee_knots()
+    bend = np.clip(side[:, None, None] * (u[None] - knot[:, None, None]), 0.0, None) ** 2
+    direct = np.stack([np.sum(w * bend * t, axis=2) for t in (1.0, dx, dy, bend)], axis=2)
+    scale = np.sum(w * (np.abs(u) + 12.0) ** 4, axis=1)[None, :, None]  # the terms' size before they cancel
+    assert np.max(np.abs(sums - direct) / scale) < 1e-12
+    assert np.max(np.abs(zsums - np.sum(w * bend * z, axis=2)) / scale[..., 0]) < 1e-12
