@@ -292,3 +292,27 @@ def test_flatness_reads_the_tables_shape_not_one_points_noise() -> None:
     stepped = rng.normal(0.0, 0.2, len(pixels)) + np.where(pixels[:, 0] < 128, 3.0, 0.0)
     assert flat_fraction(pixels, stepped, (640, 480)) < MIN_FLAT_FRACTION
     assert flat_fraction(pixels[:10], noisy_flat[:10], (640, 480)) == 0.0  # too few points for any block
+
+
+def test_a_sole_whose_votes_leave_too_little_is_too_few_points_not_no_sole(taught_scene, monkeypatch) -> None:  # noqa: ANN001
+    """The footprint's second pass (the kept points' votes) can fall below a sole's area where glare left depth on
+    little more than that (matrix sole 40027, grey and glossy): with the sole-sized change on the taught table, the
+    refusal says too little was measured, as the first pass's does."""
+    import cellctl.vision.segmentation as segmentation
+
+    rig, _, pair, taught = taught_scene
+    footprint_of = segmentation._footprint
+    vote_passes: list[int] = []
+
+    def votes_leave_nothing(raster, every, sole, *open_mm):  # noqa: ANN001, ANN002, ANN202
+        footprint = footprint_of(raster, every, sole, *open_mm)
+        if not open_mm:  # the pass over every raised point (the only one with the default opening)
+            return footprint
+        vote_passes.append(1)
+        return dataclasses.replace(footprint, mask=np.zeros_like(footprint.mask))
+
+    monkeypatch.setattr(segmentation, "_footprint", votes_leave_nothing)
+    reconstruction = SoleReconstructor(rig, taught=taught).reconstruct(pair.left, pair.right)
+    assert vote_passes  # the vote pass ran (and left nothing)
+    assert reconstruction.failure is FailureKind.TOO_FEW_POINTS, reconstruction.reason
+    assert "changed against the taught table" in reconstruction.reason
