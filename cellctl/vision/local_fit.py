@@ -180,6 +180,16 @@ def _offsets(at: np.ndarray, xy: np.ndarray, sigma_mm: float, tangent: np.ndarra
     return _Offsets(dx, dy, w, dx * tangent[:, 0:1] + dy * tangent[:, 1:2])
 
 
+def _slope_ridged(moments: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """A fit's normal matrix (K x P x P, terms 1 and 2 the gradient) with the ridge SLOPE_RIDGE_MM2 on the gradient,
+    in units of each query's total weight (w: K x M)."""
+    normal = moments.copy()
+    ridge = SLOPE_RIDGE_MM2 * w.sum(axis=1)
+    normal[:, 1, 1] += ridge
+    normal[:, 2, 2] += ridge
+    return normal
+
+
 def _plane_and_cubic(
     seen: _Offsets, z: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
@@ -192,27 +202,19 @@ def _plane_and_cubic(
     basis = np.stack([np.ones_like(dx), dx, dy, u2, u2 * u], axis=1)  # K x 5 x M
     weighted = basis * w[:, None, :]
     moments = weighted @ basis.transpose(0, 2, 1)  # K x 5 x 5
-    normal = moments.copy()
-    ridge = SLOPE_RIDGE_MM2 * w.sum(axis=1)
-    normal[:, 1, 1] += ridge
-    normal[:, 2, 2] += ridge
+    normal = _slope_ridged(moments, w)
     plane_rows = np.linalg.inv(normal[:, :3, :3])[:, 1:3] @ weighted[:, :3]  # K x 2 x M
     cubic_rows = np.linalg.inv(normal)[:, 1:3] @ weighted
     return plane_rows @ z, plane_rows, cubic_rows @ z, cubic_rows, (moments, weighted @ z)
 
 
-def _quadratic(at: np.ndarray, xy: np.ndarray, z: np.ndarray, sigma_mm: float) -> tuple[np.ndarray, np.ndarray]:
+def _quadratic(seen: _Offsets, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per query: the gradient (K x 2) and its estimator's rows (K x 2 x M) of the weighted fit
-    z = a + g . d + d' H d / 2 (Gaussian weights of width `sigma_mm`, the ridge SLOPE_RIDGE_MM2 on g)."""
-    dx = xy[None, :, 0] - at[:, None, 0]
-    dy = xy[None, :, 1] - at[:, None, 1]
-    w = np.exp(-(dx * dx + dy * dy) / (2.0 * sigma_mm**2))
+    z = a + g . d + d' H d / 2 (the offsets' Gaussian weights, the ridge SLOPE_RIDGE_MM2 on g)."""
+    dx, dy, w, _ = seen
     basis = np.stack([np.ones_like(dx), dx, dy, dx * dx, dx * dy, dy * dy], axis=1)  # K x 6 x M
     weighted = basis * w[:, None, :]
-    normal = weighted @ basis.transpose(0, 2, 1)
-    ridge = SLOPE_RIDGE_MM2 * w.sum(axis=1)
-    normal[:, 1, 1] += ridge
-    normal[:, 2, 2] += ridge
+    normal = _slope_ridged(weighted @ basis.transpose(0, 2, 1), w)
     rows = np.linalg.solve(normal, weighted)[:, 1:3]
     return rows @ z, rows
 
@@ -242,11 +244,12 @@ def _knee(
     """Per query: the gradient (K x 2) of the best knee (KNEE_RSS_RATIO) and its weighted mean squared residual
     against the cubic's (K), with the cubic's weights and moments (_plane_and_cubic). The fits share the plane's
     moments; each knot adds five sums."""
-    dx, dy, w, u = seen
+    w = seen.w
     total, zz = w.sum(axis=1), w @ (z * z)
     _, cubic_residual = _moment_fit(cubic_sums, cubic_z, zz, total)
     queries = len(w)
-    sums, zsums = _knee_moments(w, dx, dy, u, z)  # B x K x 4 (x 4): the bend's row, B = knots x sides
+    knot, side = _knee_knots()
+    sums, zsums = _knee_moments(seen, z, knot, side)  # B x K x 4 (x 4): the bend's row, B = knots x sides
     full = np.zeros(sums.shape[:2] + (4, 4))
     full[..., :3, :3] = cubic_sums[None, :, :3, :3]
     full[..., 3, :], full[..., :, 3] = sums, sums
@@ -257,7 +260,6 @@ def _knee(
     )
     solution, residual = solution.reshape(count, queries, 4), residual.reshape(count, queries)
     # The slope at the query: the plane's, and the bend's where the query lies on its curving side.
-    knot, side = _knee_knots()
     lever = (2.0 * side * np.clip(-side * knot, 0.0, None))[:, None]  # B x 1
     slopes = solution[..., 1:3] + tangent[None] * (lever * solution[..., 3])[..., None]
     fittest = np.argmin(residual, axis=0)
@@ -273,15 +275,13 @@ def _knee_knots() -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([knots, knots]), np.repeat([1.0, -1.0], len(knots))
 
 
-def _knee_moments(
-    w: np.ndarray, dx: np.ndarray, dy: np.ndarray, u: np.ndarray, z: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def _knee_moments(seen: _Offsets, z: np.ndarray, knot: np.ndarray, side: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The knees' bend term b = ((s (u - u0))_+)^2 against the plane's terms and itself, sum w b (1, dx, dy, b)
-    (B x K x 4), and sum w b z (B x K), for every knot and side of _knee_knots. b = (u - u0)^2 on the curving side,
+    (B x K x 4), and sum w b z (B x K), for every knot u0 and side s (_knee_knots). b = (u - u0)^2 on the curving side,
     so each sum is a polynomial in u0 of the power sums sum w u^j (1, dx, dy, z) over the samples on that side: those
     are summed per interval between knots (a bincount per power) and accumulated from either end, instead of summing
     B x K x M products over every knot and side (26 times the arithmetic: 2-3 times the knee's time per pass)."""
-    knot, side = _knee_knots()
+    dx, dy, w, u = seen
     knots = knot[side > 0]
     rows = len(u)
     bins = len(knots) + 1
@@ -360,7 +360,8 @@ def slope_gradients(
         gradient[part] = np.where(better[part, None], cubic, plane)
         if tip[part].any():
             rounding = np.flatnonzero(tip[part])
-            quadratic, quadratic_rows = _quadratic(at[part][rounding], xy[near], z[near], tip_sigma_mm)
+            wide = _offsets(at[part][rounding], xy[near], tip_sigma_mm, tangent[part][rounding])
+            quadratic, quadratic_rows = _quadratic(wide, z[near])
             taken = lowers_the_error(quadratic, quadratic_rows, plane[rounding], plane_rows[rounding])
             gradient[part][rounding[taken]] = quadratic[taken]
         if better[part].any():

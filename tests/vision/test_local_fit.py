@@ -267,9 +267,10 @@ def test_knee_sums_from_power_sums_are_the_direct_sums() -> None:
     xy[:20, 0] = np.round(xy[:20, 0])  # samples on knots
     tangent = np.tile([1.0, 0.0], (9, 1))
     z = rng.normal(0.0, 5.0, 500)
-    dx, dy, w, u = _offsets(at, xy, 12.0, tangent)
-    sums, zsums = _knee_moments(w, dx, dy, u, z)
+    seen = _offsets(at, xy, 12.0, tangent)
+    dx, dy, w, u = seen
     knot, side = _knee_knots()
+    sums, zsums = _knee_moments(seen, z, knot, side)
     bend = np.clip(side[:, None, None] * (u[None] - knot[:, None, None]), 0.0, None) ** 2
     direct = np.stack([np.sum(w * bend * t, axis=2) for t in (1.0, dx, dy, bend)], axis=2)
     scale = np.sum(w * (np.abs(u) + 12.0) ** 4, axis=1)[None, :, None]  # the terms' size before they cancel
