@@ -7,7 +7,7 @@ Every sole of `cellctl.sim.matrix.matrix_soles` is rendered with its variations,
 * the measurement raised an exception: CRASH (a defect: the cell would stop, not answer);
 * refused with a reason its variations make fair (`cellctl.sim.look`, e.g. "too few points" under heavy
   noise), or by the truth (toe and heel too close to call; a glue line on a wall steeper than the glue
-  contract): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
+  contract; a sole of its table's colour: colours too similar): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
 
 The table prints, per variation (every sole that has it), soles measured / refused (with reasons), the length, heel and toe
 errors (mean and max of |error|), the glue path's worst inset, height and normal errors, and the time.
@@ -31,6 +31,8 @@ from cellctl.eval.sole_bench import (
     taught_reconstructor,
     untaught_note,
 )
+from cellctl.sim.appearance import SOLE_MATERIALS, TABLES
+from cellctl.sim.look import SceneLook
 from cellctl.sim.matrix import MatrixSole
 from cellctl.sim.render_cache import RenderCache
 from cellctl.sim.rig import rig_for
@@ -71,6 +73,21 @@ STEEP_GLUE_LINE_REFUSALS = frozenset(
 )
 
 
+# A sole whose base albedo lies within this share of its table's (mean over the channels: a grey sole on the grey
+# table 3 % apart, on the grey cutting mat 7 %; a white one on the white fixture plate 8 %) has the table's colour
+# in all but its texture: the camouflage variation in all but name. Its edge cannot be placed from the change
+# against the taught table, so "colours too similar" is a fair refusal (true of the models, whatever the
+# variations say). A black sole on the dark table is 29 % apart, a white one on the grey table 70 %.
+ALIKE_ALBEDO_SHARE = 0.1
+
+
+def colours_alike(color: str, look: SceneLook) -> bool:
+    """Whether the sole's base colour is its table's within ALIKE_ALBEDO_SHARE (from the simulator's materials)."""
+    table = float(np.mean(TABLES[look.table].albedo_bgr))
+    sole = table if look.camouflage else float(np.mean(SOLE_MATERIALS[color].albedo_bgr))
+    return abs(sole - table) <= ALIKE_ALBEDO_SHARE * table
+
+
 @dataclass
 class MatrixRow:
     """One matrix sole's benchmark row and its verdict."""
@@ -94,6 +111,8 @@ def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
             fair_kinds |= STEEP_GLUE_LINE_REFUSALS
         if row.wall_height_true_mm is not None and row.wall_height_true_mm < LOW_WALL_MM:
             fair_kinds.add(FailureKind.WALL_TOO_LOW)  # true of the sole, whatever its variations say
+        if colours_alike(sole.color, sole.look):
+            fair_kinds.add(FailureKind.COLOURS_TOO_SIMILAR)
         fair = row.failure is not None and row.failure in {kind.value for kind in fair_kinds}
         return MatrixRow(sole, row, "fair refusal" if fair else "missed")
     bad = tuple(name for name, limit in TOLERANCES.items() if abs(getattr(row, name)) > limit)

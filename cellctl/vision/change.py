@@ -105,6 +105,18 @@ LIFTED_STILL_REACH_PX = 5
 # The vote's absence is evidence only where the reference has texture to vote with: most windows covering the
 # pixel (a dark table's faint texture gives 30-50 % textured windows, a grey or patterned table's ~95 %).
 LIFTED_VOTE_SHARE = 0.7
+# How much of a sole looks like the table behind it: the share of its pixels well inside its edge (ALIKE_INSET_MM)
+# that the pixel test alone cannot tell from the taught table (|residual| within PIXEL_SIGMAS of noise). Where the
+# sole's colour is the table's (a grey sole on the grey table or on a grey cutting mat: 3 % apart in albedo), its
+# edge pixels are missed as often, in patches that follow the table's texture, and both cameras' masks come out
+# ragged 1-3 mm deep: the outline cannot be confirmed, and the refusal should say why (`alike_share`,
+# cellctl.vision.measurement.table_alike_share: read for an outline's refusal only, never to refuse). Over the
+# 252 soles of the fresh sets 39000, 40000 and 43000 (docs/sole-benchmark.md, thirty-fourth round) every valid
+# result read at most 0.0054; grey soles on grey or patterned tables 0.08-0.20, black ones on the cutting mat
+# 0.03-0.09 (its dark lines), black soles under cast shadows 0.005-0.015. A refused outline is put down to the
+# colours beyond MAX_TABLE_ALIKE_SHARE, four times what any valid result read.
+ALIKE_INSET_MM = 3.0
+MAX_TABLE_ALIKE_SHARE = 0.02
 
 
 @dataclass(frozen=True)
@@ -135,6 +147,15 @@ class ChangeTest:
             sigma = max(1.4826 * float(np.median(np.abs(residual[keep]))), NOISE_FLOOR_DN)
             keep = np.abs(residual) < CHANGE_SIGMAS * sigma
         return cls(float(gain), float(offset), sigma)
+
+    def alike_share(self, current: np.ndarray, reference: np.ndarray, pixels: np.ndarray) -> float:
+        """Share of `pixels` (N x 2 integer (x, y)) that the pixel test alone cannot tell from the taught table:
+        |current - predicted| within PIXEL_SIGMAS of the table's noise (NaN for no pixels)."""
+        if len(pixels) == 0:
+            return float("nan")
+        x, y = pixels[:, 0], pixels[:, 1]
+        residual = current[y, x].astype(np.float64) - (self.gain * reference[y, x].astype(np.float64) + self.offset)
+        return float(np.mean(np.abs(residual) < PIXEL_SIGMAS * self.sigma))
 
     def predicted(self, reference: np.ndarray) -> np.ndarray:
         """The taught table as the current exposure shows it: gain x reference + offset (a new float32 array;

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision.change import ALIKE_INSET_MM, MAX_TABLE_ALIKE_SHARE
 from cellctl.vision.checks import (
     GLUE_COVER_RADIUS_MM,
     check_glue_coverage,
@@ -259,7 +260,9 @@ def _refused_or_unmeasured(
     """A refusal of the footprint's shape (its outline's checks, its halves) for `reason`, or, where more than
     MAX_UNMEASURED_FRACTION of the sole's pixels have no depth, for those: the footprint lost part of the sole to
     them, and that is the reason, not its shape (a glossy toe without depth leaves halves 3 % apart: matrix sole
-    3079, 35 % of its pixels without depth, refused as toe and heel too close to call)."""
+    3079, 35 % of its pixels without depth, refused as toe and heel too close to call). An outline refused where
+    the sole looks like the table behind it (`table_alike_share` beyond MAX_TABLE_ALIKE_SHARE) is
+    refused for the colours: the change masks that place its edge miss the sole in patches (cellctl.vision.change)."""
     if reconstruction.unmeasured_fraction > MAX_UNMEASURED_FRACTION:
         return _invalid(
             FailureKind.SURFACE_NOT_MEASURED,
@@ -268,7 +271,31 @@ def _refused_or_unmeasured(
             f"({reason})",
             **base,
         )
+    alike = table_alike_share(reconstruction) if failure is FailureKind.OUTLINE_INCONSISTENT else None
+    if alike is not None and alike > MAX_TABLE_ALIKE_SHARE:
+        return _invalid(
+            FailureKind.COLOURS_TOO_SIMILAR,
+            f"the sole looks too much like the table for its edge to be found: {100 * alike:.0f} % of its pixels differ "
+            f"from the taught table behind them by no more than the sensor's noise (a clear edge: under "
+            f"{100 * MAX_TABLE_ALIKE_SHARE:.0f} %), so its outline cannot be confirmed ({reason}); use a table surface "
+            "that contrasts with the sole",
+            **base,
+        )
     return _invalid(failure, reason, **base)
+
+
+def table_alike_share(reconstruction: Reconstruction) -> float | None:
+    """ChangeTest.alike_share over every 4th pixel of the sole's mask ALIKE_INSET_MM or more inside it (off its
+    edge, whose pixels blend the sole and the table); None without a taught table. Read only for a refusal's words:
+    an erosion of the whole image costs a few ms."""
+    test, taught, mask = reconstruction.change_test, reconstruction.taught, reconstruction.sole_mask
+    pixel_mm = reconstruction.pixel_mm
+    if test is None or taught is None or mask is None or reconstruction.rectified is None or pixel_mm is None:
+        return None
+    reach = max(int(round(ALIKE_INSET_MM / pixel_mm)), 1)
+    inner = cv2.erode(mask.view(np.uint8), np.ones((2 * reach + 1, 2 * reach + 1), np.uint8))
+    rows, cols = np.nonzero(inner)
+    return test.alike_share(reconstruction.rectified[0], taught.left, np.column_stack([cols, rows])[::4])
 
 
 def _depth_holes_cause(reconstruction: Reconstruction) -> str:

@@ -27,6 +27,7 @@ import open3d as o3d
 
 from cellctl.errors import FailureKind
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.change import ChangeTest
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_noise import MAX_IMAGE_NOISE_DN, NOISY_IMAGE_REMEDY, image_noise_dn
@@ -100,6 +101,7 @@ class Reconstruction(_SolePoints):
     changed_right: np.ndarray | None = None  # bool, rectified right pixels changed against the taught table
     changed_left: np.ndarray | None = None  # the same for the left image
     unmeasured_fraction: float = 0.0  # of the sole's changed pixels without depth (glare, no texture)
+    change_test: ChangeTest | None = None  # the left image's against the taught table, if any
     image_noise_dn: float | None = None  # the rectified left image's noise (image_noise.image_noise_dn), if read
     soft_edges: bool = False  # the images are soft at the sole's edge (cellctl.vision.edge_blur): a lens out of focus
     from_mean: bool = False  # measured on the mean of the cycle's exposures: the last one was noisier than a clean one
@@ -180,6 +182,7 @@ class _RunState:
         self.table_points: Footprint | None = None  # cells with a measured point at the table's height
         self.changed_right: np.ndarray | None = None
         self._changed_left: np.ndarray | None = None
+        self.change_test: ChangeTest | None = None
         self.image_noise = image_noise  # image_noise_dn of the rectified left image, once read
 
     def _refused(self, failure: FailureKind, reason: str, **sole: Any) -> ReconstructionRefused:
@@ -215,6 +218,7 @@ class _RunState:
             taught=self.taught,
             changed_right=self.changed_right,
             changed_left=self._changed_left,
+            change_test=self.change_test,
             image_noise_dn=self.image_noise,
             **sole,
         )
@@ -291,6 +295,7 @@ class Segmentation(_RunState):
                     "too little of the taught table is visible around the sole to compare with: clear the table",
                 )
             keep, self._changed_left, self.changed_right = change.sole, change.changed_left, change.changed_right
+            self.change_test = change.test
         else:
             colour = colour_split(self.cloud.colors, points, footprint, high)
             keep, self.colour_filter, self.separation = high[colour.sole], colour.applied, colour.separation

@@ -59,6 +59,7 @@ class ChangeSplit:
     sole: np.ndarray  # indices of the sole's points, sorted
     changed_left: np.ndarray  # bool, rectified left pixels changed against the taught table
     changed_right: np.ndarray | None  # the same for the right image (None: its table not seen)
+    test: ChangeTest  # the left image's against its taught reference
 
 
 def table_sample(points: np.ndarray) -> np.ndarray:
@@ -141,7 +142,7 @@ def change_split(
     # (one pass over the points instead of a sort of the ~2 10^5 chosen).
     chosen = np.zeros(len(points), bool)
     chosen[candidates[changed[y, x]]] = True
-    return ChangeSplit(np.flatnonzero(chosen), changed, changed_right)
+    return ChangeSplit(np.flatnonzero(chosen), changed, changed_right, test)
 
 
 def _raised(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:

@@ -467,6 +467,12 @@ def test_judging_valid_and_refused_results() -> None:
     low = replace(refused, failure=FailureKind.WALL_TOO_LOW.value, wall_height_true_mm=7.2)
     assert judge(sole, low).verdict == "fair refusal"
     assert judge(sole, replace(low, wall_height_true_mm=21.0)).verdict == "missed"
+    # A sole of its table's colour: "colours too similar" is right, from the materials, whatever the variations.
+    alike = replace(refused, failure=FailureKind.COLOURS_TOO_SIMILAR.value)
+    assert judge(MatrixSole(1, "grey", ("grey-table",)), alike).verdict == "fair refusal"
+    assert judge(MatrixSole(1, "grey", ("patterned-table",)), alike).verdict == "fair refusal"
+    assert judge(MatrixSole(1, "black", ("grey-table",)), alike).verdict == "missed"
+    assert judge(MatrixSole(1, "grey", ("plain",)), alike).verdict == "missed"  # on the dark table
     results = [judge(sole, _row()), judge(sole, refused)]
     assert acceptance(results).measured_fraction == 0.5 and not acceptance(results).passed
 

@@ -357,3 +357,18 @@ def test_a_soft_white_edge_over_fattened_depth_stays_where_the_half_contrast_tes
     assert test is not None
     raised = cv2.dilate(sole.astype(np.uint8), np.ones((13, 13), np.uint8)) > 0  # fattened 6 px beyond the edge
     assert np.array_equal(test.changed(current, reference, raised=raised), test.changed(current, reference))
+
+
+def test_a_grey_sole_on_a_grey_table_looks_like_it_and_a_white_one_does_not() -> None:
+    # The share of the sole's pixels the pixel test alone cannot tell from the table (the refusal's reason, not the
+    # mask): a grey sole whose brightness is the grey table's reads far beyond MAX_TABLE_ALIKE_SHARE, the same
+    # sole brightened to white reads none.
+    current, reference, sole, table = _grey_on_grey(np.random.default_rng(31))
+    test = ChangeTest.fit(current, reference, table)
+    assert test is not None
+    rows, cols = np.nonzero(cv2.erode(sole.astype(np.uint8), np.ones((11, 11), np.uint8)))
+    pixels = np.column_stack([cols, rows])
+    assert test.alike_share(current, reference, pixels) > 5 * change.MAX_TABLE_ALIKE_SHARE
+    white = np.where(sole, current + 100.0, current)
+    assert test.alike_share(white, reference, pixels) == 0.0
+    assert np.isnan(test.alike_share(current, reference, pixels[:0]))

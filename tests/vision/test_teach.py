@@ -20,10 +20,10 @@ from cellctl.sim.look import SceneLook, look_for
 from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene
 from cellctl.vision import checks
-from cellctl.vision.change import ChangeTest
+from cellctl.vision.change import MAX_TABLE_ALIKE_SHARE, ChangeTest
 from cellctl.vision.image_noise import NOISY_EXPOSURES_DN, exposure_noise_dn
 from cellctl.vision.measurement import measure_sole
-from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.reconstruction import Reconstruction, SoleReconstructor
 from cellctl.vision.table import TablePlane
 from cellctl.vision.teach import (
     NoisyTeachError,
@@ -316,3 +316,32 @@ def test_a_sole_whose_votes_leave_too_little_is_too_few_points_not_no_sole(taugh
     assert vote_passes  # the vote pass ran (and left nothing)
     assert reconstruction.failure is FailureKind.TOO_FEW_POINTS, reconstruction.reason
     assert "changed against the taught table" in reconstruction.reason
+
+
+def test_an_outline_refused_on_a_sole_that_looks_like_its_table_is_refused_for_the_colours(taught_scene) -> None:  # noqa: ANN001
+    """A grey sole on the grey table: 8-20 % of its pixels differ from the taught table behind them by no more than
+    the noise, both change masks come out ragged and the outline's checks refuse it; the reason to give is the
+    colours. Here the white sole's pixels are replaced by the taught table's own (a sole of the table's colour and
+    texture) after the segmentation, so only the refusal's words can change."""
+    from cellctl.vision.measurement import _refused_or_unmeasured, table_alike_share
+
+    rig, _, pair, taught = taught_scene
+    reconstruction = SoleReconstructor(rig, taught=taught).reconstruct(pair.left, pair.right)
+    assert isinstance(reconstruction, Reconstruction) and reconstruction.rectified is not None
+    share = table_alike_share(reconstruction)
+    assert share is not None and share < 0.1 * MAX_TABLE_ALIKE_SHARE  # a white sole on the dark table
+    outline, base = FailureKind.OUTLINE_INCONSISTENT, {"points": 0}
+    assert _refused_or_unmeasured(reconstruction, outline, "x", base).failure is outline
+    left = np.asarray(taught.left, reconstruction.rectified[0].dtype)
+    alike = dataclasses.replace(reconstruction, rectified=(left, reconstruction.rectified[1]))
+    share = table_alike_share(alike)
+    assert share is not None and share > 0.9
+    refused = _refused_or_unmeasured(alike, outline, "the outline disagrees with the right image", base)
+    assert refused.failure is FailureKind.COLOURS_TOO_SIMILAR
+    assert "(the outline disagrees with the right image)" in refused.reason and "% of its pixels" in refused.reason
+    # For another check, untaught, or where depth is missing (named first): as it was.
+    halves = FailureKind.ENDS_TOO_CLOSE_TO_CALL
+    assert _refused_or_unmeasured(alike, halves, "x", base).failure is halves
+    assert _refused_or_unmeasured(dataclasses.replace(alike, change_test=None), outline, "x", base).failure is outline
+    holed = dataclasses.replace(alike, unmeasured_fraction=0.3)
+    assert _refused_or_unmeasured(holed, outline, "x", base).failure is FailureKind.SURFACE_NOT_MEASURED
