@@ -7,7 +7,8 @@ Every sole of `cellctl.sim.matrix.matrix_soles` is rendered with its variations,
 * the measurement raised an exception: CRASH (a defect: the cell would stop, not answer);
 * refused with a reason its variations make fair (`cellctl.sim.look`, e.g. "too few points" under heavy
   noise), or by the truth (toe and heel too close to call; a glue line on a wall steeper than the glue
-  contract; a sole of its table's colour: colours too similar): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
+  contract; a sole of its table's colour: colours too similar; a glue line on a rim too dark to match: the
+  surface): a fair refusal; refused with any other reason: a missed sole with a wrong reason.
 
 The table prints, per variation (every sole that has it), soles measured / refused (with reasons), the length, heel and toe
 errors (mean and max of |error|), the glue path's worst inset, height and normal errors, and the time.
@@ -31,7 +32,7 @@ from cellctl.eval.sole_bench import (
     taught_reconstructor,
     untaught_note,
 )
-from cellctl.sim.appearance import SOLE_MATERIALS, TABLES
+from cellctl.sim.appearance import DARK_ACCENT, LIGHT_ACCENT, SOLE_MATERIALS, TABLES
 from cellctl.sim.look import SceneLook
 from cellctl.sim.matrix import MatrixSole
 from cellctl.sim.render_cache import RenderCache
@@ -88,6 +89,23 @@ def colours_alike(color: str, look: SceneLook) -> bool:
     return abs(sole - table) <= ALIKE_ALBEDO_SHARE * table
 
 
+# A light sole's rim (`rim`: 4-9 mm wide, so the glue line 2 mm inside the edge runs on it) is DARK_ACCENT, albedo
+# 0.05: its texture (the sole's octaves, a few per cent of its grey value) is a quarter of black rubber's, below the
+# faint-texture variation's 0.50-0.65 of it, whose refusals for the surface are fair. The matcher finds no depth
+# across it along the baseline and little elsewhere (docs/sole-benchmark.md, "Rims"): the glue heights on it
+# cannot be measurements, and a refusal for the surface is right. A black sole's rim (LIGHT_ACCENT) is measured.
+FAINT_TEXTURE_SHARE = 0.5  # of black rubber's texture in grey values: the faint-texture variation's least
+
+
+def textureless_glue_band(color: str, look: SceneLook) -> bool:
+    """Whether the sole's glue line runs on a rim too dark for its texture to be matched (see above)."""
+    if look.colours != "rim":
+        return False
+    rim = LIGHT_ACCENT if color == "black" else DARK_ACCENT  # as appearance.ColourScheme.draw colours the rim
+    black = float(np.mean(SOLE_MATERIALS["black"].albedo_bgr))
+    return float(np.mean(rim)) < FAINT_TEXTURE_SHARE * black
+
+
 @dataclass
 class MatrixRow:
     """One matrix sole's benchmark row and its verdict."""
@@ -113,6 +131,8 @@ def judge(sole: MatrixSole, row: SoleBenchRow) -> MatrixRow:
             fair_kinds.add(FailureKind.WALL_TOO_LOW)  # true of the sole, whatever its variations say
         if colours_alike(sole.color, sole.look):
             fair_kinds.add(FailureKind.COLOURS_TOO_SIMILAR)
+        if textureless_glue_band(sole.color, sole.look):
+            fair_kinds |= {FailureKind.SURFACE_NOT_MEASURED, FailureKind.TOO_FEW_POINTS}
         fair = row.failure is not None and row.failure in {kind.value for kind in fair_kinds}
         return MatrixRow(sole, row, "fair refusal" if fair else "missed")
     bad = tuple(name for name, limit in TOLERANCES.items() if abs(getattr(row, name)) > limit)

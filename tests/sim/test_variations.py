@@ -449,7 +449,7 @@ def test_judging_valid_and_refused_results() -> None:
     assert wrong.verdict == "WRONG" and wrong.out_of_tolerance == ("length_error_mm", "glue_normal_error_max_deg")
     refused = SoleBenchRow(1, "white", 250.0, False, "few", *(None,) * 6, 1.0, "heavy-noise", "too_few_points")
     assert judge(sole, refused).verdict == "fair refusal"
-    assert judge(MatrixSole(1, "white", ("rim",)), refused).verdict == "missed"
+    assert judge(MatrixSole(1, "white", ("logo",)), refused).verdict == "missed"
     no_sole = replace(refused, failure=FailureKind.NO_SOLE.value)
     assert judge(sole, no_sole).verdict == "missed"
     too_close = replace(refused, failure=FailureKind.ENDS_TOO_CLOSE_TO_CALL.value, half_area_difference_true=0.05)
@@ -473,6 +473,12 @@ def test_judging_valid_and_refused_results() -> None:
     assert judge(MatrixSole(1, "grey", ("patterned-table",)), alike).verdict == "fair refusal"
     assert judge(MatrixSole(1, "black", ("grey-table",)), alike).verdict == "missed"
     assert judge(MatrixSole(1, "grey", ("plain",)), alike).verdict == "missed"  # on the dark table
+    # A glue line on a light sole's dark rim cannot be measured: the surface's refusals are right, others not.
+    surface = replace(refused, failure=FailureKind.SURFACE_NOT_MEASURED.value)
+    assert judge(MatrixSole(1, "white", ("rim",)), surface).verdict == "fair refusal"
+    assert judge(MatrixSole(1, "grey", ("rim",)), refused).verdict == "fair refusal"  # too few points
+    assert judge(MatrixSole(1, "black", ("rim",)), surface).verdict == "missed"  # its rim is light and measured
+    assert judge(MatrixSole(1, "white", ("rim",)), alike).verdict == "missed"
     results = [judge(sole, _row()), judge(sole, refused)]
     assert acceptance(results).measured_fraction == 0.5 and not acceptance(results).passed
 
@@ -487,8 +493,8 @@ def test_the_true_wall_height_is_the_heel_of_the_model(height: str, low: float, 
 
 
 def test_missed_outline_refusals_are_counted_by_their_outlines_truth() -> None:
-    sole = MatrixSole(1, "white", ("rim",))
-    refused = SoleBenchRow(1, "white", 250.0, False, "off", *(None,) * 6, 1.0, "rim", "outline_inconsistent")
+    sole = MatrixSole(1, "white", ("logo",))
+    refused = SoleBenchRow(1, "white", 250.0, False, "off", *(None,) * 6, 1.0, "logo", "outline_inconsistent")
     off, near = replace(refused, outline_error_max_mm=2.5), replace(refused, outline_error_max_mm=0.4)
     other = replace(off, failure=FailureKind.SURFACE_NOT_MEASURED.value)
     results = [judge(sole, row) for row in (off, near, other, refused)]
@@ -661,3 +667,18 @@ def test_the_tilted_rig_looks_at_the_table_as_far_off_square_as_drawn() -> None:
         assert np.degrees(np.arccos(down)) == pytest.approx(angle, abs=1e-6)
     with pytest.raises(ValueError, match="tilt"):
         SceneLook(rig_tilt_deg=35.0)
+
+
+@pytest.mark.parametrize("color", ["white", "grey", "black"])
+def test_the_judges_rim_colour_is_the_one_the_simulator_paints(color: str) -> None:
+    # sole_matrix.textureless_glue_band restates appearance.ColourScheme.draw's choice of rim colour.
+    from cellctl.eval.sole_matrix import textureless_glue_band
+    from cellctl.sim.appearance import DARK_ACCENT, ColourScheme
+
+    look = SceneLook(colours="rim")
+    scene = SoleScene.random(3, color, half_size_rig(), look)
+    assert scene.sole is not None
+    scheme = ColourScheme.draw(np.random.default_rng(0), color, look, scene.sole.shape)
+    assert scheme.rim_mm > 2.0  # wider than the glue offset: the glue line runs on it
+    assert textureless_glue_band(color, look) == (scheme.rim_bgr == DARK_ACCENT)
+    assert not textureless_glue_band(color, SceneLook())
