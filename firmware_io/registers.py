@@ -222,7 +222,7 @@ _ERROR_TEXT: dict[ErrorCode, tuple[str, str]] = {
     ),
     ErrorCode.COLOURS_TOO_SIMILAR: (
         "The sole's colour does not stand out from the table's, so its edge cannot be found.",
-        "Use a table cover that contrasts with the sole (dark for light soles, light for dark ones) and re-trigger.",
+        "Use a table cover that contrasts with the sole (dark for light soles, light for dark ones); on a cell with a taught table, clear it and teach it again with the new cover (`cellctl teach`); then re-trigger.",
     ),
     ErrorCode.ENDS_TOO_CLOSE_TO_CALL: (
         "Toe and heel cannot be told apart: both ends of the sole's outline are about equally wide.",
