@@ -101,7 +101,9 @@ def textureless_glue_band(color: str, look: SceneLook) -> bool:
     """Whether the sole's glue line runs on a rim too dark for its texture to be matched (see above)."""
     if look.colours != "rim":
         return False
-    rim = LIGHT_ACCENT if color == "black" else DARK_ACCENT  # as appearance.ColourScheme.draw colours the rim
+    # As appearance.ColourScheme.draw colours the rim (a test holds the two together). Not a shared helper there:
+    # any edit of cellctl.sim changes the renderer's version and invalidates every cached render.
+    rim = LIGHT_ACCENT if color == "black" else DARK_ACCENT
     black = float(np.mean(SOLE_MATERIALS["black"].albedo_bgr))
     return float(np.mean(rim)) < FAINT_TEXTURE_SHARE * black
 

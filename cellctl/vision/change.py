@@ -154,7 +154,7 @@ class ChangeTest:
         if len(pixels) == 0:
             return float("nan")
         x, y = pixels[:, 0], pixels[:, 1]
-        residual = current[y, x].astype(np.float64) - (self.gain * reference[y, x].astype(np.float64) + self.offset)
+        residual = current[y, x] - self.predicted(reference[y, x])
         return float(np.mean(np.abs(residual) < PIXEL_SIGMAS * self.sigma))
 
     def predicted(self, reference: np.ndarray) -> np.ndarray:
