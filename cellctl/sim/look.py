@@ -49,6 +49,8 @@ class SceneLook:
     wall_slope_deg: float = 0.0  # side wall leaning out towards the table (0: vertical)
     top_edge_radius_mm: float = 0.0  # rounded (bevelled) top edge (0: sharp)
     wall_foot_mm: float = FOOT_MM  # vertical wall below a sloped wall's lean (0: leaning from the table up)
+    top_lip_mm: float = 0.0  # a cupsole's raised lip: the top rises this much towards the outline (0: none)
+    top_lip_width_mm: float = 0.0  # over this far in from the outline
     height: str = "normal"  # HEIGHT_CLASSES: flat ~6 mm, normal 8-35 mm, tall up to 50 mm
     colours: str = "plain"  # COLOUR_SCHEMES: rim = dark (or light) band round the edge and on the wall
     table: str = "dark"  # TABLE_LOOKS
@@ -90,6 +92,8 @@ class SceneLook:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
         if not 0.0 <= self.wall_slope_deg < 45.0 or self.top_edge_radius_mm < 0.0 or self.wall_foot_mm < 0.0:
             raise ValueError("wall slope must be in [0, 45) degrees, the top edge radius and wall foot >= 0 mm")
+        if self.top_lip_mm < 0.0 or (self.top_lip_mm > 0.0 and self.top_lip_width_mm <= 0.0):
+            raise ValueError("a lip must rise >= 0 mm, over a positive width")
         if self.right_gain <= 0.0 or self.right_gamma <= 0.0:
             raise ValueError("right camera gain and gamma must be positive")
         if self.texture_contrast <= 0.0:
@@ -166,6 +170,18 @@ VARIATIONS: dict[str, Variation] = {
             "top edge rounded, 3-5 mm radius",
             ("top_edge_radius_mm",),
             _draw("top_edge_radius_mm", 3, 5),
+        ),
+        # Outside the matrix so that its sets keep their soles: a shape no set drew before session 36, a cupsole whose
+        # footbed is sunk inside its sidewall. The top rises towards the outline, so the glue line 2 mm inside runs
+        # on the lip's slope, curved across it.
+        Variation(
+            "lipped-edge",
+            "a cupsole's raised lip: the top rises 1.5-4 mm over the last 5-12 mm before the outline",
+            ("top_lip_mm", "top_lip_width_mm"),
+            lambda look, rng: replace(
+                look, top_lip_mm=float(rng.uniform(1.5, 4.0)), top_lip_width_mm=float(rng.uniform(5.0, 12.0))
+            ),
+            in_matrix=False,
         ),
         Variation("flat", "flat sole, about 6 mm thick", ("height",), _set(height="flat")),
         Variation("tall", "tall sole, heel up to 50 mm", ("height",), _set(height="tall")),

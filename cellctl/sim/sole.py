@@ -244,7 +244,9 @@ def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
         # Drawn after the plain shape's numbers, so a plain look gives the plain simulator's soles.
         heel_end=EndShape.draw(look.heel, rng),
         toe_end=EndShape.draw(look.toe, rng),
-        edge=EdgeProfile(look.wall_slope_deg, look.top_edge_radius_mm, look.wall_foot_mm),
+        edge=EdgeProfile(
+            look.wall_slope_deg, look.top_edge_radius_mm, look.wall_foot_mm, look.top_lip_mm, look.top_lip_width_mm
+        ),
     )
 
 

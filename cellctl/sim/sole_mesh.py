@@ -50,7 +50,7 @@ def sole_mesh(model: SoleModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         walls.append(quads[:, ::-1] if column == 0 else quads)
     vertices = np.vstack([top, bottom])
     triangles = np.vstack([grid, *walls, grid[:, ::-1] + n_grid])
-    on_profile = np.any((plain_top - top_z)[grid] > 1e-9, axis=1)
+    on_profile = np.any(np.abs(plain_top - top_z)[grid] > 1e-9, axis=1)  # a lip rises: a profile too
     parts = np.concatenate(
         [
             np.where(on_profile, 3, 0).astype(np.int32),

@@ -13,7 +13,9 @@ from a vertical foot of `foot_mm` (FOOT_MM unless the look draws another: 0 is a
 up) and leans out by `wall_slope_deg` towards the table; a rounded top edge is a circular fillet of
 `top_radius` between the wall and the top. With the default foot every profile keeps the part of the sole
 above MIN_HEIGHT_MM (docs/measurements.md, footprint) reaching out to the outline itself, so the footprint is
-the outline: the foot and the fillet are limited to keep `foot_mm` of vertical wall. A lower foot is what
+the outline: the foot and the fillet are limited to keep `foot_mm` of vertical wall. A cupsole's raised lip
+lifts the top by `lip_mm` towards the outline over its last `lip_width_mm` (the footbed sunk inside its
+sidewall), before the wall and fillet shape it. A lower foot is what
 another simulator (or a real moulded sole) may well have: the outline is still the foot on the table.
 """
 
@@ -99,20 +101,33 @@ class EdgeProfile:
     wall_slope_deg: float = 0.0
     top_radius: float = 0.0
     foot_mm: float = FOOT_MM  # vertical wall below the lean (and below the fillet)
+    # A cupsole's raised lip: the top rises by lip_mm towards the outline over the last lip_width_mm (a smoothstep,
+    # level at both ends), the footbed sunk below its sidewall. The fillet and the lean, if any, round the lip's top.
+    lip_mm: float = 0.0
+    lip_width_mm: float = 0.0
 
     @property
     def plain(self) -> bool:
-        return self.wall_slope_deg == 0.0 and self.top_radius == 0.0
+        return self.wall_slope_deg == 0.0 and self.top_radius == 0.0 and self.lip_mm == 0.0
 
     def band_mm(self, thickness: float) -> float:
         """How far in from the outline the profile can reach for a sole `thickness` thick."""
-        return thickness * np.tan(np.radians(self.wall_slope_deg)) + self.top_radius + 1e-3
+        lip = self.lip_width_mm if self.lip_mm else 0.0
+        return max(thickness * np.tan(np.radians(self.wall_slope_deg)) + self.top_radius, lip) + 1e-3
+
+    def lip(self, dist: np.ndarray) -> np.ndarray:
+        """The lip's rise (mm) over the plain top at distance `dist` inside the outline."""
+        if not self.lip_mm:
+            return np.zeros_like(np.asarray(dist, np.float64))
+        t = np.clip(1.0 - np.asarray(dist, np.float64) / self.lip_width_mm, 0.0, 1.0)
+        return self.lip_mm * t * t * (3.0 - 2.0 * t)
 
     def height(self, dist: np.ndarray, top: np.ndarray, bottom: np.ndarray) -> np.ndarray:
         """Top surface height at distance `dist` inside the outline, where the plain top is at `top`."""
         if self.plain:
             return np.asarray(top, np.float64)
         dist = np.clip(np.asarray(dist, np.float64), 0.0, None)
+        top = np.asarray(top, np.float64) + self.lip(dist)
         alpha = np.radians(self.wall_slope_deg)
         foot = bottom + self.foot_mm
         r = np.clip(np.minimum(self.top_radius, top - foot), 0.0, None)

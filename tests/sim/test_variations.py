@@ -169,6 +169,32 @@ def test_rounded_edge_profile_and_its_normals() -> None:
     assert drop == pytest.approx(4 - np.sqrt(16 - (4 - d) ** 2), abs=1e-6)
 
 
+def test_a_cupsoles_lip_raises_the_top_towards_the_outline() -> None:
+    """`lipped-edge` (named only): a smoothstep rise of lip_mm over lip_width_mm, level at both of its ends, in the
+    truth's heights and normals and in the mesh the renderer casts rays at."""
+    profile = EdgeProfile(lip_mm=3.0, lip_width_mm=8.0)
+    z = profile.height(np.array([0.0, 4.0, 8.0, 20.0]), np.full(4, 25.0), np.zeros(4))
+    np.testing.assert_allclose(z, [28.0, 26.5, 25.0, 25.0])
+    look = look_for(("lipped-edge",), 3)
+    assert 1.5 <= look.top_lip_mm <= 4.0 and 5.0 <= look.top_lip_width_mm <= 12.0
+    assert "lipped-edge" not in MATRIX_ENTRIES
+    with pytest.raises(ValueError, match="lip"):
+        SceneLook(top_lip_mm=2.0)
+    shape = replace(shape_with(SceneLook()), edge=profile, cross_curvature=0.0)  # the top level across
+    model = SoleModel(shape, SolePose(5.0, -3.0, 30.0, True))
+    u = np.array([0.5 * shape.length])
+    edge_v = shape.centre_line(u) - shape.half_width(u, False)
+    xy = model.pose.to_table(np.column_stack([u, edge_v + 2.0]), shape.length)
+    d = shape.edge_distance(u, edge_v + 2.0)[0]
+    plain = SoleModel(replace(shape, edge=EdgeProfile()), model.pose)
+    t = 1.0 - d / 8.0
+    assert model.top_height_at(xy)[0] - plain.top_height_at(xy)[0] == pytest.approx(3.0 * t * t * (3 - 2 * t))
+    # 2 mm in, the lip adds a slope of 6 t (1 - t) x 3 / 8 (about 0.4: 20 degrees) to the top's own, across the edge.
+    lipped, level = (-n[0, :2] / n[0, 2] for n in (model.top_normal_at(xy), plain.top_normal_at(xy)))
+    assert np.linalg.norm(lipped - level) == pytest.approx(6 * t * (1 - t) * 3.0 / 8.0, rel=0.02)
+    _assert_mesh_is_the_surface(SoleModel(shape_with(replace(look, height="tall")), SolePose(0.0, 0.0, 20.0, False)))
+
+
 def test_sloped_wall_rises_from_its_foot() -> None:
     profile = EdgeProfile(15.0, 0.0)
     dist = np.array([0.0, 3.0, 50.0])
@@ -187,7 +213,11 @@ def test_sloped_walls_lean_from_the_table_up_to_a_four_mm_foot() -> None:
 
 def test_mesh_follows_the_edge_profile() -> None:
     look = SceneLook(toe="pointed", heel="square", wall_slope_deg=12.0, top_edge_radius_mm=4.0, height="tall")
-    model = SoleModel(shape_with(look), SolePose(0.0, 0.0, 20.0, False))
+    _assert_mesh_is_the_surface(SoleModel(shape_with(look), SolePose(0.0, 0.0, 20.0, False)))
+
+
+def _assert_mesh_is_the_surface(model: SoleModel) -> None:
+    """Rays cast down at the model's mesh 1-15 mm inside its outline hit its top surface's true heights."""
     vertices, triangles, _ = model.mesh()
     scene = o3d.t.geometry.RaycastingScene()
     mesh = o3d.t.geometry.TriangleMesh()
