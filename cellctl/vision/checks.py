@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cellctl.errors import FailureKind
+from cellctl.vision.closed_path import outward_normals, running_median
 from cellctl.vision.defaults import GLUE_HEIGHT_TOLERANCE_MM
 from cellctl.vision.footprint import Footprint
 
@@ -85,6 +86,26 @@ GLUE_DEVIATION_DEPTH_PX_MM = 3.6
 # on a glue normal 2.2 degrees from the truth), and the noise tail of both, one from the images' fits and one from
 # the matcher's depth, met the limit at the same point on none of the matrix's soles.
 GLUE_MAX_NORMAL_DEG = 30.0
+# The glue normals take the slope across the path over 15 mm (glue_path.GLUE_NORMAL_BASE_MM: a sole's top is far
+# flatter over that than the 5 degree tolerance). A top that curves within a few mm of its edge is not: a cupsole's
+# lip rising 1.5-4 mm over its last 5-12 mm leans 10-35 degrees at the glue line, and five of sixteen such soles were
+# published with glue normals 20-27 degrees off (`lipped-edge`, set 47000); lips of 0.65-1.4 mm, six of nine
+# published 6-9 degrees off (docs/sole-benchmark.md, thirty-fifth round). The glue points' own local estimates see
+# it: per point, the slope across the path (towards the outline) of the image patches' normals (4 mm fits: they
+# follow a lip within ~0.03 in the median) and of the depth's own plane (6 mm: it averages a lip's curve, a third to
+# two thirds of the patches' reading), less the glue normal's. Over the 174 glue paths of the fresh sets 39000,
+# 40000, 43000 and 46000 (every sole that reached its glue path, those the precision check refuses included; the
+# glue normals' slope across within 0.046 of the truth's on every 80 mm stretch) the patches' median along the whole
+# path stayed within 0.043 (the depth's 0.041), and the running median over 80 mm of both, where they lean the same
+# way (the smaller), within 0.127 but once: 0.20 along a black sole's square heel (40004), where both estimates were
+# biased at an edge across the cameras' baseline and the glue normals were right. The lipped soles published wrong:
+# 0.068-0.46 along the path (their depth's 0.022-0.27: a share of 0.32 or more), 0.35-0.41 on a stretch for the
+# steep lips. A lip that leans at the glue line by less than the limit all round (3.4 degrees) can still leave its
+# worst glue normal beyond 5 degrees: the noise's tail comes on top (docs/measurements.md, Validity).
+GLUE_TILT_STRETCH_MM = 80.0
+GLUE_MAX_TILT_PATH = 0.06  # 3.4 degrees, 1.4 times the largest of the right paths
+GLUE_TILT_DEPTH_SHARE = 0.25  # the depth's median leaning the same way by at least this share of the patches'
+GLUE_MAX_TILT_STRETCH = 0.3  # 17 degrees, 1.5 times the largest of the right paths
 MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a sole's top surface
 # A glue point is measured if the cloud has MIN_CLOUD_POINTS (12, ~4 per mm^2) within GLUE_COVER_RADIUS_MM of
 # it. A patch fit (4 mm) bridges small holes, but a path that runs over unmeasured or thinly measured surface
@@ -473,8 +494,9 @@ def check_glue_path(
 ) -> CheckFailure | None:
     """Glue points (N x 3) and normals against the sole's height range, their own samples (at most
     `deviation_limit_mm` apart: `glue_deviation_limit`) and the surface: the patches' normals along the path, and
-    `depth_normals(index)`, the depth's own normals at the glue points `index` (asked only where the patches
-    disagree: glue_path.depth_normals; NaN: unknown)."""
+    `depth_normals(index)`, the depth's own normals at the glue points `index` (glue_path.depth_normals; NaN:
+    unknown): at the points where the patches disagree grossly, and along the path for the slope across it
+    (`check_glue_tilt`)."""
     z = points[:, 2]
     low, high = sole_heights[0] - GLUE_HEIGHT_MARGIN_MM, sole_heights[1] + GLUE_HEIGHT_MARGIN_MM
     outside = np.flatnonzero((z < max(low, 0.0)) | (z > high))
@@ -499,8 +521,9 @@ def check_glue_path(
         return _glue(f"a glue normal is {np.degrees(np.arccos(normals[:, 2].min())):.0f} degrees off vertical")
     angle = _angles(normals, patch_normals)
     suspect = np.flatnonzero(angle > GLUE_MAX_NORMAL_DEG)
+    depth = depth_normals(np.arange(len(normals)))
     if suspect.size:
-        depth_angle = _angles(normals[suspect], depth_normals(suspect))
+        depth_angle = _angles(normals[suspect], depth[suspect])
         against_both = ~(depth_angle <= GLUE_MAX_NORMAL_DEG)  # NaN (no depth there): the patches' word stands
         if against_both.any():
             worst = int(np.argmax(np.where(against_both, angle[suspect], -1.0)))
@@ -510,7 +533,61 @@ def check_glue_path(
                 f"glue normal {k} is {angle[k]:.0f} degrees from the surface fitted around it and {against} "
                 f"(limit {GLUE_MAX_NORMAL_DEG:g})"
             )
-    return None
+    return check_glue_tilt(points[:, :2], normals, patch_normals, depth, spacing_mm)
+
+
+def check_glue_tilt(
+    path_xy: np.ndarray, normals: np.ndarray, patch_normals: np.ndarray, depth_normals: np.ndarray, spacing_mm: float
+) -> CheckFailure | None:
+    """The glue normals' slope across the closed, counter-clockwise path `path_xy` against the surface's own around
+    each point: the patches' normals and the depth's planes (N x 3, NaN: unknown). Refused where the top under the
+    path leans across it against the glue normals by more than GLUE_MAX_TILT_PATH in the patches' median along the
+    whole path (the depth's leaning the same way, at least GLUE_TILT_DEPTH_SHARE of that), or by more than
+    GLUE_MAX_TILT_STRETCH in both along some GLUE_TILT_STRETCH_MM of it: a top that curves near its edge."""
+    outward = outward_normals(path_xy)
+    glue = _across(normals, outward)
+    patch, depth = _across(patch_normals, outward) - glue, _across(depth_normals, outward) - glue
+    over_path, depth_over_path = _median_of_known(patch), _median_of_known(depth)
+    confirmed = over_path * depth_over_path >= GLUE_TILT_DEPTH_SHARE * over_path**2  # NaN: not confirmed
+    reach = int(min(round(GLUE_TILT_STRETCH_MM / 2.0 / spacing_mm), (len(glue) - 1) // 2))
+    stretch = np.nan_to_num(_agreed(running_median(patch, reach), running_median(depth, reach)))
+    worst = int(np.argmax(np.abs(stretch)))
+    if confirmed and abs(over_path) > GLUE_MAX_TILT_PATH:
+        where, tilt, limit = "along the whole path", over_path, GLUE_MAX_TILT_PATH
+    elif abs(stretch[worst]) > GLUE_MAX_TILT_STRETCH:
+        where, tilt, limit = (
+            f"along {GLUE_TILT_STRETCH_MM:g} mm of it round glue point {worst}",
+            stretch[worst],
+            GLUE_MAX_TILT_STRETCH,
+        )
+    else:
+        return None
+    way = "rises towards" if tilt > 0 else "falls towards"
+    return _glue(
+        f"the sole's top under the glue line {way} its edge {np.degrees(np.arctan(abs(tilt))):.0f} degrees more "
+        f"steeply than the glue normals say {where} (the surface fitted round each glue point says so and the "
+        f"depth's own planes lean the same way; limit {np.degrees(np.arctan(limit)):.1f}): a raised lip or a top "
+        "curving near its edge, which the glue normals, whose slope across the path is taken over a wider base, do "
+        "not follow; set the recipe's [glue] offset_mm to where the top is level"
+    )
+
+
+def _across(normals: np.ndarray, outward: np.ndarray) -> np.ndarray:
+    """Per point the surface's slope (rise per mm) towards `outward` of unit upward normals (NaN: unknown)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return -np.sum(normals[:, :2] * outward, axis=1) / normals[:, 2]
+
+
+def _median_of_known(values: np.ndarray) -> float:
+    """The median of the known (finite) values; NaN if none is."""
+    known = values[np.isfinite(values)]
+    return float(np.median(known)) if known.size else float("nan")
+
+
+def _agreed(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Where a and b have one sign, the one nearer zero (signed); 0 where they disagree or either is unknown (NaN)."""
+    smaller = np.where(np.abs(a) < np.abs(b), a, b)
+    return np.where(np.sign(a) * np.sign(b) > 0, smaller, 0.0)
 
 
 def _angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:

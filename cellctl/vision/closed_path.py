@@ -6,6 +6,8 @@ The measurement's outline and glue path are closed polygons sampled in mm; these
 
 from __future__ import annotations
 
+import warnings
+
 import cv2
 import numpy as np
 
@@ -49,6 +51,17 @@ def smooth_closed(poly: np.ndarray, sigma_mm: float) -> np.ndarray:
     kernel = cv2.getGaussianKernel(2 * radius + 1, sigma).ravel()
     padded = np.vstack([ring[-radius:], ring, ring[:radius]])
     return np.column_stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)])
+
+
+def running_median(values: np.ndarray, reach: int, quorum: int = 1) -> np.ndarray:
+    """Per point of a closed path the median of `values` over itself and the `reach` points either side, unknowns
+    (NaN) left out; NaN where fewer than `quorum` of them are known."""
+    around = (np.arange(len(values))[:, None] + np.arange(-reach, reach + 1)[None]) % len(values)
+    window = values[around]
+    enough = np.isfinite(window).sum(axis=1) >= quorum
+    with warnings.catch_warnings():  # all-NaN windows: left out by `enough` (quorum 1 or more)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.where(enough, np.nanmedian(window, axis=1), np.nan)
 
 
 def outward_normals(poly: np.ndarray) -> np.ndarray:

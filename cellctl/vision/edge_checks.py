@@ -7,7 +7,6 @@ None or a `CheckFailure`.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -16,6 +15,7 @@ from cellctl.errors import FailureKind
 from cellctl.stereo.kernels import edge_profiles
 from cellctl.vision.checks import MIN_TESTABLE, CheckFailure
 from cellctl.vision.closed_path import run_lengths
+from cellctl.vision.closed_path import running_median as closed_running_median
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.footprint import Footprint
 
@@ -174,9 +174,11 @@ def check_edge_profile(
         more = detail() if detail is not None else ""
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
-            f"the sole's top falls {drop:.1f} mm (median round the outline) over the last few mm before its "
-            "outline: its top edge is rounded or bevelled, so the edge lies beyond where its depth was measured "
-            "and the glue path near it is on a curve, not a flat top" + (f" ({more})" if more else ""),
+            f"the sole's top falls {drop:.1f} mm (median round the outline) below the line of its top "
+            f"{EDGE_INNER_MM[0]:g}-{EDGE_INNER_MM[-1]:g} mm in over the last few mm before its outline: its top edge "
+            "is rounded or bevelled, so the edge lies beyond where its depth was measured, or its top curves there "
+            "(a raised lip levelling off), and the glue path near it is on a curve, not a flat top"
+            + (f" ({more})" if more else ""),
         )
     return None
 
@@ -291,11 +293,7 @@ def running_median(offsets: np.ndarray) -> np.ndarray:
     """Per point of a closed outline (points 1 mm apart) the median of `offsets` over EDGE_OFFSET_WINDOW_MM
     centred on it, NaN where no more than half of the window is known."""
     half = EDGE_OFFSET_WINDOW_MM // 2
-    window = np.stack([np.roll(offsets, s) for s in range(-half, half + 1)])
-    enough = np.isfinite(window).sum(axis=0) > half
-    with warnings.catch_warnings():  # all-NaN windows are left out by `enough`
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.where(enough, np.nanmedian(window, axis=0), np.nan)
+    return closed_running_median(offsets, half, quorum=half + 1)
 
 
 # The running median over EDGE_OFFSET_WINDOW_MM (5 points) is for one point's scatter; it reads a bump of the outline

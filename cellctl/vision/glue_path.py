@@ -112,7 +112,7 @@ def depth_normals(surface: SoleSurface, path_xy: np.ndarray, index: np.ndarray, 
     """Unit normals (len(index) x 3; NaN where the cloud has too few points) of the depth's planes
     (SoleSurface.cloud_planes, GLUE_DEPTH_NORMAL_RADIUS_MM) at the glue points `index` of the closed path path_xy,
     smoothed along it as the patches' normals are (closed_path.smooth_along, PATH_SMOOTHING_MM); only the points
-    the smoothing reads are fitted (the check asks for a few)."""
+    the smoothing reads are fitted."""
     kernel = along_kernel(PATH_SMOOTHING_MM / spacing_mm, len(path_xy))
     radius = len(kernel) // 2
     around = (np.asarray(index)[:, None] + np.arange(-radius, radius + 1)[None]) % len(path_xy)

@@ -184,8 +184,8 @@ def test_a_glue_normal_against_the_surface_is_refused() -> None:
 
 def test_patch_normals_a_colour_edge_tilted_do_not_refuse_a_glue_normal_the_depth_confirms() -> None:
     """The patches' normals tilted 50 degrees along a stretch (a rim's colour edge pulls their image fits) while
-    the depth's plane agrees with the glue normals: not refused, and the depth is asked only there. Where the
-    depth has no plane (NaN), the patches' word stands."""
+    the depth's plane agrees with the glue normals: not refused (the depth is asked along the whole path, once).
+    Where the depth has no plane (NaN), the patches' word stands."""
     z = np.full(150, 20.0)
     points, normals = _glue(z)
     patches = _tilted(normals, slice(40, 46), 50.0)
@@ -196,9 +196,56 @@ def test_patch_normals_a_colour_edge_tilted_do_not_refuse_a_glue_normal_the_dept
         return _upright(index)
 
     assert check_glue_path(points, normals, z, patches, (15.0, 25.0), 2.0, depth) is None
-    np.testing.assert_array_equal(np.concatenate(asked), np.arange(40, 46))
+    assert len(asked) == 1
+    np.testing.assert_array_equal(asked[0], np.arange(150))
     unknown = check_glue_path(points, normals, z, patches, (15.0, 25.0), 2.0, lambda i: np.full((len(i), 3), np.nan))
     assert unknown is not None and "50 degrees from the surface fitted around it and no depth there" in unknown.reason
+
+
+def _leaning(count: int, degrees: float, index: slice | np.ndarray) -> np.ndarray:
+    """Upright normals of a ring of glue points (`_glue`), those at `index` of a top rising towards the ring's outside
+    (its edge) by `degrees` (negative: falling)."""
+    _, outward = _ring(50.0, count)
+    normals = np.tile([0.0, 0.0, 1.0], (count, 1))
+    normals[index, :2] = -np.sin(np.radians(degrees)) * outward[index]
+    normals[index, 2] = np.cos(np.radians(degrees))
+    return normals
+
+
+def test_a_top_rising_to_its_edge_under_level_glue_normals_is_refused() -> None:
+    """A cupsole's lip: the patches' normals and the depth's planes both lean 20 degrees in (the top rises towards
+    the edge) where the glue normals, taken over 15 mm, are level. Refused, all round or along a 100 mm stretch; a
+    top falling to its edge as well; a gentle lip all round (the patches 5 degrees, the depth's wider planes 2)
+    too. Either estimate alone, or both within their noise, is not refused."""
+    z = np.full(150, 20.0)
+    points, level = _glue(z)
+    lip = _leaning(150, 20.0, slice(None))
+    all_round = check_glue_path(points, level, z, lip, (15.0, 25.0), 2.0, lambda i: lip[i])
+    assert all_round is not None and all_round.kind is FailureKind.GLUE_PATH_INCONSISTENT
+    assert "rises towards its edge 20 degrees more steeply than the glue normals say along the whole path" in (
+        all_round.reason
+    )
+    stretch = _leaning(150, 20.0, slice(60, 108))  # 100 mm of the 314 mm path
+    heel_cup = check_glue_path(points, level, z, stretch, (15.0, 25.0), 2.0, lambda i: stretch[i])
+    assert heel_cup is not None and "along 80 mm of it round glue point" in heel_cup.reason
+    assert 60 <= int(heel_cup.reason.split("round glue point ")[1].split()[0]) < 108  # within the stretch
+    falling = _leaning(150, -20.0, slice(None))
+    fall = check_glue_path(points, level, z, falling, (15.0, 25.0), 2.0, lambda i: falling[i])
+    assert fall is not None and "falls towards its edge" in fall.reason
+    assert check_glue_path(points, level, z, lip, (15.0, 25.0), 2.0, _upright) is None  # the depth says level
+    gentle, wide = _leaning(150, 5.0, slice(None)), _leaning(150, 2.0, slice(None))  # the depth's 6 mm averages it
+    low_lip = check_glue_path(points, level, z, gentle, (15.0, 25.0), 2.0, lambda i: wide[i])
+    assert low_lip is not None and "rises towards its edge 5 degrees" in low_lip.reason
+    assert check_glue_path(points, level, z, gentle, (15.0, 25.0), 2.0, lambda i: level[i]) is None
+    assert check_glue_path(points, lip, z, lip, (15.0, 25.0), 2.0, lambda i: lip[i]) is None  # normals follow it
+    rng = np.random.default_rng(3)
+    noisy = [_leaning(150, 1.0, slice(None)) for _ in range(2)]
+    for normals in noisy:  # 10 degrees of noise on each estimate, both 1 degree off in the mean
+        normals[:, :2] += rng.normal(0.0, 0.17, (150, 2))
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    patches, depth = noisy
+    assert check_glue_path(points, level, z, patches, (15.0, 25.0), 2.0, lambda i: depth[i]) is None
+    assert checks.check_glue_tilt(points[:, :2], level, patches, np.full((150, 3), np.nan), 2.0) is None
 
 
 def test_a_lone_failed_patch_fit_is_repaired_two_in_a_row_are_kept() -> None:
