@@ -92,19 +92,19 @@ GLUE_MAX_NORMAL_DEG = 30.0
 # published with glue normals 20-27 degrees off (`lipped-edge`, set 47000); lips of 0.65-1.4 mm, six of nine
 # published 6-9 degrees off (docs/sole-benchmark.md, thirty-fifth round). The glue points' own local estimates see
 # it: per point, the slope across the path (towards the outline) of the image patches' normals (4 mm fits: they
-# follow a lip within ~0.03 in the median) and of the depth's own plane (6 mm: it averages a lip's curve, a third to
-# two thirds of the patches' reading), less the glue normal's. Over the 174 glue paths of the fresh sets 39000,
+# follow a lip within ~0.03 in the median) and of the depth's own plane (6 mm: it averages a lip's curve, from a fifth
+# to two thirds of the patches' reading), less the glue normal's. Over the 174 glue paths of the fresh sets 39000,
 # 40000, 43000 and 46000 (every sole that reached its glue path, those the precision check refuses included; the
 # glue normals' slope across within 0.046 of the truth's on every 80 mm stretch) the patches' median along the whole
 # path stayed within 0.043 (the depth's 0.041), and the running median over 80 mm of both, where they lean the same
 # way (the smaller), within 0.127 but once: 0.20 along a black sole's square heel (40004), where both estimates were
-# biased at an edge across the cameras' baseline and the glue normals were right. The lipped soles published wrong:
-# 0.068-0.46 along the path (their depth's 0.022-0.27: a share of 0.32 or more), 0.35-0.41 on a stretch for the
-# steep lips. A lip that leans at the glue line by less than the limit all round (3.4 degrees) can still leave its
+# biased at an edge across the cameras' baseline and the glue normals were right; no path's patches read beyond 0.06
+# where the depth's leaned the same way. The lipped soles published wrong: 0.068-0.46 along the path (their depth's
+# 0.022-0.27, the same way; a black sole's narrow lip, 1.8 mm over 6.5, 0.19 and 0.037), 0.35-0.41 on a stretch
+# for the steep lips. A lip that leans at the glue line by less than the limit all round (3.4 degrees) can still leave its
 # worst glue normal beyond 5 degrees: the noise's tail comes on top (docs/measurements.md, Validity).
 GLUE_TILT_STRETCH_MM = 80.0
 GLUE_MAX_TILT_PATH = 0.06  # 3.4 degrees, 1.4 times the largest of the right paths
-GLUE_TILT_DEPTH_SHARE = 0.25  # the depth's median leaning the same way by at least this share of the patches'
 GLUE_MAX_TILT_STRETCH = 0.3  # 17 degrees, 1.5 times the largest of the right paths
 MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a sole's top surface
 # A glue point is measured if the cloud has MIN_CLOUD_POINTS (12, ~4 per mm^2) within GLUE_COVER_RADIUS_MM of
@@ -542,13 +542,13 @@ def check_glue_tilt(
     """The glue normals' slope across the closed, counter-clockwise path `path_xy` against the surface's own around
     each point: the patches' normals and the depth's planes (N x 3, NaN: unknown). Refused where the top under the
     path leans across it against the glue normals by more than GLUE_MAX_TILT_PATH in the patches' median along the
-    whole path (the depth's leaning the same way, at least GLUE_TILT_DEPTH_SHARE of that), or by more than
+    whole path (the depth's median leaning the same way), or by more than
     GLUE_MAX_TILT_STRETCH in both along some GLUE_TILT_STRETCH_MM of it: a top that curves near its edge."""
     outward = outward_normals(path_xy)
     glue = _across(normals, outward)
     patch, depth = _across(patch_normals, outward) - glue, _across(depth_normals, outward) - glue
     over_path, depth_over_path = _median_of_known(patch), _median_of_known(depth)
-    confirmed = over_path * depth_over_path >= GLUE_TILT_DEPTH_SHARE * over_path**2  # NaN: not confirmed
+    confirmed = over_path * depth_over_path > 0.0  # NaN: not confirmed
     reach = int(min(round(GLUE_TILT_STRETCH_MM / 2.0 / spacing_mm), (len(glue) - 1) // 2))
     stretch = np.nan_to_num(_agreed(running_median(patch, reach), running_median(depth, reach)))
     worst = int(np.argmax(np.abs(stretch)))
