@@ -51,6 +51,7 @@ class SceneLook:
     wall_foot_mm: float = FOOT_MM  # vertical wall below a sloped wall's lean (0: leaning from the table up)
     top_lip_mm: float = 0.0  # a cupsole's raised lip: the top rises this much towards the outline (0: none)
     top_lip_width_mm: float = 0.0  # over this far in from the outline
+    top_lip_heel_share: float = 1.0  # the lip round the heel only, over this share of the length (1: all round)
     height: str = "normal"  # HEIGHT_CLASSES: flat ~6 mm, normal 8-35 mm, tall up to 50 mm
     colours: str = "plain"  # COLOUR_SCHEMES: rim = dark (or light) band round the edge and on the wall
     table: str = "dark"  # TABLE_LOOKS
@@ -92,6 +93,8 @@ class SceneLook:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
         if not 0.0 <= self.wall_slope_deg < 45.0 or self.top_edge_radius_mm < 0.0 or self.wall_foot_mm < 0.0:
             raise ValueError("wall slope must be in [0, 45) degrees, the top edge radius and wall foot >= 0 mm")
+        if not 0.0 < self.top_lip_heel_share <= 1.0:
+            raise ValueError("a lip's share of the length must be in (0, 1]")
         if self.top_lip_mm < 0.0 or (self.top_lip_mm > 0.0 and self.top_lip_width_mm <= 0.0):
             raise ValueError("a lip must rise >= 0 mm, over a positive width")
         if self.right_gain <= 0.0 or self.right_gamma <= 0.0:
@@ -180,6 +183,20 @@ VARIATIONS: dict[str, Variation] = {
             ("top_lip_mm", "top_lip_width_mm"),
             lambda look, rng: replace(
                 look, top_lip_mm=float(rng.uniform(1.5, 4.0)), top_lip_width_mm=float(rng.uniform(5.0, 12.0))
+            ),
+            in_matrix=False,
+        ),
+        # Outside the matrix: a lip round the heel only (a heel cup), which the glue normals' check reads over 80 mm
+        # stretches rather than the whole path (cellctl.vision.checks.check_glue_tilt).
+        Variation(
+            "heel-cup",
+            "a heel cup: the top rises 1.5-4 mm over its last 5-12 mm round the rear 25-35 % of the sole",
+            ("top_lip_mm", "top_lip_width_mm", "top_lip_heel_share"),
+            lambda look, rng: replace(
+                look,
+                top_lip_mm=float(rng.uniform(1.5, 4.0)),
+                top_lip_width_mm=float(rng.uniform(5.0, 12.0)),
+                top_lip_heel_share=float(rng.uniform(0.25, 0.35)),
             ),
             in_matrix=False,
         ),

@@ -194,7 +194,7 @@ class SoleShape:
         )
         near = near_end | (self.edge_distance_estimate(u, v) < 1.2 * band)
         height = top.copy()
-        height[near] = self.edge.height(self.edge_distance(u[near], v[near]), top[near], bottom[near])
+        height[near] = self.edge.height(self.edge_distance(u[near], v[near]), top[near], bottom[near], u[near])
         return height
 
     def surface_normal(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -245,7 +245,12 @@ def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
         heel_end=EndShape.draw(look.heel, rng),
         toe_end=EndShape.draw(look.toe, rng),
         edge=EdgeProfile(
-            look.wall_slope_deg, look.top_edge_radius_mm, look.wall_foot_mm, look.top_lip_mm, look.top_lip_width_mm
+            look.wall_slope_deg,
+            look.top_edge_radius_mm,
+            look.wall_foot_mm,
+            look.top_lip_mm,
+            look.top_lip_width_mm,
+            look.top_lip_heel_share * length if look.top_lip_heel_share < 1.0 else float("inf"),
         ),
     )
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+LIP_FADE_MM = 20.0  # a heel cup's lip fades out over this beyond its reach along the sole
 FOOT_MM = 4.0  # vertical wall kept at the bottom of every edge profile: above the footprint's 3 mm threshold
 SQUARE_POWER = (4.0, 6.0)  # superellipse exponents of a square end
 POINTED_WEDGE_DEG = (35.0, 60.0)  # full angle of a pointed end
@@ -105,6 +106,8 @@ class EdgeProfile:
     # level at both ends), the footbed sunk below its sidewall. The fillet and the lean, if any, round the lip's top.
     lip_mm: float = 0.0
     lip_width_mm: float = 0.0
+    # A heel cup: the lip only from the heel tip to lip_reach_mm along the sole, fading out over LIP_FADE_MM beyond.
+    lip_reach_mm: float = float("inf")
 
     @property
     def plain(self) -> bool:
@@ -115,19 +118,23 @@ class EdgeProfile:
         lip = self.lip_width_mm if self.lip_mm else 0.0
         return max(thickness * np.tan(np.radians(self.wall_slope_deg)) + self.top_radius, lip) + 1e-3
 
-    def lip(self, dist: np.ndarray) -> np.ndarray:
-        """The lip's rise (mm) over the plain top at distance `dist` inside the outline."""
+    def lip(self, dist: np.ndarray, along: np.ndarray | float = 0.0) -> np.ndarray:
+        """The lip's rise (mm) over the plain top at distance `dist` inside the outline, `along` mm from the heel
+        tip."""
         if not self.lip_mm:
             return np.zeros_like(np.asarray(dist, np.float64))
-        t = np.clip(1.0 - np.asarray(dist, np.float64) / self.lip_width_mm, 0.0, 1.0)
-        return self.lip_mm * t * t * (3.0 - 2.0 * t)
+        across = _smoothstep(1.0 - np.asarray(dist, np.float64) / self.lip_width_mm)
+        return self.lip_mm * across * _smoothstep((self.lip_reach_mm + LIP_FADE_MM - np.asarray(along)) / LIP_FADE_MM)
 
-    def height(self, dist: np.ndarray, top: np.ndarray, bottom: np.ndarray) -> np.ndarray:
-        """Top surface height at distance `dist` inside the outline, where the plain top is at `top`."""
+    def height(
+        self, dist: np.ndarray, top: np.ndarray, bottom: np.ndarray, along: np.ndarray | float = 0.0
+    ) -> np.ndarray:
+        """Top surface height at distance `dist` inside the outline, `along` mm from the heel tip, where the plain top
+        is at `top`."""
         if self.plain:
             return np.asarray(top, np.float64)
         dist = np.clip(np.asarray(dist, np.float64), 0.0, None)
-        top = np.asarray(top, np.float64) + self.lip(dist)
+        top = np.asarray(top, np.float64) + self.lip(dist, along)
         alpha = np.radians(self.wall_slope_deg)
         foot = bottom + self.foot_mm
         r = np.clip(np.minimum(self.top_radius, top - foot), 0.0, None)
@@ -138,3 +145,9 @@ class EdgeProfile:
         arc = centre_z + np.sqrt(np.clip(r * r - (dist - d_top) ** 2, 0.0, None))
         wall = foot + dist / np.tan(alpha) if alpha > 0 else np.full_like(dist, np.inf)
         return np.where(dist >= d_top, top, np.where(dist >= d_wall, arc, np.minimum(wall, top)))
+
+
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    """0 below 0, 1 above 1, 3 t^2 - 2 t^3 between: level at both ends."""
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)

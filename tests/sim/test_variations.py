@@ -35,7 +35,7 @@ from cellctl.sim.matrix import (
 from cellctl.sim.render import SceneRenderer
 from cellctl.sim.scene import SoleScene
 from cellctl.sim.sole import SoleModel, SolePose, SoleShape
-from cellctl.sim.sole_profile import FOOT_MM, EdgeProfile, EndShape
+from cellctl.sim.sole_profile import FOOT_MM, LIP_FADE_MM, EdgeProfile, EndShape
 from cellctl.vision.sole_result import MeasurementRefused
 from tests.sim_rig import half_size_rig, write_half_size_rig
 
@@ -193,6 +193,14 @@ def test_a_cupsoles_lip_raises_the_top_towards_the_outline() -> None:
     lipped, level = (-n[0, :2] / n[0, 2] for n in (model.top_normal_at(xy), plain.top_normal_at(xy)))
     assert np.linalg.norm(lipped - level) == pytest.approx(6 * t * (1 - t) * 3.0 / 8.0, rel=0.02)
     _assert_mesh_is_the_surface(SoleModel(shape_with(replace(look, height="tall")), SolePose(0.0, 0.0, 20.0, False)))
+    # `heel-cup`: the lip round the heel only, faded out over LIP_FADE_MM beyond its share of the length.
+    cup = look_for(("heel-cup",), 3)
+    assert 0.25 <= cup.top_lip_heel_share <= 0.35 and "heel-cup" not in MATRIX_ENTRIES
+    cupped = replace(shape, edge=EdgeProfile(lip_mm=3.0, lip_width_mm=8.0, lip_reach_mm=0.3 * shape.length))
+    u = np.array([0.2, 0.3, 0.6]) * shape.length + np.array([0.0, LIP_FADE_MM / 2, 0.0])
+    edge_v = cupped.centre_line(u) - cupped.half_width(u, False)
+    rise = cupped.surface_height(u, edge_v + 0.01) - shape.top_height(u, edge_v + 0.01)
+    np.testing.assert_allclose(rise, [3.0, 1.5, 0.0], atol=0.05)
 
 
 def test_sloped_wall_rises_from_its_foot() -> None:
