@@ -106,6 +106,13 @@ GLUE_MAX_NORMAL_DEG = 30.0
 GLUE_TILT_STRETCH_MM = 80.0
 GLUE_MAX_TILT_PATH = 0.06  # 3.4 degrees, 1.4 times the largest of the right paths
 GLUE_MAX_TILT_STRETCH = 0.3  # 17 degrees, 1.5 times the largest of the right paths
+# The same lip round part of the sole only (a heel cup) leans less than GLUE_MAX_TILT_STRETCH at the glue line where
+# its normals are already 8-21 degrees off (`heel-cup`, 12 soles from 47400: four published WRONG). Its height shows
+# more clearly than its lean: the glue line's patch heights stand above the line through the top's heights 6 and 15
+# mm further in by most of the lip's height (glue_path.edge_rise). Over 80 mm of path (the running median) that rise
+# read at most 0.84 mm on the 174 glue paths of the four fresh sets (a black sole's rim, whose colour edge pulls the
+# patches; the next 0.80, 0.72) and 1.21-2.42 mm on every heel cup, the four published wrong among them (1.21-1.79).
+GLUE_MAX_RISE_MM = 1.0
 MIN_GLUE_NZ = 0.5  # a glue normal more than 60 degrees off vertical is not on a sole's top surface
 # A glue point is measured if the cloud has MIN_CLOUD_POINTS (12, ~4 per mm^2) within GLUE_COVER_RADIUS_MM of
 # it. A patch fit (4 mm) bridges small holes, but a path that runs over unmeasured or thinly measured surface
@@ -569,6 +576,22 @@ def check_glue_tilt(
         f"depth's own planes lean the same way; limit {np.degrees(np.arctan(limit)):.1f}): a raised lip or a top "
         "curving near its edge, which the glue normals, whose slope across the path is taken over a wider base, do "
         "not follow; set the recipe's [glue] offset_mm to where the top is level"
+    )
+
+
+def check_glue_rise(rise: np.ndarray, spacing_mm: float) -> CheckFailure | None:
+    """The glue line's rise above the top's course further in (per point, mm, NaN: not read; glue_path.edge_rise):
+    refused where its running median over GLUE_TILT_STRETCH_MM of the path exceeds GLUE_MAX_RISE_MM."""
+    reach = int(min(round(GLUE_TILT_STRETCH_MM / 2.0 / spacing_mm), (len(rise) - 1) // 2))
+    along = running_median(rise, reach, quorum=max(1, reach // 2))
+    if not np.any(along > GLUE_MAX_RISE_MM):
+        return None
+    worst = int(np.nanargmax(along))
+    return _glue(
+        f"the glue line stands {along[worst]:.1f} mm above the course of the sole's top further in along "
+        f"{GLUE_TILT_STRETCH_MM:g} mm of it round glue point {worst} (limit {GLUE_MAX_RISE_MM:g}): a raised lip or heel "
+        "cup, whose slope under the glue line the glue normals do not follow; set the recipe's [glue] offset_mm to "
+        "where the top is level"
     )
 
 

@@ -105,7 +105,20 @@ def glue_path(
     normals = _slopes(path_xy, path_inward, inner_xy, raw, inner, path_variance, inner_variance, spacing_mm)
     patch_normals = smooth_along(samples.normals[:n], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
-    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals, height_sd), None
+    rise = edge_rise(raw, ring_z, inner)
+    return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals, height_sd, rise), None
+
+
+def edge_rise(raw: np.ndarray, ring: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """Per glue point how far (mm) its patch height `raw` stands above the line through the rings' heights inside it
+    (`ring`, GLUE_HEIGHT_RING_MM in, every GLUE_RING_STRIDE-th point; `inner`, GLUE_NORMAL_BASE_MM in), extrapolated to
+    the path; NaN where no ring point was sampled. A top curved as a sole's is (its dome or cup, a toe's spring) keeps
+    it within a few tenths; a raised lip or heel cup lifts it by most of the lip's height."""
+    at = np.arange(0, len(raw), GLUE_RING_STRIDE)[: len(ring)]
+    course = ring + (ring - inner[at]) * GLUE_HEIGHT_RING_MM / (GLUE_NORMAL_BASE_MM - GLUE_HEIGHT_RING_MM)
+    rise = np.full(len(raw), np.nan)
+    rise[at] = raw[at] - course
+    return rise
 
 
 def depth_normals(surface: SoleSurface, path_xy: np.ndarray, index: np.ndarray, spacing_mm: float) -> np.ndarray:

@@ -32,6 +32,7 @@ from cellctl.vision.checks import (
     check_glue_coverage,
     check_glue_path,
     check_glue_precision,
+    check_glue_rise,
     check_height_support,
     glue_deviation_limit,
 )
@@ -226,6 +227,8 @@ def measure_sole(
         lambda index: depth_normals(surface, glue_xy, index, glue_spacing_mm),
         glue_deviation_limit(_depth_per_pixel_mm(reconstruction)),
     )
+    if problem is None and path.edge_rise is not None:
+        problem = check_glue_rise(path.edge_rise, glue_spacing_mm)
     if problem is None and path.height_sd is not None:
         problem = check_glue_precision(
             path.height_sd,

@@ -28,6 +28,9 @@ class GluePath:
     # Per point the expected error (sd, mm) of its height: the noise and bias of the fit along the path that gave
     # it (cellctl.vision.surface.path_heights), for the glue-precision check.
     height_sd: np.ndarray | None = None
+    # Per point how far (mm) its height stands above the top's course further in (cellctl.vision.glue_path: NaN where
+    # not read), for the raised-lip check (checks.check_glue_rise).
+    edge_rise: np.ndarray | None = None
 
     @property
     def length_mm(self) -> float:

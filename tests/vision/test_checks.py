@@ -23,7 +23,7 @@ from cellctl.vision.checks import (
     glue_sd_limit,
 )
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.glue_path import without_single_outliers
+from cellctl.vision.glue_path import GLUE_HEIGHT_RING_MM, GLUE_NORMAL_BASE_MM, edge_rise, without_single_outliers
 from cellctl.vision.sole_region import depth_step
 from cellctl.vision.table import TablePlane
 
@@ -246,6 +246,33 @@ def test_a_top_rising_to_its_edge_under_level_glue_normals_is_refused() -> None:
     patches, depth = noisy
     assert check_glue_path(points, level, z, patches, (15.0, 25.0), 2.0, lambda i: depth[i]) is None
     assert checks.check_glue_tilt(points[:, :2], level, patches, np.full((150, 3), np.nan), 2.0) is None
+
+
+def test_a_glue_line_standing_above_the_tops_course_over_a_stretch_is_refused() -> None:
+    """A heel cup: the glue line's heights stand 1.5 mm above the line through the rings' heights further in over
+    100 mm of the path (read at every other point, as the rings are sampled). Refused, naming it; the same
+    0.8 mm all round, within what right soles read, passes."""
+    rise = np.full(150, np.nan)
+    rise[::2] = 0.1
+    cup = rise.copy()
+    cup[60:108:2] = 1.5
+    problem = checks.check_glue_rise(cup, 2.0)
+    assert problem is not None and problem.kind is FailureKind.GLUE_PATH_INCONSISTENT
+    assert "the glue line stands 1.5 mm above the course of the sole's top further in along 80 mm" in problem.reason
+    assert 60 <= int(problem.reason.split("round glue point ")[1].split()[0]) < 108
+    assert checks.check_glue_rise(rise, 2.0) is None
+    assert checks.check_glue_rise(np.where(np.isfinite(rise), 0.8, np.nan), 2.0) is None
+
+
+def test_the_edge_rise_is_the_paths_height_over_the_rings_line() -> None:
+    """edge_rise: 0 on a top sloping across the path, 90 c on a quadratic c t^2 across it (t mm in from the path:
+    rings at 6 and 15 mm), the lip's height where the path alone is lifted; NaN between the rings' samples."""
+    t = np.array([0.0, GLUE_HEIGHT_RING_MM, GLUE_NORMAL_BASE_MM])
+    for top, expected in ((20.0 + 0.3 * t, 0.0), (20.0 - 0.01 * t**2, -0.9), (20.0 + np.array([2.0, 0, 0]), 2.0)):
+        raw, ring, inner = np.full(6, top[0]), np.full(3, top[1]), np.full(6, top[2])
+        rise = edge_rise(raw, ring, inner)
+        np.testing.assert_allclose(rise[::2], expected, atol=1e-12)
+        assert np.all(np.isnan(rise[1::2]))
 
 
 def test_a_lone_failed_patch_fit_is_repaired_two_in_a_row_are_kept() -> None:
