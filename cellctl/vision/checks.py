@@ -556,7 +556,7 @@ def check_glue_tilt(
     patch, depth = _across(patch_normals, outward) - glue, _across(depth_normals, outward) - glue
     over_path, depth_over_path = _median_of_known(patch), _median_of_known(depth)
     confirmed = over_path * depth_over_path > 0.0  # NaN: not confirmed
-    reach = int(min(round(GLUE_TILT_STRETCH_MM / 2.0 / spacing_mm), (len(glue) - 1) // 2))
+    reach = _stretch_reach(len(glue), spacing_mm)
     stretch = np.nan_to_num(_agreed(running_median(patch, reach), running_median(depth, reach)))
     worst = int(np.argmax(np.abs(stretch)))
     if confirmed and abs(over_path) > GLUE_MAX_TILT_PATH:
@@ -582,7 +582,7 @@ def check_glue_tilt(
 def check_glue_rise(rise: np.ndarray, spacing_mm: float) -> CheckFailure | None:
     """The glue line's rise above the top's course further in (per point, mm, NaN: not read; glue_path.edge_rise):
     refused where its running median over GLUE_TILT_STRETCH_MM of the path exceeds GLUE_MAX_RISE_MM."""
-    reach = int(min(round(GLUE_TILT_STRETCH_MM / 2.0 / spacing_mm), (len(rise) - 1) // 2))
+    reach = _stretch_reach(len(rise), spacing_mm)
     along = running_median(rise, reach, quorum=max(1, reach // 2))
     if not np.any(along > GLUE_MAX_RISE_MM):
         return None
@@ -593,6 +593,12 @@ def check_glue_rise(rise: np.ndarray, spacing_mm: float) -> CheckFailure | None:
         "cup, whose slope under the glue line the glue normals do not follow; set the recipe's [glue] offset_mm to "
         "where the top is level"
     )
+
+
+def _stretch_reach(count: int, spacing_mm: float) -> int:
+    """Glue points either side of each that span GLUE_TILT_STRETCH_MM of a closed path of `count` points
+    `spacing_mm` apart, at most the whole path."""
+    return int(min(round(GLUE_TILT_STRETCH_MM / 2.0 / spacing_mm), (count - 1) // 2))
 
 
 def _across(normals: np.ndarray, outward: np.ndarray) -> np.ndarray:
