@@ -14,7 +14,7 @@ measurement, and its reason is judged against the kinds listed. Entries outside 
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
 "light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
-"large-sole", "narrow-sole" and "wide-sole" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"large-sole", "narrow-sole", "wide-sole", "waisted-sole", "dished-top" and "domed-top" are kept out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ HEADINGS = ("along", "any")
 PLACEMENTS = ("in-view", "off-image")
 SIZES = ("normal", "small", "large")  # cellctl.sim.sole.SIZE_LENGTH_RANGES_MM
 WIDTHS = ("normal", "narrow", "wide")  # cellctl.sim.sole.WIDTH_FRACTIONS
+WAISTS = ("normal", "deep")  # cellctl.sim.sole.WAIST_FRACTIONS
 DEFAULT_RIGHT_GAIN = 0.97  # the two cameras never expose identically
 
 
@@ -74,6 +75,10 @@ class SceneLook:
     placement: str = "in-view"  # PLACEMENTS: off-image = one end runs up to OFF_IMAGE_PX beyond an image's edge
     size: str = "normal"  # SIZES: the sole's length range (normal 240-300 mm, small 170-240, large 300-340)
     width: str = "normal"  # WIDTHS: the ball's half-width 17-19 % of the length (narrow 14-16 %, wide 20-23 %)
+    # The top's cross curvature (sole.SoleShape.cross_curvature: a dome > 0, a dished footbed < 0); None: drawn
+    # within the height class's bound as always.
+    cross_curvature_mm: float | None = None
+    waist: str = "normal"  # WAISTS: how deep the arch cuts in and how far the last curves (deep: a waisted sole)
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -88,6 +93,7 @@ class SceneLook:
             ("placement", PLACEMENTS),
             ("size", SIZES),
             ("width", WIDTHS),
+            ("waist", WAISTS),
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
@@ -336,6 +342,35 @@ VARIATIONS: dict[str, Variation] = {
         ),
         Variation(
             "wide-sole", "a wide sole (ball 40-46 % of the length)", ("width",), _set(width="wide"), in_matrix=False
+        ),
+        # Outside the matrix so that its sets keep their soles: a shape no set drew before session 37, a deeply
+        # waisted sole on a strongly curved last (a court shoe's, a racing spike's): the medial arch cuts in 38-50 %
+        # of the ball's half-width (20-35 % in the matrix), the lateral 10-20 % (4-12 %), the toe swings 3-6 % of
+        # the length to the medial side (0-3 %). Measurable like any sole.
+        Variation(
+            "waisted-sole",
+            "a deeply waisted sole on a curved last (medial arch 38-50 % of the ball's half-width, toe 3-6 % over)",
+            ("waist",),
+            _set(waist="deep"),
+            in_matrix=False,
+        ),
+        # Outside the matrix so that its sets keep their soles: tops curved across far more than the matrix draws
+        # (within 1.5 mm, 2 mm when tall), as a dished footbed or a domed midsole top is. The glue line runs where
+        # the top slopes across it by up to ~12 degrees (dished: rising towards the outline, a broad lip; domed:
+        # falling towards it, a broad rounded edge).
+        Variation(
+            "dished-top",
+            "a dished footbed: the top's edge 3-6 mm above its middle across the sole",
+            ("cross_curvature_mm",),
+            lambda look, rng: replace(look, cross_curvature_mm=-float(rng.uniform(3.0, 6.0))),
+            in_matrix=False,
+        ),
+        Variation(
+            "domed-top",
+            "a domed top: its middle 2-4 mm above its edge across the sole",
+            ("cross_curvature_mm",),
+            _draw("cross_curvature_mm", 2.0, 4.0),
+            in_matrix=False,
         ),
         Variation(
             "off-image",

@@ -48,6 +48,12 @@ WIDTH_FRACTIONS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
     "narrow": ((0.095, 0.110), (0.140, 0.160)),
     "wide": ((0.140, 0.160), (0.200, 0.230)),
 }
+# Per SceneLook.waist: the medial and lateral arch cuts as fractions of the ball's half-width, and the toe's shift
+# to the medial side as a fraction of the length. "normal" is the matrix's; "deep" a waisted sole on a curved last.
+WAIST_FRACTIONS: dict[str, tuple[tuple[float, float], tuple[float, float], tuple[float, float]]] = {
+    "normal": ((0.20, 0.35), (0.04, 0.12), (0.0, 0.03)),
+    "deep": ((0.38, 0.50), (0.10, 0.20), (0.03, 0.06)),
+}
 HEEL_HEIGHT_RANGE_MM = (20.0, 35.0)
 TOE_HEIGHT_RANGE_MM = (8.0, 28.0)
 # Per SceneLook.height: heel and toe height ranges and the cross curvature's bound.
@@ -214,12 +220,15 @@ def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
     heel_range, toe_range, cross_bound = HEIGHT_CLASS_RANGES_MM[look.height]
     length = rng.uniform(*SIZE_LENGTH_RANGES_MM[look.size])
     heel_fraction, ball_fraction = WIDTH_FRACTIONS[look.width]
+    medial_fraction, lateral_fraction, shift_fraction = WAIST_FRACTIONS[look.waist]
     heel_half = length * rng.uniform(*heel_fraction)
     ball_half = length * rng.uniform(*ball_fraction)
     heel_height = rng.uniform(*heel_range)
     # A toe higher than the heel is not a shoe: draw the toe height up to the heel height.
     toe_height = rng.uniform(toe_range[0], min(toe_range[1], heel_height))
-    cross = rng.uniform(-cross_bound, cross_bound)
+    cross = rng.uniform(-cross_bound, cross_bound)  # drawn even when the look sets it: the later draws stay put
+    if look.cross_curvature_mm is not None:
+        cross = look.cross_curvature_mm
     spring_start = rng.uniform(0.60, 0.70)
     # The toe spring may take at most what leaves the forefoot MIN_EDGE_THICKNESS_MM thick.
     lift_at_toe_point = rng.uniform(1.0, max(1.0, min(8.0, toe_height - cross - MIN_EDGE_THICKNESS_MM)))
@@ -230,11 +239,11 @@ def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
         length=length,
         heel_half_width=heel_half,
         ball_half_width=ball_half,
-        medial_arch=ball_half * rng.uniform(0.20, 0.35),
-        lateral_arch=ball_half * rng.uniform(0.04, 0.12),
+        medial_arch=ball_half * rng.uniform(*medial_fraction),
+        lateral_arch=ball_half * rng.uniform(*lateral_fraction),
         heel_cap=heel_half * rng.uniform(0.9, 1.2),
         toe_cap=length * rng.uniform(0.14, 0.20),
-        toe_shift=length * rng.uniform(0.0, 0.03),
+        toe_shift=length * rng.uniform(*shift_fraction),
         heel_thickness=heel_height - cross,
         forefoot_thickness=forefoot,
         thickness_blend=(rng.uniform(0.18, 0.25), rng.uniform(0.55, 0.65)),

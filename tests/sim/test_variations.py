@@ -283,6 +283,44 @@ def test_sole_widths_outside_the_matrix(variation: str, low: float, high: float)
     assert variation not in MATRIX_ENTRIES and not fair_refusals((variation,))
 
 
+def test_a_waisted_sole_cuts_its_arch_deeper_on_a_curved_last() -> None:
+    """The waisted sole's arch cuts 38-50 % of the ball's half-width in on the medial side and its toe swings 3-6 %
+    of the length over; its waist is narrower than the plain draw's of the same seed, and a plain look draws as it
+    always did (the switch takes no draw)."""
+    for seed in range(6):
+        plain = shape_with(SceneLook(), seed)
+        waisted = shape_with(look_for(("waisted-sole",), seed), seed)
+        assert 0.38 <= waisted.medial_arch / waisted.ball_half_width <= 0.50
+        assert 0.10 <= waisted.lateral_arch / waisted.ball_half_width <= 0.20
+        assert 0.03 <= waisted.toe_shift / waisted.length <= 0.06
+        u = np.linspace(0.3, 0.6, 31) * waisted.length
+        waist = np.min(waisted.half_width(u, True) + waisted.half_width(u, False))
+        assert waist < np.min(plain.half_width(u, True) + plain.half_width(u, False)) - 0.05 * waisted.ball_half_width
+        assert waist > 0.5 * waisted.ball_half_width  # still a sole, not two
+    assert [round(shape_with(SceneLook(), seed).medial_arch, 3) for seed in range(3)] == [13.38, 13.218, 11.491]
+    assert "waisted-sole" not in MATRIX_ENTRIES and not fair_refusals(("waisted-sole",))
+    with pytest.raises(ValueError, match="waist"):
+        SceneLook(waist="hourglass")
+
+
+@pytest.mark.parametrize(("variation", "low", "high"), [("dished-top", -6.0, -3.0), ("domed-top", 2.0, 4.0)])
+def test_a_dished_or_domed_top_curves_across_the_sole(variation: str, low: float, high: float) -> None:
+    """The top's edge at the ball stands |c| above (dished) or below (domed) its middle, 3-6 or 2-4 mm, where the
+    matrix's tops curve within 1.5 mm; the sole keeps its edge thickness, and the later draws are the plain ones."""
+    for seed in range(6):
+        shape = shape_with(look_for((variation,), seed), seed)
+        assert low <= shape.cross_curvature <= high
+        u = np.array([0.7 * shape.length])
+        middle = shape.centre_line(u)
+        edge = middle + shape.half_width(u, True)
+        rise = shape.top_height(u, edge) - shape.top_height(u, middle)
+        across = shape.half_width(u, True) / (1.05 * shape.ball_half_width)
+        assert rise == pytest.approx(-shape.cross_curvature * across**2)
+        assert shape.top_height(u, edge) - shape.underside(u) >= 5.0 - 1e-9  # sole.MIN_EDGE_THICKNESS_MM
+        assert shape.length == shape_with(SceneLook(), seed).length
+    assert variation not in MATRIX_ENTRIES and not fair_refusals((variation,))
+
+
 # ---- appearance -----------------------------------------------------------------------------------------
 
 
