@@ -14,7 +14,8 @@ measurement, and its reason is judged against the kinds listed. Entries outside 
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
 "light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
-"large-sole", "narrow-sole", "wide-sole", "waisted-sole", "dished-top" and "domed-top" are kept out so that the matrix sets keep their soles, and are judged like any entry.
+"large-sole", "narrow-sole", "wide-sole", "waisted-sole", "dished-top", "domed-top" and "sprung-toe" are kept
+out so that the matrix sets keep their soles, and are judged like any entry.
 """
 
 from __future__ import annotations
@@ -78,6 +79,9 @@ class SceneLook:
     # The top's cross curvature (sole.SoleShape.cross_curvature: a dome > 0, a dished footbed < 0); None: drawn
     # within the height class's bound as always.
     cross_curvature_mm: float | None = None
+    # The underside's lift 10 % of the length in from the toe tip (sole.SoleShape.toe_spring); None: drawn within 1-8
+    # mm as always (what the forefoot's thickness leaves).
+    toe_spring_mm: float | None = None
     waist: str = "normal"  # WAISTS: how deep the arch cuts in and how far the last curves (deep: a waisted sole)
 
     def __post_init__(self) -> None:
@@ -370,6 +374,16 @@ VARIATIONS: dict[str, Variation] = {
             "a domed top: its middle 2-4 mm above its edge across the sole",
             ("cross_curvature_mm",),
             _draw("cross_curvature_mm", 2.0, 4.0),
+            in_matrix=False,
+        ),
+        # Outside the matrix so that its sets keep their soles: a running shoe's toe spring, the forefoot curving up
+        # off the table by 10-16 mm at the toe's height point (20-35 mm at the tip), where the matrix lifts it by 1-8:
+        # the toe's wall stands over a gap, the table under it in the sole's shadow and hidden from the cameras.
+        Variation(
+            "sprung-toe",
+            "a running shoe's toe spring: the forefoot 10-16 mm off the table 10 % in from the toe tip",
+            ("toe_spring_mm",),
+            _draw("toe_spring_mm", 10.0, 16.0),
             in_matrix=False,
         ),
         Variation(

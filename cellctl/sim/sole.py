@@ -233,8 +233,10 @@ def draw_shape(rng: np.random.Generator, look: SceneLook) -> SoleShape:
     # The toe spring may take at most what leaves the forefoot MIN_EDGE_THICKNESS_MM thick.
     lift_at_toe_point = rng.uniform(1.0, max(1.0, min(8.0, toe_height - cross - MIN_EDGE_THICKNESS_MM)))
     reach = ((1.0 - HEIGHT_POINT_FRACTION) - spring_start) / (1.0 - spring_start)
-    toe_spring = lift_at_toe_point / reach**2
     forefoot = max(MIN_EDGE_THICKNESS_MM, toe_height - cross - lift_at_toe_point)
+    if look.toe_spring_mm is not None:  # the drawn forefoot lifted further: the toe height grows with the lift
+        lift_at_toe_point = look.toe_spring_mm
+    toe_spring = lift_at_toe_point / reach**2
     return SoleShape(
         length=length,
         heel_half_width=heel_half,

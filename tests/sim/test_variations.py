@@ -303,6 +303,22 @@ def test_a_waisted_sole_cuts_its_arch_deeper_on_a_curved_last() -> None:
         SceneLook(waist="hourglass")
 
 
+def test_a_sprung_toe_lifts_the_forefoot_off_the_table() -> None:
+    """A running shoe's toe spring: the underside 10-16 mm off the table at the toe's height point (the matrix's 1-8),
+    the forefoot as thick as the plain draw's there, so the toe stands higher by the extra lift."""
+    for seed in range(6):
+        plain = shape_with(SceneLook(), seed)
+        sprung = shape_with(look_for(("sprung-toe",), seed), seed)
+        toe_point = np.array([0.9 * sprung.length])
+        lift = float(sprung.underside(toe_point)[0])
+        assert 10.0 <= lift <= 16.0 and float(plain.underside(toe_point)[0]) <= 8.0 + 1e-9
+        middle = sprung.centre_line(toe_point)
+        thickness = sprung.top_height(toe_point, middle) - sprung.underside(toe_point)
+        assert thickness == pytest.approx(plain.top_height(toe_point, middle) - plain.underside(toe_point))
+        assert sprung.underside(np.array([0.5 * sprung.length]))[0] == 0.0  # the heel and waist lie on the table
+    assert "sprung-toe" not in MATRIX_ENTRIES and not fair_refusals(("sprung-toe",))
+
+
 @pytest.mark.parametrize(("variation", "low", "high"), [("dished-top", -6.0, -3.0), ("domed-top", 2.0, 4.0)])
 def test_a_dished_or_domed_top_curves_across_the_sole(variation: str, low: float, high: float) -> None:
     """The top's edge at the ball stands |c| above (dished) or below (domed) its middle, 3-6 or 2-4 mm, where the
