@@ -48,6 +48,22 @@ GLUE_SLOPE_NOISE_RATIO = 1.75
 # truth, where the depth's plane was 10 degrees off); 6 mm: the depth's noise at 4 mm left 25 degrees at the worst of
 # the matrix's black soles, this 18 (sets 2000 and 4000, 86 valid results; /work/notes/s16/normdiag.py).
 GLUE_DEPTH_NORMAL_RADIUS_MM = 6.0
+# The normals' slope across the path is a difference of heights GLUE_NORMAL_BASE_MM apart (_slopes): on a top curved
+# across (z = k d^2 at d mm in from the path) that is the slope halfway in, off the path's own by k x that base. The
+# glue line's rise above the line through the two rings (edge_rise) is k x GLUE_HEIGHT_RING_MM x GLUE_NORMAL_BASE_MM
+# there, so rise / GLUE_HEIGHT_RING_MM is the slope the normals miss. A dished footbed 3-6 mm deep (`dished-top`, 32
+# valid results from 48100 and 48300) missed 0.018-0.043 outward in the median (1.0-2.5 degrees; 48110 published
+# WRONG at 5.2 degrees, a noise spike along the path on top), which the path's median rise / 6 read as 0.013-0.034;
+# a domed top the other way. Taken from the whole path's median: the rise at single points is noise (corrected point
+# by point over 40-80 mm, the worst normal of plain tops grew by up to 4 degrees). That median strays too: on the 148
+# valid results of the four fresh sets it read up to 0.024 (p90 0.013) where their normals missed at most 0.022 and
+# mostly the other way (colour edges of rims and logos pull the patches, black rubber's noise); less 0.005 it made 13
+# of them worse by over 0.005 (a black rim's worst normal 3.2 -> 4.0 degrees), less GLUE_BEND_DEADBAND none
+# (/work/notes/s37/probe_rise.py). So a dish's bias is only partly taken back (0.033 -> 0.021 in the median): the
+# estimate cannot tell a shallow curve from a colour edge. A rise beyond GLUE_BEND_MAX_RISE_MM is no gentle curve but
+# a lip, which the lean and rise checks judge on the normals as fitted (checks.check_glue_tilt, check_glue_rise).
+GLUE_BEND_DEADBAND = 0.015
+GLUE_BEND_MAX_RISE_MM = 0.3
 
 
 def glue_path(
@@ -106,6 +122,7 @@ def glue_path(
     patch_normals = smooth_along(samples.normals[:n], sigma)
     patch_normals /= np.linalg.norm(patch_normals, axis=1, keepdims=True)
     rise = edge_rise(raw, ring_z, inner)
+    normals = tilted(normals, -path_inward, across_bend(rise))
     return GluePath(np.column_stack([path_xy, z]), normals, True, raw, patch_normals, height_sd, rise), None
 
 
@@ -119,6 +136,26 @@ def edge_rise(raw: np.ndarray, ring: np.ndarray, inner: np.ndarray) -> np.ndarra
     rise = np.full(len(raw), np.nan)
     rise[at] = raw[at] - course
     return rise
+
+
+def across_bend(rise: np.ndarray) -> float:
+    """The slope (rise per mm, outward) that the glue normals miss on a top curved across, from the glue line's
+    `edge_rise` (per point, mm, NaN: not read): the whole path's median over GLUE_HEIGHT_RING_MM, less
+    GLUE_BEND_DEADBAND towards zero; 0 where that median is unknown or beyond GLUE_BEND_MAX_RISE_MM."""
+    known = rise[np.isfinite(rise)]
+    if known.size == 0 or abs(float(np.median(known))) > GLUE_BEND_MAX_RISE_MM:
+        return 0.0
+    bend = float(np.median(known)) / GLUE_HEIGHT_RING_MM
+    return float(np.sign(bend) * max(abs(bend) - GLUE_BEND_DEADBAND, 0.0))
+
+
+def tilted(normals: np.ndarray, outward: np.ndarray, slope: float) -> np.ndarray:
+    """Unit upward normals whose surfaces rise `slope` (per mm) more towards `outward` (unit, in the plane)."""
+    if slope == 0.0:
+        return normals
+    gradient = -normals[:, :2] / normals[:, 2:3] + slope * outward
+    turned = np.column_stack([-gradient, np.ones(len(normals))])
+    return turned / np.linalg.norm(turned, axis=1, keepdims=True)
 
 
 def depth_normals(surface: SoleSurface, path_xy: np.ndarray, index: np.ndarray, spacing_mm: float) -> np.ndarray:

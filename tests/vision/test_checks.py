@@ -23,7 +23,15 @@ from cellctl.vision.checks import (
     glue_sd_limit,
 )
 from cellctl.vision.footprint import Footprint
-from cellctl.vision.glue_path import GLUE_HEIGHT_RING_MM, GLUE_NORMAL_BASE_MM, edge_rise, without_single_outliers
+from cellctl.vision.glue_path import (
+    GLUE_BEND_DEADBAND,
+    GLUE_HEIGHT_RING_MM,
+    GLUE_NORMAL_BASE_MM,
+    across_bend,
+    edge_rise,
+    tilted,
+    without_single_outliers,
+)
 from cellctl.vision.sole_region import depth_step
 from cellctl.vision.table import TablePlane
 
@@ -273,6 +281,24 @@ def test_the_edge_rise_is_the_paths_height_over_the_rings_line() -> None:
         rise = edge_rise(raw, ring, inner)
         np.testing.assert_allclose(rise[::2], expected, atol=1e-12)
         assert np.all(np.isnan(rise[1::2]))
+
+
+def test_the_across_bend_is_the_median_rise_over_the_inner_ring_less_the_deadband() -> None:
+    """glue_path.across_bend: a cup's rise of 0.18 mm all round is a slope of 0.03 the normals miss, less the
+    deadband; a plain top's few hundredths of a mm are left alone, and so is a lip's rise (not a gentle curve)."""
+    rise = np.full(200, np.nan)
+    rise[::2] = np.random.default_rng(3).normal(0.18, 0.3, 100)
+    rise[::2] += 0.18 - np.median(rise[::2])
+    assert across_bend(rise) == pytest.approx(0.18 / GLUE_HEIGHT_RING_MM - GLUE_BEND_DEADBAND)
+    assert across_bend(-rise) == pytest.approx(-across_bend(rise))
+    assert across_bend(rise - 0.18 + 0.02) == 0.0
+    assert across_bend(rise - 0.18 + 0.6) == 0.0
+    assert across_bend(np.full(10, np.nan)) == 0.0
+    normals = np.tile([0.0, 0.0, 1.0], (4, 1))
+    outward = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+    turned = tilted(normals, outward, 0.05)
+    np.testing.assert_allclose(-np.sum(turned[:, :2] * outward, axis=1) / turned[:, 2], 0.05)
+    np.testing.assert_allclose(np.linalg.norm(turned, axis=1), 1.0)
 
 
 def test_a_lone_failed_patch_fit_is_repaired_two_in_a_row_are_kept() -> None:
