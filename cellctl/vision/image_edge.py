@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cellctl.vision import closed_path
 from cellctl.vision.closed_path import closed_runs, outward_normals, resample_closed, run_lengths, smooth_along
 from cellctl.vision.edge_checks import (
     NOTCH_MAX_HALF_CHORD_MM,
@@ -46,6 +47,9 @@ from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import SOLE_MATCHER_PARAMS, Reconstruction
 from cellctl.vision.surface import SoleSurface
 
+EDGE_HEIGHT_IN_MM = 3.0  # the top edge's height is read this far inside the outline, over a disc of this radius
+EDGE_RISE_REACH = 3  # outline points (~1 mm apart) either side of each over which the top's rise is taken
+EDGE_RISE_MIN_MM = 0.3  # a rise towards the outline under this (a slope of 0.1) is the heights' noise
 PLACE_EDGE_FROM_IMAGES = True  # outward moves; the module docstring says what guards them
 # Inward moves: off narrow blobs of depth beyond the edge (a local mismatch a few mm wide), where both cameras
 # agree point by point over the whole blob (`edge_shift`). Measured on the matrices (docs/sole-benchmark.md,
@@ -128,9 +132,29 @@ def table_level(reconstruction: Reconstruction) -> Footprint | None:
 
 
 def edge_heights(surface: SoleSurface, ring: np.ndarray, outward: np.ndarray) -> np.ndarray:
-    """The sole's height near each outline point (3 mm inside; the median of the others where none)."""
-    edge_height = surface.coarse_heights(ring - 3.0 * outward, 3.0)
-    return np.where(np.isfinite(edge_height), edge_height, np.nanmedian(edge_height))
+    """The sole's top-edge height at each outline point of `ring` (closed, ~1 mm apart): read EDGE_HEIGHT_IN_MM
+    inside (the median of the others where none), and where the top rises towards the outline, carried on to it
+    (`edge_rise`)."""
+    near = surface.coarse_heights(ring - EDGE_HEIGHT_IN_MM * outward, EDGE_HEIGHT_IN_MM)
+    far = surface.coarse_heights(ring - 2.0 * EDGE_HEIGHT_IN_MM * outward, EDGE_HEIGHT_IN_MM)
+    edge_height = near + edge_rise(near, far)
+    return np.where(np.isfinite(edge_height), edge_height, np.nanmedian(near))
+
+
+def edge_rise(near: np.ndarray, far: np.ndarray) -> np.ndarray:
+    """How much higher the top stands at each outline point than EDGE_HEIGHT_IN_MM inside it, where it rises towards
+    the outline: the rise from twice that far in (`far`) to there (`near`), the running median over
+    EDGE_RISE_REACH points either side (the heights' noise), where it exceeds EDGE_RISE_MIN_MM; 0 elsewhere.
+
+    A camera that sees the top edge as its silhouette places the edge where its ray meets the edge's height, and
+    the ray runs outward as it falls (0.4 mm per mm of height at a toe's tip). A toe spring lifts the top towards
+    the tip: read 3 mm in, the edge's height was 1.8 mm low at the tip of a toe sprung 20 mm (`sprung-toe` beyond
+    its range, /work/notes/s37/spring.py), the outline 0.8 mm beyond the tip, the length 1.1 mm long and the toe
+    height 0.8 mm high (it lies on the steep top 10 % in from the tip: published wrong). A top falling towards its
+    edge (a rounded edge, a sloped wall) is not carried on: its silhouette is not its top edge (rounded_edge)."""
+    known = np.isfinite(near) & np.isfinite(far)
+    rise = closed_path.running_median(np.where(known, near - far, np.nan), EDGE_RISE_REACH, EDGE_RISE_REACH + 1)
+    return np.where(rise > EDGE_RISE_MIN_MM, rise, 0.0)
 
 
 Camera = tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], np.ndarray]  # change mask, projection, centre

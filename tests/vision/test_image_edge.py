@@ -11,11 +11,13 @@ from cellctl.vision.closed_path import closed_runs, run_lengths
 from cellctl.vision.edge_checks import check_edge_offsets
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
+    EDGE_HEIGHT_IN_MM,
     EDGE_MOVE_MAX_MM,
     EDGE_MOVE_MIN_MM,
     PlacedOutline,
     _paired,
     depth_silent,
+    edge_heights,
     edge_shift,
     notch_fill,
     stereo_offsets,
@@ -63,6 +65,38 @@ def circle(radius: float) -> tuple[np.ndarray, np.ndarray]:
     angle = np.linspace(0.0, 2 * np.pi, int(2 * np.pi * RADIUS), endpoint=False)
     outward = np.column_stack([np.cos(angle), np.sin(angle)])
     return radius * outward, outward
+
+
+class _Top:
+    """A top of height `height(x, y)` as SoleSurface.coarse_heights reads it (the disc's median is its centre's
+    height on a top that is linear over the disc)."""
+
+    def __init__(self, height: Callable[[np.ndarray], np.ndarray]) -> None:
+        self.height = height
+
+    def coarse_heights(self, xy: np.ndarray, radius_mm: float) -> np.ndarray:
+        return self.height(np.asarray(xy))
+
+
+def test_the_edge_height_is_carried_on_to_the_outline_where_the_top_rises_to_it() -> None:
+    """Read 3 mm inside, a top rising 0.6 per mm towards the outline (a sprung toe's tip) stands 1.8 mm higher at
+    the outline: carried on to it. A level top, one rising by less than the heights' noise and one falling to its
+    edge (a rounded edge: its silhouette is not its top edge) keep the height read inside."""
+    ring, outward = circle(RADIUS)
+
+    def rising(slope: float) -> _Top:  # the top's slope outward (negative: falling to the edge)
+        return _Top(lambda xy: HEIGHT + slope * (np.linalg.norm(xy, axis=1) - RADIUS))
+
+    np.testing.assert_allclose(edge_heights(rising(0.6), ring, outward), HEIGHT, atol=1e-9)  # type: ignore[arg-type]
+    read_inside = HEIGHT - 0.05 * EDGE_HEIGHT_IN_MM
+    np.testing.assert_allclose(edge_heights(rising(0.05), ring, outward), read_inside)  # type: ignore[arg-type]
+    np.testing.assert_allclose(edge_heights(rising(-0.6), ring, outward), HEIGHT + 1.8)  # type: ignore[arg-type]
+    tip = rising(0.6)
+    tip.height = lambda xy: np.where(xy[:, 0] > 40.0, HEIGHT + 0.6 * (np.linalg.norm(xy, axis=1) - RADIUS), HEIGHT)
+    carried = edge_heights(tip, ring, outward)  # type: ignore[arg-type]
+    assert np.all(np.abs(carried[np.abs(ring[:, 1]) > 40.0] - HEIGHT) < 1e-9)  # the level sides
+    tip_end = (np.abs(ring[:, 1]) < 5.0) & (ring[:, 0] > 0)  # carried on
+    assert np.all(np.abs(carried[tip_end] - HEIGHT) < 1e-9)
 
 
 @pytest.mark.parametrize("wall", [True, False])
