@@ -143,9 +143,10 @@ def across_bend(rise: np.ndarray) -> float:
     `edge_rise` (per point, mm, NaN: not read): the whole path's median over GLUE_HEIGHT_RING_MM, less
     GLUE_BEND_DEADBAND towards zero; 0 where that median is unknown or beyond GLUE_BEND_MAX_RISE_MM."""
     known = rise[np.isfinite(rise)]
-    if known.size == 0 or abs(float(np.median(known))) > GLUE_BEND_MAX_RISE_MM:
+    median = float(np.median(known)) if known.size else float("nan")
+    if not abs(median) <= GLUE_BEND_MAX_RISE_MM:  # unknown (NaN) or a lip
         return 0.0
-    bend = float(np.median(known)) / GLUE_HEIGHT_RING_MM
+    bend = median / GLUE_HEIGHT_RING_MM
     return float(np.sign(bend) * max(abs(bend) - GLUE_BEND_DEADBAND, 0.0))
 
 

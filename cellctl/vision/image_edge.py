@@ -133,15 +133,17 @@ def table_level(reconstruction: Reconstruction) -> Footprint | None:
 
 def edge_heights(surface: SoleSurface, ring: np.ndarray, outward: np.ndarray) -> np.ndarray:
     """The sole's top-edge height at each outline point of `ring` (closed, ~1 mm apart): read EDGE_HEIGHT_IN_MM
-    inside (the median of the others where none), and where the top rises towards the outline, carried on to it
-    (`edge_rise`)."""
+    inside (the median of the others where none; all NaN where none is known), and where the top rises towards the
+    outline, carried on to it (`rise_to_outline`)."""
     near = surface.coarse_heights(ring - EDGE_HEIGHT_IN_MM * outward, EDGE_HEIGHT_IN_MM)
+    if not np.any(np.isfinite(near)):
+        return near
     far = surface.coarse_heights(ring - 2.0 * EDGE_HEIGHT_IN_MM * outward, EDGE_HEIGHT_IN_MM)
-    edge_height = near + edge_rise(near, far)
+    edge_height = near + rise_to_outline(near, far)
     return np.where(np.isfinite(edge_height), edge_height, np.nanmedian(near))
 
 
-def edge_rise(near: np.ndarray, far: np.ndarray) -> np.ndarray:
+def rise_to_outline(near: np.ndarray, far: np.ndarray) -> np.ndarray:
     """How much higher the top stands at each outline point than EDGE_HEIGHT_IN_MM inside it, where it rises towards
     the outline: the rise from twice that far in (`far`) to there (`near`), the running median over
     EDGE_RISE_REACH points either side (the heights' noise), where it exceeds EDGE_RISE_MIN_MM; 0 elsewhere.
@@ -508,9 +510,9 @@ def onto_image_edge(reconstruction: Reconstruction, outline: np.ndarray, surface
         return PlacedOutline.unmoved(outline)  # no guard without the raw depth cells: the check judges it as it is
     ring = resample_closed(outline, 1.0)
     outward = outward_normals(ring)
-    if not np.any(np.isfinite(surface.coarse_heights(ring - 3.0 * outward, 3.0))):
-        return PlacedOutline.unmoved(outline)
     edge_height = edge_heights(surface, ring, outward)
+    if not np.any(np.isfinite(edge_height)):
+        return PlacedOutline.unmoved(outline)
     level = table_level(reconstruction)
     (left_pixel, left_centre), (right_pixel, right_centre) = projections(reconstruction)
     cameras = ((changed_left, left_pixel, left_centre), (changed_right, right_pixel, right_centre))
