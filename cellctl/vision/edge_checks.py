@@ -14,8 +14,7 @@ import numpy as np
 from cellctl.errors import FailureKind
 from cellctl.stereo.kernels import edge_profiles
 from cellctl.vision.checks import MIN_TESTABLE, CheckFailure
-from cellctl.vision.closed_path import run_lengths
-from cellctl.vision.closed_path import running_median as closed_running_median
+from cellctl.vision.closed_path import run_lengths, running_median
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.footprint import Footprint
 
@@ -289,11 +288,11 @@ def mean_of_known(readings: np.ndarray) -> np.ndarray:
     return np.where(known.any(axis=0), np.nansum(readings, axis=0) / np.maximum(known.sum(axis=0), 1), np.nan)
 
 
-def running_median(offsets: np.ndarray) -> np.ndarray:
+def offset_median(offsets: np.ndarray) -> np.ndarray:
     """Per point of a closed outline (points 1 mm apart) the median of `offsets` over EDGE_OFFSET_WINDOW_MM
     centred on it, NaN where no more than half of the window is known."""
     half = EDGE_OFFSET_WINDOW_MM // 2
-    return closed_running_median(offsets, half, quorum=half + 1)
+    return running_median(offsets, half, quorum=half + 1)
 
 
 # The running median over EDGE_OFFSET_WINDOW_MM (5 points) is for one point's scatter; it reads a bump of the outline
@@ -338,7 +337,7 @@ def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
             f"the sole's edge is not clear in the images: only {np.count_nonzero(np.isfinite(mean))} of "
             f"{len(mean)} outline points show one within {EDGE_SEARCH_MM:g} mm",
         )
-    local = np.nan_to_num(running_median(mean), nan=0.0)  # too little known: no evidence against the outline
+    local = np.nan_to_num(offset_median(mean), nan=0.0)  # too little known: no evidence against the outline
     agreed = agreed_offsets(offsets)
     local = np.where(np.abs(agreed) > np.abs(local), agreed, local)
     worst = int(np.argmax(np.abs(local)))

@@ -36,12 +36,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cellctl.vision import closed_path
-from cellctl.vision.closed_path import closed_runs, outward_normals, resample_closed, run_lengths, smooth_along
+from cellctl.vision.closed_path import (
+    closed_runs,
+    outward_normals,
+    resample_closed,
+    run_lengths,
+    running_median,
+    smooth_along,
+)
 from cellctl.vision.edge_checks import (
     NOTCH_MAX_HALF_CHORD_MM,
     edge_offset_pair,
-    running_median,
+    offset_median,
 )
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.reconstruction import SOLE_MATCHER_PARAMS, Reconstruction
@@ -155,7 +161,7 @@ def rise_to_outline(near: np.ndarray, far: np.ndarray) -> np.ndarray:
     height 0.8 mm high (it lies on the steep top 10 % in from the tip: published wrong). A top falling towards its
     edge (a rounded edge, a sloped wall) is not carried on: its silhouette is not its top edge (rounded_edge)."""
     known = np.isfinite(near) & np.isfinite(far)
-    rise = closed_path.running_median(np.where(known, near - far, np.nan), EDGE_RISE_REACH, EDGE_RISE_REACH + 1)
+    rise = running_median(np.where(known, near - far, np.nan), EDGE_RISE_REACH, EDGE_RISE_REACH + 1)
     return np.where(rise > EDGE_RISE_MIN_MM, rise, 0.0)
 
 
@@ -289,8 +295,8 @@ def edge_shift(
     silent (proposed moves -> bool per point): whether depth is silent over each outward move (`depth_silent`);
     where it is not, the point stays, also after the smoothing, so the edge-offset check still judges it there."""
     outer_left, outer_right = (left, right) if outer is None else outer
-    local_left, local_right = running_median(left), running_median(right)
-    far_left, far_right = running_median(outer_left), running_median(outer_right)
+    local_left, local_right = offset_median(left), offset_median(right)
+    far_left, far_right = offset_median(outer_left), offset_median(outer_right)
     far = 0.5 * (far_left + far_right)
     out = (np.abs(far_left - far_right) <= EDGE_MOVE_AGREE_MM) & (far > EDGE_MOVE_MIN_MM) & (far <= EDGE_MOVE_MAX_MM)
     out &= (local_left > -EDGE_MOVE_MIN_MM) & (local_right > -EDGE_MOVE_MIN_MM)
