@@ -225,7 +225,7 @@ def sample_variance(xy: np.ndarray, z: np.ndarray, spacing_mm: float) -> np.ndar
     noise is path_noise / sqrt(1 - 4/3 rho(lag) + 1/3 rho(2 lag))."""
     lag = PATH_NOISE_LAG * spacing_mm
     seen = 1.0 - (4.0 * disc_overlap(lag, GLUE_FIT_RADIUS_MM) - disc_overlap(2.0 * lag, GLUE_FIT_RADIUS_MM)) / 3.0
-    variance = path_noise(z) ** 2 / float(seen)
+    variance = path_noise(z, xy=xy) ** 2 / float(seen)
     correlated = np.ones(len(z))
     for k in range(1, len(z) // 2):
         rho = disc_overlap(np.linalg.norm(xy - np.roll(xy, k, axis=0), axis=1), GLUE_FIT_RADIUS_MM)

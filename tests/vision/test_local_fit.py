@@ -9,7 +9,7 @@ import numpy as np
 from cellctl.vision.closed_path import smooth_along
 from cellctl.vision.glue_path import GLUE_NORMAL_SMOOTHING_MM, GLUE_NORMAL_TIP_SMOOTHING_MM, sample_variance
 from cellctl.vision.local_fit import disc_overlap, local_planes, slope_gradients
-from cellctl.vision.surface import path_noise
+from cellctl.vision.surface import path_noise, sharp_turns
 
 
 def test_a_rising_pointed_end_keeps_its_tip_height_and_slope() -> None:
@@ -179,12 +179,13 @@ def test_sample_variance_counts_the_patches_overlap() -> None:
     n = 400
     z = rng.normal(0.0, 0.2, n)
     # Samples further apart than two patch radii: independent, the path noise itself.
+    # (A straight run closed on itself turns back at its ends: path_noise leaves out the second differences there.)
     far = np.column_stack([np.arange(n) * 10.0, np.zeros(n)])
-    np.testing.assert_allclose(sample_variance(far, z, 10.0), path_noise(z) ** 2)
+    np.testing.assert_allclose(sample_variance(far, z, 10.0), path_noise(z, xy=far) ** 2)
     # 2 mm apart with 4 mm patches: the same heights read as more noise per sample (second differences miss
     # the shared part), counted with the correlated neighbours' sum (1 + 2 (0.69 + 0.39 + 0.14) = 3.44).
     near = np.column_stack([np.arange(n) * 2.0, np.zeros(n)])
-    ratio = (sample_variance(near, z, 2.0) / path_noise(z) ** 2)[10:-10]  # the open ends have fewer neighbours
+    ratio = (sample_variance(near, z, 2.0) / path_noise(z, xy=near) ** 2)[10:-10]  # the open ends: fewer neighbours
     np.testing.assert_allclose(ratio, ratio[0])
     assert 6.5 < ratio[0] < 7.5  # 3.44 / (1 - 4/3 x 0.39)
 
@@ -303,3 +304,20 @@ def test_no_knee_fitted_to_the_noise_of_a_dished_black_top() -> None:
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     error = np.degrees(np.arccos(np.clip(np.sum(normals * recorded["true_normals"], axis=1), -1.0, 1.0)))
     assert error.max() < 4.5, (int(np.argmax(error)), error.max())  # 3.49 (at 0.8: 5.19)
+
+
+def test_the_noise_round_a_sprung_pointed_tip_is_the_heights_scatter_not_their_kink() -> None:
+    # A pointed tip (a 35 degree wedge) whose top rises 0.5 mm per mm along the path to it: second differences
+    # across the tip read the kink of the heights (~1.6 mm at the tip), not their noise (0.2 mm).
+    spacing, half = 2.0, 60
+    along = np.arange(-half, half + 1) * spacing  # signed distance along the path from the tip
+    angle = np.radians(17.5)
+    xy = np.column_stack([-np.abs(along) * np.cos(angle), along * np.sin(angle)])
+    z = 30.0 - 0.5 * np.abs(along) + np.random.default_rng(4).normal(0.0, 0.2, len(along))
+    tip = half
+    assert sharp_turns(xy)[tip - 1 : tip + 2].all() and not sharp_turns(xy)[tip + 3 : -3].any()
+    assert path_noise(z)[tip] > 0.4  # the kink read as noise: 0.51 (0.52 over 200 draws; 0.20 with the turn left out)
+    assert 0.1 < path_noise(z, xy=xy)[tip] < 0.3
+    # A round end (30 mm radius, 2 mm apart) turns ~15 degrees between the chords: nothing is left out.
+    circle = 30.0 * np.column_stack([np.cos(np.arange(94) * 2.0 / 30.0), np.sin(np.arange(94) * 2.0 / 30.0)])
+    assert not sharp_turns(circle).any()
