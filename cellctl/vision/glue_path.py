@@ -6,7 +6,7 @@ import numpy as np
 
 from cellctl.vision.closed_path import along_kernel, outward_normals, resample_closed, smooth_along
 from cellctl.vision.defaults import GLUE_OFFSET_MM, GLUE_SPACING_MM
-from cellctl.vision.local_fit import disc_overlap, slope_gradients
+from cellctl.vision.local_fit import disc_overlap, slope_gradients, upward_normals
 from cellctl.vision.sole_result import GluePath
 from cellctl.vision.surface import (
     PATH_NOISE_LAG,
@@ -154,9 +154,7 @@ def tilted(normals: np.ndarray, outward: np.ndarray, slope: float) -> np.ndarray
     """Unit upward normals whose surfaces rise `slope` (per mm) more towards `outward` (unit, in the plane)."""
     if slope == 0.0:
         return normals
-    gradient = -normals[:, :2] / normals[:, 2:3] + slope * outward
-    turned = np.column_stack([-gradient, np.ones(len(normals))])
-    return turned / np.linalg.norm(turned, axis=1, keepdims=True)
+    return upward_normals(-normals[:, :2] / normals[:, 2:3] + slope * outward)
 
 
 def depth_normals(surface: SoleSurface, path_xy: np.ndarray, index: np.ndarray, spacing_mm: float) -> np.ndarray:
@@ -209,9 +207,7 @@ def _slopes(
         spacing_mm,
         GLUE_NORMAL_TIP_SMOOTHING_MM,
     )
-    normals = np.column_stack([-gradient, np.ones(len(path_xy))])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    return normals
+    return upward_normals(gradient)
 
 
 def sample_variance(xy: np.ndarray, z: np.ndarray, spacing_mm: float) -> np.ndarray:

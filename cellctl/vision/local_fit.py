@@ -122,6 +122,12 @@ KNEE_KNOT_REACH_MM = 12.0
 KNEE_RSS_RATIO = 0.7
 
 
+def upward_normals(gradient: np.ndarray) -> np.ndarray:
+    """Unit normals (K x 3, pointing up) of surfaces z = gx x + gy y + c with the gradients (gx, gy) (K x 2)."""
+    normals = np.column_stack([-gradient, np.ones(len(gradient))])
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
 def disc_overlap(distance: np.ndarray | float, radius: float) -> np.ndarray:
     """Shared area of two discs of `radius` whose centres are `distance` apart, as a share of one disc's area.
 

@@ -16,7 +16,14 @@ from typing import TypeVar
 import numpy as np
 
 from cellctl.stereo.pointgrid import PointGrid
-from cellctl.vision.local_fit import GRADIENT_RIDGE_MM2, known_variance, query_chunks, unfolded, within_reach
+from cellctl.vision.local_fit import (
+    GRADIENT_RIDGE_MM2,
+    known_variance,
+    query_chunks,
+    unfolded,
+    upward_normals,
+    within_reach,
+)
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.subpixel import refine_patches
 from cellctl.vision.workers import worker
@@ -172,8 +179,7 @@ def heights_on_planes(planes: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, n
     with np.errstate(divide="ignore", invalid="ignore"):
         slope = -planes[:, :3] / planes[:, 2:3]  # (gx, gy, -1): the plane z = gx x + gy y + z0
         z = slope[:, 0] * xy[:, 0] + slope[:, 1] * xy[:, 1] - planes[:, 3] / planes[:, 2]
-    normals = np.column_stack([-slope[:, 0], -slope[:, 1], np.ones(len(z))])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = upward_normals(slope[:, :2])
     finite = np.isfinite(z) & np.all(np.isfinite(normals), axis=1)
     return np.where(finite, z, np.nan), normals
 
@@ -193,8 +199,7 @@ def robust_planes(points: np.ndarray, at: np.ndarray, ids: np.ndarray) -> tuple[
     keep = (residual >= low[ids]) & (residual <= high[ids])
     refit = np.bincount(ids, weights=keep, minlength=count) >= 3
     coef = np.where(refit[:, None], _segment_planes(dx, dy, points[:, 2], ids, count, keep), coef)
-    normals = np.column_stack([-coef[:, 1], -coef[:, 2], np.ones(count)])
-    return coef[:, 0], normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return coef[:, 0], upward_normals(coef[:, 1:3])
 
 
 def _segment_planes(
