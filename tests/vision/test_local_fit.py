@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from cellctl.vision.closed_path import smooth_along
-from cellctl.vision.glue_path import GLUE_NORMAL_SMOOTHING_MM, GLUE_NORMAL_TIP_SMOOTHING_MM, sample_variance
+from cellctl.vision.glue_path import sample_variance
 from cellctl.vision.local_fit import disc_overlap, local_planes, slope_gradients
 from cellctl.vision.surface import path_noise, sharp_turns
 
@@ -288,20 +288,13 @@ def test_no_knee_fitted_to_the_noise_of_a_dished_black_top() -> None:
     # them at residual ratios of 0.73-0.79 of the cubic's, and with KNEE_RSS_RATIO at 0.8 it put a normal 5.2 degrees
     # off a smooth dish (the cubic there: 3.3-3.5; the plane: 1.7-2.3; before glue_path.across_bend, whose dish
     # correction these errors still include, 1-1.5 degrees of them). docs/sole-benchmark.md, thirty-seventh round.
+    from cellctl.vision.glue_path import _slopes
+
     recorded = np.load(Path(__file__).parent / "data" / "dished_black_48110.npz")
-    path, inward = recorded["path_xy"], recorded["path_inward"]
-    gradient, _ = slope_gradients(
-        path,
-        np.column_stack([inward[:, 1], -inward[:, 0]]),
-        np.vstack([path, recorded["inner_xy"]]),
-        np.concatenate([recorded["raw"], recorded["inner"]]),
-        np.concatenate([recorded["pv"], recorded["iv"]]),
-        GLUE_NORMAL_SMOOTHING_MM,
+    normals = _slopes(
+        *(recorded[name] for name in ("path_xy", "path_inward", "inner_xy", "raw", "inner", "pv", "iv")),
         float(recorded["spacing"]),
-        GLUE_NORMAL_TIP_SMOOTHING_MM,
     )
-    normals = np.column_stack([-gradient, np.ones(len(path))])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     error = np.degrees(np.arccos(np.clip(np.sum(normals * recorded["true_normals"], axis=1), -1.0, 1.0)))
     assert error.max() < 4.5, (int(np.argmax(error)), error.max())  # 3.49 (at 0.8: 5.19)
 
