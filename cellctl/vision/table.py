@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.subpixel import refine_patches
 
@@ -61,6 +62,35 @@ class TablePlane:
         transform[:3, :3] = np.vstack([x, y, z])
         transform[:3, 3] = -transform[:3, :3] @ origin
         return transform
+
+
+@dataclass(frozen=True)
+class TableDisparity:
+    """A table plane's disparity, linear in the rectified left pixel: d(x, y) = a x + b y + c, from
+    d = -B n.(x - cx, y - cy, f) / o for the plane n.X + o = 0 in the rectified left camera frame."""
+
+    a: float
+    b: float
+    c: float
+
+    @classmethod
+    def of(cls, plane: TablePlane, calib: Calibration) -> TableDisparity:
+        n, o, baseline = plane.normal, plane.offset, calib.baseline_mm
+        cx, cy, f = calib.P1[0, 2], calib.P1[1, 2], calib.focal_px
+        scale = -baseline / o
+        return cls(scale * n[0], scale * n[1], scale * (n[2] * f - n[0] * cx - n[1] * cy))
+
+    def values(self, box: tuple[slice, slice]) -> np.ndarray:
+        """The disparity (px, float64) at every rectified left pixel of `box` (rows, columns)."""
+        rows = np.arange(box[0].start or 0, box[0].stop, dtype=np.float64)
+        columns = np.arange(box[1].start or 0, box[1].stop, dtype=np.float64)
+        return (self.b * rows + self.c)[:, None] + self.a * columns[None, :]
+
+    def shift(self, box: tuple[slice, slice], right: bool) -> np.ndarray:
+        """Per pixel of `box`, how far along x the other image shows the same table point: -d for a left pixel;
+        for a right pixel x_r, +d at the left pixel x_l = x_r + d (solved: d = (a x_r + b y + c) / (1 - a))."""
+        d = self.values(box)
+        return (d / (1.0 - self.a) if right else -d).astype(np.float32)
 
 
 def find_table(points: np.ndarray, sample: int = 60000, seed: int = 0, refit_stride: int = 4) -> TablePlane | None:

@@ -27,7 +27,7 @@ import numpy as np
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.image_noise import CLEAN_IMAGE_NOISE_DN, NOISY_EXPOSURES_DN, image_noise_dn
-from cellctl.vision.table import TABLE_INLIER_MM, TablePlane, find_table, refine_table
+from cellctl.vision.table import TABLE_INLIER_MM, TableDisparity, TablePlane, find_table, refine_table
 
 FORMAT_VERSION = 1
 MIN_TABLE_FRACTION = 0.5  # of the image: the empty table must fill most of the view to be taught
@@ -66,13 +66,9 @@ class TaughtTable:
     taught_at: float  # seconds since the epoch (UTC)
 
     def table_disparity(self, calib: Calibration) -> np.ndarray:
-        """The plane's disparity at every rectified left pixel (float32 H x W): d = -B n.(x - cx, y - cy, f) / o."""
+        """The plane's disparity at every rectified left pixel (float32 H x W, table.TableDisparity)."""
         width, height = calib.image_size
-        f, cx, cy, baseline = calib.focal_px, calib.P1[0, 2], calib.P1[1, 2], calib.baseline_mm
-        n, o = self.plane.normal, self.plane.offset
-        x = np.arange(width, dtype=np.float64)[None, :] - cx
-        y = np.arange(height, dtype=np.float64)[:, None] - cy
-        return (-baseline * (n[0] * x + n[1] * y + n[2] * f) / o).astype(np.float32)
+        return TableDisparity.of(self.plane, calib).values((slice(0, height), slice(0, width))).astype(np.float32)
 
     def disparity_band(self, calib: Calibration, max_height_mm: float, margin_px: int = 2) -> tuple[int, int]:
         """(min_disparity, num_disparities) from the table up to `max_height_mm` above it, anywhere in view.
