@@ -296,6 +296,12 @@ class Segmentation(_RunState):
                 )
             keep, self._changed_left, self.changed_right = change.sole, change.changed_left, change.changed_right
             self.change_test = change.test
+            if len(change.shadowed):
+                # Depth carried over a cast shadow's band (cellctl.vision.shadow_band): not measured there, for the
+                # footprint and the depth step alike.
+                carried = raster.counts(np.take(points, change.shadowed, axis=0))
+                every, high_counts = every - carried, high_counts - carried
+                self.raised, self.measured_cells = depth_step(raster, every, high_counts)
         else:
             colour = colour_split(self.cloud.colors, points, footprint, high)
             keep, self.colour_filter, self.separation = high[colour.sole], colour.applied, colour.separation

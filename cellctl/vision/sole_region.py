@@ -6,7 +6,7 @@ order and its shared state stay in cellctl.vision.segmentation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -19,8 +19,10 @@ from cellctl.vision.cloud import StereoCloud
 from cellctl.vision.edge_blur import soft_edges
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.outliers import ISOLATED_SPACINGS, inliers_by_mean, mean_neighbour_distances
-from cellctl.vision.table import TABLE_INLIER_MM, TablePlane
+from cellctl.vision.shadow_band import shadow_band
+from cellctl.vision.table import TABLE_INLIER_MM, TableDisparity, TablePlane
 from cellctl.vision.teach import TaughtTable
+from cellctl.vision.workers import worker
 
 BORDER_MARGIN_PX = 8  # a sole closer than this to the edge of what both cameras see is cut off
 SOLE_MASK_ERODE_PX = 1  # sub-pixel fits keep this far from the edge: its pixels mix sole and table
@@ -34,6 +36,7 @@ UNMEASURED_CLOSE_PX = 61  # ~24 mm: closes the sole's image region over patches 
 # The change masks are computed this far round the sole's high points (~40 mm: past fattening, a leaning
 # wall's foot, the outline checks' 7 mm and the unmeasured-pixel closing's 24 mm).
 CHANGE_MARGIN_PX = 100
+SHADOW_BANDS = True  # cellctl.vision.shadow_band
 # A pixel is on the raised sole for the change test (`ChangeTest.changed(raised=...)`) where no point measured
 # at the table's level (within WALL_FOOT_MM) lies within this many pixels (~2 mm). The matcher drags the
 # sole's disparity onto the table beside its edge by up to about its census window's half width (4 px): a
@@ -60,6 +63,8 @@ class ChangeSplit:
     changed_left: np.ndarray  # bool, rectified left pixels changed against the taught table
     changed_right: np.ndarray | None  # the same for the right image (None: its table not seen)
     test: ChangeTest  # the left image's against its taught reference
+    # Points above the table on a cast shadow's band (cellctl.vision.shadow_band): depth carried over the band.
+    shadowed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def table_sample(points: np.ndarray) -> np.ndarray:
@@ -133,6 +138,11 @@ def change_split(
         if right_test is None
         else right_test.changed(cloud.rectified[1], taught.right, right_box, raised_right, lifted_right)
     )
+    shadowed = np.zeros(0, np.int64)
+    if SHADOW_BANDS and changed_right is not None and right_test is not None and cloud.calibration is not None:
+        changed, changed_right, shadowed = _without_shadow_bands(
+            cloud, taught, points, high, (changed, changed_right), (test, right_test)
+        )
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
     near = near[footprint.dilated(EDGE_BAND_MM).contains(np.take(points, near, axis=0))]
@@ -142,7 +152,59 @@ def change_split(
     # (one pass over the points instead of a sort of the ~2 10^5 chosen).
     chosen = np.zeros(len(points), bool)
     chosen[candidates[changed[y, x]]] = True
-    return ChangeSplit(np.flatnonzero(chosen), changed, changed_right, test)
+    return ChangeSplit(np.flatnonzero(chosen), changed, changed_right, test, shadowed)
+
+
+def _without_shadow_bands(
+    cloud: StereoCloud,
+    taught: TaughtTable,
+    points: np.ndarray,
+    high: np.ndarray,
+    changed: tuple[np.ndarray, np.ndarray],
+    tests: tuple[ChangeTest, ChangeTest],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Both change masks less a cast shadow's band beside the sole (cellctl.vision.shadow_band), and the high
+    points (indices into `points`) whose left pixel lies on the left band."""
+    assert cloud.rectified is not None and cloud.calibration is not None
+    left, right = cloud.rectified
+    table = TableDisparity.of(taught.plane, cloud.calibration)
+    pixel_mm = _pixel_mm(cloud, taught)
+    heights_left, heights_right = _heights(cloud, points, left.shape)
+    # The right image's on the second core (numpy and OpenCV release the GIL): ~9 ms each.
+    right_band = worker("shadow-band").submit(
+        shadow_band,
+        *(changed[1], right, left, table, True, tests[1], taught.right, tests[0].sigma, pixel_mm, heights_right),
+    )
+    try:
+        band_left = shadow_band(
+            changed[0], left, right, table, False, tests[0], taught.left, tests[1].sigma, pixel_mm, heights_left
+        )
+    finally:
+        band_right = right_band.result()
+    x, y = np.round(np.take(cloud.pixels, high, axis=0)).astype(np.int64).T
+    shadowed = high[band_left[y, x]]
+    return changed[0] & ~band_left, changed[1] & ~band_right, shadowed
+
+
+def _heights(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right rectified images of the measured points' heights above the table's level (WALL_FOOT_MM; the
+    right ones at x - disparity), NaN where none was measured."""
+    above = np.flatnonzero(points[:, 2] > WALL_FOOT_MM)
+    z = points[above, 2].astype(np.float32)
+    x, y = np.round(np.take(cloud.pixels, above, axis=0)).astype(np.int64).T
+    images = []
+    for column in (x, np.round(cloud.pixels[above, 0] - cloud.disparity[above]).astype(np.int64)):
+        image = np.full(shape[:2], np.nan, np.float32)
+        inside = (column >= 0) & (column < shape[1]) & (y >= 0) & (y < shape[0])
+        image[y[inside], column[inside]] = z[inside]
+        images.append(image)
+    return images[0], images[1]
+
+
+def _pixel_mm(cloud: StereoCloud, taught: TaughtTable) -> float:
+    """A rectified pixel's footprint on the table (mm): the table's distance along the axis over the focal length."""
+    assert cloud.calibration is not None
+    return abs(float(taught.plane.offset)) / cloud.calibration.focal_px
 
 
 def _raised(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,208 @@
+"""A cast shadow's dark band beside the sole, told from the sole by stereo: it lies on the table, so both cameras
+see it at the table's disparity.
+
+A lamp low beside the cell darkens a band of the table along the sole's edge (its penumbra graded over 2-4 mm,
+where two lamps' shadows overlap). There the table's texture is too faint for the change test's vote
+(cellctl.vision.change: the band stays changed), and the matcher, with nothing to match in it, carries the sole's
+disparity out over it: the depth outline bulged 2-6 mm beyond the edge on 20 of the 25 shadowed soles of the
+fresh sets (docs/sole-benchmark.md, thirty-eighth round), and the outline's checks refused them.
+
+What the images still show is where the band lies: on the table, the same in both views once the right image is
+shifted by the table's disparity, which the sole's edge and textured top are not (they stand higher, at a
+larger disparity). A changed pixel is taken for shadowed table (`shadow_band`) where all of these hold:
+
+- darker than the taught table as lit now (a shadow's factor, change.MAX_SHADOW_FACTOR, and more than the noise);
+- consistent at the table's disparity: the left pixel and the right one at x - d_table differ by no more than
+  the two images' noise (CONSISTENT_SIGMAS), by a 3 x 3 majority;
+- darker than the sole beside it by MIN_SOLE_OVER_BAND (the lit sole casts the shadow; a dark part of a sole lies
+  beside more of itself);
+- within BAND_MAX_MM of the unchanged table round the sole (`_outer`), in a connected stretch of such pixels that
+  meets the table the way a penumbra does (`_faded_stretches`: softly, directly, and wider than a blended edge
+  pixel), and which depth did not measure above the table (`_raised`: a rounded edge's curve, a leaning wall).
+
+The same for the right image against the left. Those pixels are no longer changed, and the depth points on
+them above the table are the sole's disparity carried over the band (cellctl.vision.segmentation drops them
+from the footprint and the depth step alike).
+
+Not found: where the sole hides the band from the other camera (beside its edge, up to the difference of the two
+disparities wide), a shadow with a sharp edge (a small lamp near the table), and a band beside a sole as dark
+as it (a black sole on a grey table): there the band stays changed, the outline bulges and the checks refuse it as
+before. Not told apart: a dark rim of a light sole beside a band, within BAND_MAX_MM of the table.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from cellctl.vision.change import MAX_SHADOW_FACTOR, MIN_TEXTURE_GAIN, ChangeTest
+from cellctl.vision.table import TableDisparity
+
+# |left - right at the table's disparity| on the table: within 3 sigma of the difference's noise but for 0.3 % of
+# the pixels (which the 3 x 3 majority then outvotes); a textured sole seen at the wrong disparity, often beyond.
+CONSISTENT_SIGMAS = 3.0
+DARKER_SIGMAS = 2.0  # below the predicted table by this many of its noise, besides the shadow's factor
+# The band's width from the unchanged table: the penumbras beside the matrix's shadowed soles are 2-4 mm wide.
+BAND_MAX_MM = 4.0
+# The sole beside a shadow is lit: a white or grey sole 3-10 times the band's brightness, a black one on the dark
+# table 2-3 times (the brightest sole pixel within the band's width of it).
+MIN_SOLE_OVER_BAND = 1.6
+# A penumbra's outer edge: the band fades into the table (2-5 DN per pixel beside the matrix's soles), the change
+# test stops where the step is within its noise; an albedo edge steps by half its contrast or more at the mask.
+SOFT_EDGE_SHARE = 0.25
+# A stretch of candidates is a band where nearly all of its pixels beside the table are soft and few lie beside a
+# sharp edge seen at the wrong disparity: the shadow bands of 39062 90-100 % and 0-10 %, the black rim round
+# white matrix sole 39000 (as dark as a shadow's band, beside a brighter sole) 54 % and 52 %.
+MIN_SOFT_SHARE = 0.8
+MAX_RING_SHARE = 0.25
+RING_PX = 2.5  # the changed pixels on the table's side of a stretch: within a pixel or two of the table
+# The bands beside three shadowed matrix soles (39039, 39059, 39062): 1.5-2.6 px wide in the mean (area over its
+# pixels beside the table); the blend of a rounded black edge with the dark table (40026) 1.0-1.25 px. (The band's
+# texture against the taught table's was no help: 0.1-0.54 correlation for the bands, 0.1-0.36 for that blend.)
+MIN_BAND_WIDTH_MM = 0.55
+OUTER_CLOSE_PX = 9  # ~3.5 mm: gaps in a sole's mask are a pixel or two; a shadow band's specks lie further apart
+# Depth under a stretch: points more than MIN_RISE_MM above the table on 0-5 % of the pixels of the shadow bands of
+# matrix soles 39039, 39059 and 39062; on 28-91 % of the shaded curves of rounded black edges (39054, 40054, 43054,
+# no shadow) and 26 % of a black side wall leaning out into view (46026), which pass every test above.
+MIN_RISE_MM = 5.0
+MAX_RAISED_SHARE = 0.15
+MIN_EDGE_PX = 10  # ~4 mm of edge on the table: less is a speck the outline's opening removes anyway
+GAIN_STRIDE = 4  # the two images' gain on the table round the sole: every 4th pixel each way (~10^4 of them)
+
+
+def _warped(image: np.ndarray, shift: np.ndarray, box: tuple[slice, slice]) -> np.ndarray:
+    """`image` read at (x + shift, y) for the pixels of `box` (shift: per pixel of the box; float32, NaN off the
+    image)."""
+    rows = np.arange(box[0].start, box[0].stop, dtype=np.float32)
+    columns = np.arange(box[1].start, box[1].stop, dtype=np.float32)
+    map_x = columns[None, :] + shift
+    map_y = np.repeat(rows[:, None], len(columns), axis=1)
+    return cv2.remap(np.asarray(image, np.float32), map_x, map_y, cv2.INTER_LINEAR, borderValue=np.nan)
+
+
+def _below_brighter_sole(image: np.ndarray, sole: np.ndarray, candidate: np.ndarray, reach_px: int) -> np.ndarray:
+    """Per candidate pixel: the brightest of the sole (the changed pixels that are no candidate) within `reach_px`
+    is MIN_SOLE_OVER_BAND times brighter. A shadow lies darker than the lit sole that casts it; a dark part of the
+    sole itself (a black sole on a grey table) lies beside more of that sole, no brighter. A dark rim of a light
+    sole does lie beside a brighter sole: its edge on the table is sharp, so no band starts on it (`_soft_edge`)."""
+    size = 2 * reach_px + 1  # a square: separable, so its cost does not grow with the reach
+    brightest = cv2.dilate(np.where(sole, image, 0.0).astype(np.float32), np.ones((size, size), np.uint8))
+    return candidate & (brightest >= MIN_SOLE_OVER_BAND * image)
+
+
+def _soft_edge(image: np.ndarray, table: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Per pixel: its brightness lies within SOFT_EDGE_SHARE of the brightest table pixel beside it (as taught and
+    lit now, at least): a penumbra fades into the table over millimetres, while the edge of anything lying on it (a
+    black sole, a dark rim) steps by most of its contrast within a pixel."""
+    lit = cv2.dilate(np.where(table, image, 0.0).astype(np.float32), np.ones((3, 3), np.uint8))
+    return lit - image <= SOFT_EDGE_SHARE * np.maximum(lit, predicted)
+
+
+def _faded_stretches(
+    candidate: np.ndarray,
+    image: np.ndarray,
+    outside: np.ndarray,
+    predicted: np.ndarray,
+    ring: np.ndarray,
+    pixel_mm: float,
+) -> np.ndarray:
+    """The connected stretches of candidates that meet the table round the sole the way a penumbra does: directly
+    (few of their pixels beside changed pixels on the table's side that do not agree at the table's disparity,
+    `ring`: the sharp outer edge of something standing higher, seen at the wrong disparity) and softly (most of their pixels beside the table
+    within SOFT_EDGE_SHARE of it). One soft pixel would not do: a dark rim's edge is soft where its contrast with
+    the table happens to be low. And the stretch is a band, MIN_BAND_WIDTH_MM wide in the mean: the last pixel of
+    a sole's edge that blends it with the table (a rounded edge's shaded curve beside a dark table) is not."""
+    _, labels = cv2.connectedComponents(candidate.astype(np.uint8), connectivity=8)
+    square = np.ones((3, 3), np.uint8)
+    on_table = candidate & (cv2.dilate(outside.astype(np.uint8), square) > 0)
+    on_ring = candidate & (cv2.dilate(ring.astype(np.uint8), square) > 0)
+    soft = on_table & _soft_edge(image, outside, predicted)
+    count = int(labels.max()) + 1
+    table_count, ring_count, soft_count = (np.bincount(labels[m], minlength=count) for m in (on_table, on_ring, soft))
+    faded = (table_count >= MIN_EDGE_PX) & (soft_count >= MIN_SOFT_SHARE * table_count)
+    faded &= ring_count <= MAX_RING_SHARE * (ring_count + table_count)
+    area = np.bincount(labels.ravel(), minlength=count)
+    faded &= area * pixel_mm >= MIN_BAND_WIDTH_MM * np.maximum(table_count, 1)
+    faded[0] = False
+    return faded[labels]
+
+
+def _raised(band: np.ndarray, heights: np.ndarray) -> np.ndarray:
+    """The stretches of `band` that depth measured above the table: a point higher than MIN_RISE_MM on more than
+    MAX_RAISED_SHARE of their pixels. A shadow's band has next to no texture and lies on the table: the matcher
+    measures the table there, or carries the sole's disparity over a few of its pixels. A dark part of the sole
+    that passes for a band, a rounded edge's shaded curve or a side wall leaning out into view, has the sole's
+    texture and is measured where it stands."""
+    _, labels = cv2.connectedComponents(band.astype(np.uint8), connectivity=8)
+    count = int(labels.max()) + 1
+    high = np.nan_to_num(heights, nan=0.0) > MIN_RISE_MM
+    area = np.bincount(labels.ravel(), minlength=count)
+    raised = np.bincount(labels[high], minlength=count) > MAX_RAISED_SHARE * area
+    raised[0] = False
+    return raised[labels]
+
+
+def _outer(changed: np.ndarray) -> np.ndarray:
+    """The unchanged pixels round the sole: outside the changed region once it is closed over OUTER_CLOSE_PX (a black
+    sole like the table leaves unchanged patches inside its mask, some open to the table through a gap of a
+    pixel or two) and its holes filled."""
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (OUTER_CLOSE_PX, OUTER_CLOSE_PX))
+    closed = cv2.morphologyEx(changed.astype(np.uint8), cv2.MORPH_CLOSE, disc)
+    _, labels = cv2.connectedComponents((closed == 0).astype(np.uint8), connectivity=4)
+    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    outer = np.unique(border[border > 0])
+    return np.isin(labels, outer) & ~changed
+
+
+def shadow_band(
+    changed: np.ndarray,
+    current: np.ndarray,
+    other: np.ndarray,
+    table: TableDisparity,
+    right: bool,
+    test: ChangeTest,
+    reference: np.ndarray,
+    other_sigma: float,
+    pixel_mm: float,
+    heights: np.ndarray,
+) -> np.ndarray:
+    """Bool image: the changed pixels of `current` that are a cast shadow's band on the table (module docstring).
+
+    other: the other rectified image; table: the table's disparity; right: `current` is the right image; test, reference: `current`'s change test
+    against its taught reference; other_sigma: the other image's noise (DN); pixel_mm: a pixel on the table;
+    heights: per pixel of `current` the height (mm) of a point measured there above the table's level, NaN elsewhere."""
+    band = np.zeros_like(changed)
+    if not np.any(changed):
+        return band
+    rows, columns = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
+    reach = int(np.ceil(BAND_MAX_MM / pixel_mm)) + 2
+    box = (
+        slice(max(int(rows[0]) - reach, 0), min(int(rows[-1]) + reach + 1, changed.shape[0])),
+        slice(max(int(columns[0]) - reach, 0), min(int(columns[-1]) + reach + 1, changed.shape[1])),
+    )
+    window_changed = changed[box]
+    cur = np.asarray(current, np.float32)
+    seen = _warped(other, table.shift(box, right), box)
+    outside = _outer(window_changed) & np.isfinite(seen)
+    if int(np.count_nonzero(outside)) < 100:
+        return band
+    here = cur[box]
+    sample = (slice(None, None, GAIN_STRIDE),) * 2
+    gain = float(np.median(here[sample][outside[sample]])) / max(float(np.median(seen[sample][outside[sample]])), 1e-3)
+    sigma = float(np.hypot(test.sigma, gain * other_sigma))
+    # Per pixel, then a 3 x 3 majority: a mean over the window would let one pixel of the sole's edge beside a
+    # band pixel (a strong step, seen at the wrong disparity) outvote it.
+    agree = np.nan_to_num(np.abs(here - gain * seen), nan=np.inf) <= CONSISTENT_SIGMAS * sigma
+    consistent = cv2.medianBlur(agree.astype(np.uint8), 3) > 0
+    predicted = test.predicted(np.asarray(reference)[box])
+    dark = (here < MAX_SHADOW_FACTOR * predicted) & (here < predicted - DARKER_SIGMAS * test.sigma)
+    dark &= here >= MIN_TEXTURE_GAIN * predicted  # a shadow's factor, not a black rim's on a lit table
+    candidate = window_changed & dark & consistent
+    distance = cv2.distanceTransform((~outside).astype(np.uint8), cv2.DIST_L2, 3)
+    candidate &= distance * pixel_mm <= BAND_MAX_MM
+    candidate &= _below_brighter_sole(here, window_changed & ~candidate, candidate, reach)
+    band[box] = _faded_stretches(
+        candidate, here, outside, predicted, window_changed & ~consistent & (distance <= RING_PX), pixel_mm
+    )
+    band[box] &= ~_raised(band[box], heights[box])
+    return band
