@@ -32,6 +32,8 @@ before. Not told apart: a dark rim of a light sole beside a band, within BAND_MA
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 
@@ -164,13 +166,14 @@ def shadow_band(
     reference: np.ndarray,
     other_sigma: float,
     pixel_mm: float,
-    heights: np.ndarray,
+    heights: Callable[[tuple[slice, slice]], np.ndarray],
 ) -> np.ndarray:
     """Bool image: the changed pixels of `current` that are a cast shadow's band on the table (module docstring).
 
     other: the other rectified image; table: the table's disparity; right: `current` is the right image; test, reference: `current`'s change test
     against its taught reference; other_sigma: the other image's noise (DN); pixel_mm: a pixel on the table;
-    heights: per pixel of `current` the height (mm) of a point measured there above the table's level, NaN elsewhere."""
+    heights: for a box of `current`, per pixel the height (mm) of a point measured there above the table's level, NaN
+    elsewhere (asked only where a band is found)."""
     band = np.zeros_like(changed)
     if not np.any(changed):
         return band
@@ -201,8 +204,11 @@ def shadow_band(
     distance = cv2.distanceTransform((~outside).astype(np.uint8), cv2.DIST_L2, 3)
     candidate &= distance * pixel_mm <= BAND_MAX_MM
     candidate &= _below_brighter_sole(here, window_changed & ~candidate, candidate, reach)
+    if not np.any(candidate):
+        return band
     band[box] = _faded_stretches(
         candidate, here, outside, predicted, window_changed & ~consistent & (distance <= RING_PX), pixel_mm
     )
-    band[box] &= ~_raised(band[box], heights[box])
+    if np.any(band[box]):
+        band[box] &= ~_raised(band[box], heights(box))
     return band

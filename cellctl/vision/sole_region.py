@@ -6,6 +6,7 @@ order and its shared state stay in cellctl.vision.segmentation.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import cv2
@@ -169,15 +170,34 @@ def _without_shadow_bands(
     left, right = cloud.rectified
     table = TableDisparity.of(taught.plane, cloud.calibration)
     pixel_mm = _pixel_mm(cloud, taught)
-    heights_left, heights_right = _heights(cloud, points, left.shape)
     # The right image's on the second core (numpy and OpenCV release the GIL): ~9 ms each.
     right_band = worker("shadow-band").submit(
         shadow_band,
-        *(changed[1], right, left, table, True, tests[1], taught.right, tests[0].sigma, pixel_mm, heights_right),
+        *(
+            changed[1],
+            right,
+            left,
+            table,
+            True,
+            tests[1],
+            taught.right,
+            tests[0].sigma,
+            pixel_mm,
+            _heights(cloud, points, True),
+        ),
     )
     try:
         band_left = shadow_band(
-            changed[0], left, right, table, False, tests[0], taught.left, tests[1].sigma, pixel_mm, heights_left
+            changed[0],
+            left,
+            right,
+            table,
+            False,
+            tests[0],
+            taught.left,
+            tests[1].sigma,
+            pixel_mm,
+            _heights(cloud, points, False),
         )
     finally:
         band_right = right_band.result()
@@ -186,19 +206,21 @@ def _without_shadow_bands(
     return changed[0] & ~band_left, changed[1] & ~band_right, shadowed
 
 
-def _heights(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Left and right rectified images of the measured points' heights above the table's level (WALL_FOOT_MM; the
-    right ones at x - disparity), NaN where none was measured."""
-    above = np.flatnonzero(points[:, 2] > WALL_FOOT_MM)
-    z = points[above, 2].astype(np.float32)
-    x, y = np.round(np.take(cloud.pixels, above, axis=0)).astype(np.int64).T
-    images = []
-    for column in (x, np.round(cloud.pixels[above, 0] - cloud.disparity[above]).astype(np.int64)):
-        image = np.full(shape[:2], np.nan, np.float32)
-        inside = (column >= 0) & (column < shape[1]) & (y >= 0) & (y < shape[0])
-        image[y[inside], column[inside]] = z[inside]
-        images.append(image)
-    return images[0], images[1]
+def _heights(cloud: StereoCloud, points: np.ndarray, right: bool) -> Callable[[tuple[slice, slice]], np.ndarray]:
+    """For a box of the left (or right) rectified image, the heights of the points measured there above the table's
+    level (WALL_FOOT_MM; the right image's at x - disparity), NaN where none was: read only where a band is found."""
+
+    def within(box: tuple[slice, slice]) -> np.ndarray:
+        above = np.flatnonzero(points[:, 2] > WALL_FOOT_MM)
+        x = cloud.pixels[above, 0] - (cloud.disparity[above] if right else 0.0)
+        rows = np.round(cloud.pixels[above, 1]).astype(np.int64) - box[0].start
+        columns = np.round(x).astype(np.int64) - box[1].start
+        image = np.full((box[0].stop - box[0].start, box[1].stop - box[1].start), np.nan, np.float32)
+        inside = (rows >= 0) & (rows < image.shape[0]) & (columns >= 0) & (columns < image.shape[1])
+        image[rows[inside], columns[inside]] = points[above[inside], 2]
+        return image
+
+    return within
 
 
 def _pixel_mm(cloud: StereoCloud, taught: TaughtTable) -> float:

@@ -83,9 +83,8 @@ def _band(
     left: np.ndarray, right: np.ndarray, reference: np.ndarray, changed: np.ndarray, heights: np.ndarray | None = None
 ) -> np.ndarray:
     table = TableDisparity(0.0, 0.0, TABLE_DISPARITY)
-    if heights is None:
-        heights = np.full(left.shape, np.nan, np.float32)  # no depth measured beside the sole
-    return shadow_band(changed, left, right, table, False, TEST, reference, NOISE, MM_PER_PX, heights)
+    measured = np.full(left.shape, np.nan, np.float32) if heights is None else heights  # None: no depth beside the sole
+    return shadow_band(changed, left, right, table, False, TEST, reference, NOISE, MM_PER_PX, lambda box: measured[box])
 
 
 def _sole_mask() -> np.ndarray:
