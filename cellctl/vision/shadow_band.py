@@ -110,10 +110,11 @@ def _faded_stretches(
 ) -> np.ndarray:
     """The connected stretches of candidates that meet the table round the sole the way a penumbra does: directly
     (few of their pixels beside changed pixels on the table's side that do not agree at the table's disparity,
-    `ring`: the sharp outer edge of something standing higher, seen at the wrong disparity) and softly (most of their pixels beside the table
-    within SOFT_EDGE_SHARE of it). One soft pixel would not do: a dark rim's edge is soft where its contrast with
-    the table happens to be low. And the stretch is a band, MIN_BAND_WIDTH_MM wide in the mean: the last pixel of
-    a sole's edge that blends it with the table (a rounded edge's shaded curve beside a dark table) is not."""
+    `ring`: the sharp outer edge of something standing higher, seen at the wrong disparity) and softly (most of
+    their pixels beside the table within SOFT_EDGE_SHARE of it). One soft pixel would not do: a dark rim's edge
+    is soft where its contrast with the table happens to be low. And the stretch is a band, MIN_BAND_WIDTH_MM wide
+    in the mean: the last pixel of a sole's edge that blends it with the table (a rounded edge's shaded curve beside
+    a dark table) is not."""
     _, labels = cv2.connectedComponents(candidate.astype(np.uint8), connectivity=8)
     square = np.ones((3, 3), np.uint8)
     on_table = candidate & (cv2.dilate(outside.astype(np.uint8), square) > 0)
@@ -170,10 +171,10 @@ def shadow_band(
 ) -> np.ndarray:
     """Bool image: the changed pixels of `current` that are a cast shadow's band on the table (module docstring).
 
-    other: the other rectified image; table: the table's disparity; right: `current` is the right image; test, reference: `current`'s change test
-    against its taught reference; other_sigma: the other image's noise (DN); pixel_mm: a pixel on the table;
-    heights: for a box of `current`, per pixel the height (mm) of a point measured there above the table's level, NaN
-    elsewhere (asked only where a band is found)."""
+    other: the other rectified image; table: the table's disparity; right: `current` is the right image;
+    test, reference: `current`'s change test against its taught reference; other_sigma: the other image's noise
+    (DN); pixel_mm: a pixel on the table; heights: for a box of `current`, per pixel the height (mm) of a point
+    measured there above the table's level, NaN elsewhere (asked only where a band is found)."""
     band = np.zeros_like(changed)
     if not np.any(changed):
         return band
