@@ -82,21 +82,26 @@ def _warped(image: np.ndarray, shift: np.ndarray, box: tuple[slice, slice]) -> n
     return cv2.remap(np.asarray(image, np.float32), map_x, map_y, cv2.INTER_LINEAR, borderValue=np.nan)
 
 
+def _brightest(image: np.ndarray, mask: np.ndarray, reach_px: int) -> np.ndarray:
+    """Per pixel, the brightest of the `mask` pixels within `reach_px` (a square: separable, so its cost does not grow
+    with the reach); 0 where none is."""
+    size = 2 * reach_px + 1
+    return cv2.dilate(np.where(mask, image, 0.0).astype(np.float32), np.ones((size, size), np.uint8))
+
+
 def _below_brighter_sole(image: np.ndarray, sole: np.ndarray, candidate: np.ndarray, reach_px: int) -> np.ndarray:
     """Per candidate pixel: the brightest of the sole (the changed pixels that are no candidate) within `reach_px`
     is MIN_SOLE_OVER_BAND times brighter. A shadow lies darker than the lit sole that casts it; a dark part of the
     sole itself (a black sole on a grey table) lies beside more of that sole, no brighter. A dark rim of a light
     sole does lie beside a brighter sole: its edge on the table is sharp, so no band starts on it (`_soft_edge`)."""
-    size = 2 * reach_px + 1  # a square: separable, so its cost does not grow with the reach
-    brightest = cv2.dilate(np.where(sole, image, 0.0).astype(np.float32), np.ones((size, size), np.uint8))
-    return candidate & (brightest >= MIN_SOLE_OVER_BAND * image)
+    return candidate & (_brightest(image, sole, reach_px) >= MIN_SOLE_OVER_BAND * image)
 
 
 def _soft_edge(image: np.ndarray, table: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """Per pixel: its brightness lies within SOFT_EDGE_SHARE of the brightest table pixel beside it (as taught and
     lit now, at least): a penumbra fades into the table over millimetres, while the edge of anything lying on it (a
     black sole, a dark rim) steps by most of its contrast within a pixel."""
-    lit = cv2.dilate(np.where(table, image, 0.0).astype(np.float32), np.ones((3, 3), np.uint8))
+    lit = _brightest(image, table, 1)
     return lit - image <= SOFT_EDGE_SHARE * np.maximum(lit, predicted)
 
 
