@@ -283,7 +283,6 @@ class Segmentation(_RunState):
         footprint = _footprint(raster, every, high_counts)
         if footprint.area_mm2 < MIN_SOLE_AREA_MM2:
             return self._no_sole(points, no_sole)
-        self.raised, self.measured_cells = depth_step(raster, every, high_counts)
         self.table_points = Footprint(
             ((every > high_counts) & (every > 0)).astype(np.uint8), raster.origin, raster.cell_mm
         )
@@ -301,10 +300,10 @@ class Segmentation(_RunState):
                 # footprint and the depth step alike.
                 carried = raster.counts(np.take(points, change.shadowed, axis=0))
                 every, high_counts = every - carried, high_counts - carried
-                self.raised, self.measured_cells = depth_step(raster, every, high_counts)
         else:
             colour = colour_split(self.cloud.colors, points, footprint, high)
             keep, self.colour_filter, self.separation = high[colour.sole], colour.applied, colour.separation
+        self.raised, self.measured_cells = depth_step(raster, every, high_counts)
         if self.taught is None and not self.colour_filter:
             # Without the colour edge, matching halos widen the sole by 1-5 mm (simulated soles): no length.
             return self._refused(

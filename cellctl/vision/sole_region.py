@@ -139,11 +139,10 @@ def change_split(
         if right_test is None
         else right_test.changed(cloud.rectified[1], taught.right, right_box, raised_right, lifted_right)
     )
-    shadowed = np.zeros(0, np.int64)
+    band_left = None
     if SHADOW_BANDS and changed_right is not None and right_test is not None and cloud.calibration is not None:
-        changed, changed_right, shadowed = _without_shadow_bands(
-            cloud, taught, points, high, (changed, changed_right), (test, right_test)
-        )
+        band_left, band_right = _shadow_bands(cloud, taught, points, (changed, changed_right), (test, right_test))
+        changed, changed_right = changed & ~band_left, changed_right & ~band_right
     # The foot of a leaning wall, not the table: a cast shadow changes the image but lies at z ~ 0.
     near = np.flatnonzero((points[:, 2] > WALL_FOOT_MM) & (points[:, 2] <= min_height_mm))
     near = near[footprint.dilated(EDGE_BAND_MM).contains(np.take(points, near, axis=0))]
@@ -153,23 +152,23 @@ def change_split(
     # (one pass over the points instead of a sort of the ~2 10^5 chosen).
     chosen = np.zeros(len(points), bool)
     chosen[candidates[changed[y, x]]] = True
+    # The high points on the left band (the first of the candidates): depth carried over it.
+    shadowed = high[band_left[y[: len(high)], x[: len(high)]]] if band_left is not None else np.zeros(0, np.int64)
     return ChangeSplit(np.flatnonzero(chosen), changed, changed_right, test, shadowed)
 
 
-def _without_shadow_bands(
+def _shadow_bands(
     cloud: StereoCloud,
     taught: TaughtTable,
     points: np.ndarray,
-    high: np.ndarray,
     changed: tuple[np.ndarray, np.ndarray],
     tests: tuple[ChangeTest, ChangeTest],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Both change masks less a cast shadow's band beside the sole (cellctl.vision.shadow_band), and the high
-    points (indices into `points`) whose left pixel lies on the left band."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """A cast shadow's band beside the sole in the left and the right change mask (cellctl.vision.shadow_band)."""
     assert cloud.rectified is not None and cloud.calibration is not None
     left, right = cloud.rectified
     table = TableDisparity.of(taught.plane, cloud.calibration)
-    pixel_mm = _pixel_mm(cloud, taught)
+    pixel_mm = taught.plane.pixel_mm(cloud.calibration)
     # The right image's on the second core (numpy and OpenCV release the GIL): ~9 ms each.
     right_band = worker("shadow-band").submit(
         shadow_band,
@@ -201,9 +200,7 @@ def _without_shadow_bands(
         )
     finally:
         band_right = right_band.result()
-    x, y = np.round(np.take(cloud.pixels, high, axis=0)).astype(np.int64).T
-    shadowed = high[band_left[y, x]]
-    return changed[0] & ~band_left, changed[1] & ~band_right, shadowed
+    return band_left, band_right
 
 
 def _heights(cloud: StereoCloud, points: np.ndarray, right: bool) -> Callable[[tuple[slice, slice]], np.ndarray]:
@@ -221,12 +218,6 @@ def _heights(cloud: StereoCloud, points: np.ndarray, right: bool) -> Callable[[t
         return image
 
     return within
-
-
-def _pixel_mm(cloud: StereoCloud, taught: TaughtTable) -> float:
-    """A rectified pixel's footprint on the table (mm): the table's distance along the axis over the focal length."""
-    assert cloud.calibration is not None
-    return abs(float(taught.plane.offset)) / cloud.calibration.focal_px
 
 
 def _raised(cloud: StereoCloud, points: np.ndarray, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -313,7 +304,7 @@ def changed_area_mm2(cloud: StereoCloud, taught: TaughtTable, plane: TablePlane,
     changed = test.changed(current, taught.left).astype(np.uint8)
     count, _, stats, _ = cv2.connectedComponentsWithStats(changed, connectivity=8)
     largest = int(stats[1:, cv2.CC_STAT_AREA].max()) if count > 1 else 0
-    pixel_mm = plane.offset / cloud.calibration.focal_px if cloud.calibration else 0.0
+    pixel_mm = plane.pixel_mm(cloud.calibration) if cloud.calibration else 0.0
     return largest * pixel_mm**2
 
 

@@ -47,6 +47,11 @@ class TablePlane:
         straight down at it)."""
         return float(np.degrees(np.arccos(min(abs(float(self.normal[2])), 1.0))))
 
+    def pixel_mm(self, calib: Calibration) -> float:
+        """A rectified pixel's footprint on the table (mm): the camera's distance from the plane over the focal
+        length."""
+        return abs(float(self.offset)) / calib.focal_px
+
     def camera_to_table(self) -> np.ndarray:
         """4 x 4 rigid transform from the rectified left camera frame to the table frame.
 
