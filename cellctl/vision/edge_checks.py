@@ -100,6 +100,25 @@ WALL_HEIGHT_RADIUS_MM = 3.0
 LEAN_SHOWN_DEG = 20.0  # the steepest lean the refusal's words put a number on (the simulator's range: 8-20)
 
 
+def chord_bulge(outline: np.ndarray, half_chord: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per point of a closed counter-clockwise outline: how far it lies beyond (outside) the chord between its
+    neighbours `half_chord` points either side (negative: inside it), and that chord's half-length (mm)."""
+    before, after = np.roll(outline, half_chord, axis=0), np.roll(outline, -half_chord, axis=0)
+    chord = after - before
+    length = np.linalg.norm(chord, axis=1)
+    rel = outline - before
+    # Left of the chord (counter-clockwise outline: towards the inside) is positive for the cross product.
+    inside = (chord[:, 0] * rel[:, 1] - chord[:, 1] * rel[:, 0]) / np.maximum(length, 1e-9)
+    return -inside, 0.5 * length
+
+
+def concave_sag(half_chord_mm: np.ndarray) -> np.ndarray:
+    """How far behind a chord of `half_chord_mm` (per point) an edge curving inward with MIN_CONCAVE_RADIUS_MM, the
+    tightest a sole's edge bends, lies at its middle."""
+    half = np.minimum(half_chord_mm, MIN_CONCAVE_RADIUS_MM)
+    return MIN_CONCAVE_RADIUS_MM - np.sqrt(MIN_CONCAVE_RADIUS_MM**2 - half**2)
+
+
 def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
     """A notch in the outline (N x 2, counter-clockwise, points 1 mm apart, closed) sharper than a sole's edge
     bends: a point lying inside the chord between its neighbours h mm either side by more than an arc of
@@ -107,17 +126,11 @@ def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
     n = len(outline)
     worst, at, chord_mm = 0.0, 0, 0.0
     for h in range(1, min(NOTCH_MAX_HALF_CHORD_MM, (n - 1) // 2) + 1):
-        before, after = np.roll(outline, h, axis=0), np.roll(outline, -h, axis=0)
-        chord = after - before
-        length = np.linalg.norm(chord, axis=1)
-        rel = outline - before
-        # Left of the chord (counter-clockwise outline: towards the inside) is positive.
-        inside = (chord[:, 0] * rel[:, 1] - chord[:, 1] * rel[:, 0]) / np.maximum(length, 1e-9)
-        half = np.minimum(0.5 * length, MIN_CONCAVE_RADIUS_MM)
-        excess = inside - (MIN_CONCAVE_RADIUS_MM - np.sqrt(MIN_CONCAVE_RADIUS_MM**2 - half**2))
+        beyond, half = chord_bulge(outline, h)
+        excess = -beyond - concave_sag(half)
         k = int(np.argmax(excess))
         if excess[k] > worst:
-            worst, at, chord_mm = float(excess[k]), k, float(length[k])
+            worst, at, chord_mm = float(excess[k]), k, float(2.0 * half[k])
     if worst > MAX_EDGE_OFFSET_MM:
         x, y = outline[at]
         return CheckFailure(
@@ -307,30 +320,75 @@ def offset_median(offsets: np.ndarray) -> np.ndarray:
 # cameras read 0.9-1.4 mm inside, its glue point 0.98 mm off; 9315, 1.4 mm at the toe, its length 0.97 mm long
 # (docs/sole-benchmark.md, twentieth round). Now the agreed readings count anywhere on the outline.
 AGREED_RUN_POINTS = 2
+# A reading more than MAX_EDGE_OFFSET_MM inside (the cameras' mean, or their agreed one) is the outline's error only
+# as far as the shape of a sole's edge allows. Where the outline
+# runs smoothly past a stretch of such readings and the cameras read it on the sole's edge either side, the true edge
+# can lie no further inside it than the chord through those sides' edges, less the outline's own bulge over that
+# chord, and less what an edge curving inward with MIN_CONCAVE_RADIUS_MM (the tightest a sole's edge bends, as for
+# check_outline_notch) sags behind the chord. Deeper, the masks have a notch the sole has not: a patch of the table's
+# colour meeting a white sole's edge (fresh sole 46059: both cameras 2.4-3.6 mm inside over 2 points, the outline
+# 0.36 mm from the true edge there) or a speck of a black sole's edge left unchanged (46073: 1.9-2.9 mm over 2-3
+# points, the outline 0.1 mm off). Every chord of 1 to NOTCH_MAX_HALF_CHORD_MM points either side whose ends the
+# cameras read on the outline (within CHORD_END_MM, half the limit: the readings' own scatter and step) bounds the
+# true edge, so the tightest of those bounds holds. A real bump of the outline bulges over such chords (the bound
+# keeps its reading; over chords lying on the bump itself its flanks read inside, fresh sole 39015: 0.4-0.6 mm on a
+# 5 mm bump 0.8-1.06 mm beyond the edge, and give no bound), a smeared stretch reads inside at the chords' ends (std20
+# sole 1: 0.6 mm over 9 mm, 0.9 on its peak's two points), a long offset has no ends beyond it, and a wide shallow
+# concavity the outline bridged is allowed its sag: their readings stand. A chord's ends read beyond the outline do
+# not lift the bound (no reading beyond counts in the outline's favour).
+CHORD_END_MM = 0.5 * MAX_EDGE_OFFSET_MM
 
 
-def agreed_offsets(offsets: list[np.ndarray]) -> np.ndarray:
+def agreed_offsets(offsets: list[np.ndarray], outline: np.ndarray | None = None) -> np.ndarray:
     """Per outline point (closed, 1 mm apart): where two or more cameras all read the edge inside the outline, the
     reading nearest the outline, kept only inside runs of AGREED_RUN_POINTS or more points whose such reading lies
-    more than MAX_EDGE_OFFSET_MM inside; 0 elsewhere (one camera alone is left to the running median)."""
+    more than MAX_EDGE_OFFSET_MM inside; 0 elsewhere (one camera alone is left to the running median). With the
+    `outline` (N x 2, counter-clockwise), each reading counts only as deep as the outline's course past the run
+    predicts (`held_to_course`)."""
     readings = np.vstack(offsets)
     if len(readings) < 2:
         return np.zeros(readings.shape[1])
     known = np.all(np.isfinite(readings), axis=0)
     filled = np.where(known[None, :], readings, 0.0)
     nearest = np.where(known, np.max(filled, axis=0), 0.0)  # the least far inside; >= 0 if one is not
+    if outline is not None:
+        nearest = np.where(known, held_to_course(np.where(known, nearest, np.nan), outline), 0.0)
     run = run_lengths(nearest < -MAX_EDGE_OFFSET_MM) >= AGREED_RUN_POINTS
     return np.where(run, nearest, 0.0)
 
 
-def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
+def held_to_course(readings: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """`readings` (per point of the closed counter-clockwise `outline`, 1 mm apart; NaN: unknown) with each reading
+    more than MAX_EDGE_OFFSET_MM inside held to the deepest the shape of a sole's edge allows there (the comment
+    above): per chord of 1 to NOTCH_MAX_HALF_CHORD_MM points either side whose ends are both read within CHORD_END_MM,
+    their mean reading (at most 0) less the outline's bulge over the chord and a MIN_CONCAVE_RADIUS_MM arc's sag; the
+    tightest of them, at most 0. Where no chord qualifies the reading stands."""
+    deep = np.nan_to_num(readings) < -MAX_EDGE_OFFSET_MM
+    if not np.any(deep):
+        return readings
+    near = np.abs(np.nan_to_num(readings, nan=np.inf)) <= CHORD_END_MM
+    index = np.arange(len(outline))
+    bound = np.full(len(outline), -np.inf)
+    for half in range(1, min(NOTCH_MAX_HALF_CHORD_MM, (len(outline) - 1) // 2) + 1):
+        before, after = np.roll(index, half), np.roll(index, -half)
+        usable = near[before] & near[after]
+        ends = np.minimum(0.5 * (readings[before] + readings[after]), 0.0)
+        beyond, half_mm = chord_bulge(outline, half)
+        bound = np.where(usable, np.maximum(bound, ends - beyond - concave_sag(half_mm)), bound)
+    return np.where(deep, np.maximum(readings, np.minimum(bound, 0.0)), readings)
+
+
+def check_edge_offsets(offsets: list[np.ndarray], outline: np.ndarray | None = None) -> CheckFailure | None:
     """The outline (points 1 mm apart, closed) against the edges the cameras' change masks show there.
 
     `offsets`: per camera, one of `edge_offset_pair`'s readings along the outline. Their mean per point, a running median over
     EDGE_OFFSET_WINDOW_MM, must stay within MAX_EDGE_OFFSET_MM of the outline everywhere it is known, and so must
-    the cameras' agreed readings (`agreed_offsets`).
+    the cameras' agreed readings (`agreed_offsets`, held to the `outline`'s course where it is given: N x 2,
+    counter-clockwise).
     """
     mean = mean_of_known(np.vstack(offsets))
+    if outline is not None:
+        mean = held_to_course(mean, outline)
     if np.count_nonzero(np.isfinite(mean)) < MIN_TESTABLE * len(mean):
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
@@ -338,7 +396,7 @@ def check_edge_offsets(offsets: list[np.ndarray]) -> CheckFailure | None:
             f"{len(mean)} outline points show one within {EDGE_SEARCH_MM:g} mm",
         )
     local = np.nan_to_num(offset_median(mean), nan=0.0)  # too little known: no evidence against the outline
-    agreed = agreed_offsets(offsets)
+    agreed = agreed_offsets(offsets, outline)
     local = np.where(np.abs(agreed) > np.abs(local), agreed, local)
     worst = int(np.argmax(np.abs(local)))
     if abs(local[worst]) > MAX_EDGE_OFFSET_MM:

@@ -131,7 +131,7 @@ def _check_outline_images(
     )
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
     inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
-    problem = _edge_offsets_problem(inner, outer)
+    problem = _edge_offsets_problem(inner, outer, ring)
     if problem is None or not SHADOW_CLEARED or reconstruction.rectified is None or reconstruction.taught is None:
         return problem
     # Refused: a cast shadow's slivers beside the sole that one camera's mask shows and the other's does not
@@ -148,7 +148,9 @@ def _check_outline_images(
         by_one_camera(readings, one_camera)
         for readings in stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
     )
-    return _edge_offsets_problem(one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared))
+    return _edge_offsets_problem(
+        one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared), ring
+    )
 
 
 def by_one_camera(readings: tuple[np.ndarray, np.ndarray], one_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -160,13 +162,14 @@ def by_one_camera(readings: tuple[np.ndarray, np.ndarray], one_camera: np.ndarra
 
 
 def _edge_offsets_problem(
-    inner: tuple[np.ndarray, np.ndarray], outer: tuple[np.ndarray, np.ndarray]
+    inner: tuple[np.ndarray, np.ndarray], outer: tuple[np.ndarray, np.ndarray], ring: np.ndarray
 ) -> CheckFailure | None:
-    """The edge-offset check on both readings (stereo_offsets): the innermost, then the outermost."""
-    problem = check_edge_offsets(list(inner))
+    """The edge-offset check on both readings (stereo_offsets) along the outline `ring`: the innermost, then the
+    outermost."""
+    problem = check_edge_offsets(list(inner), ring)
     if problem is not None:
         return problem
-    return check_edge_offsets(list(outer))
+    return check_edge_offsets(list(outer), ring)
 
 
 HEIGHT_MAP_CELL_MM = 1.0
