@@ -321,11 +321,10 @@ def offset_median(offsets: np.ndarray) -> np.ndarray:
 # (docs/sole-benchmark.md, twentieth round). Now the agreed readings count anywhere on the outline.
 AGREED_RUN_POINTS = 2
 # A reading more than MAX_EDGE_OFFSET_MM inside (the cameras' mean, or their agreed one) is the outline's error only
-# as far as the shape of a sole's edge allows. Where the outline
-# runs smoothly past a stretch of such readings and the cameras read it on the sole's edge either side, the true edge
-# can lie no further inside it than the chord through those sides' edges, less the outline's own bulge over that
-# chord, and less what an edge curving inward with MIN_CONCAVE_RADIUS_MM (the tightest a sole's edge bends, as for
-# check_outline_notch) sags behind the chord. Deeper, the masks have a notch the sole has not: a patch of the table's
+# as far as the shape of a sole's edge allows. Where the outline runs smoothly past a stretch of such readings and the
+# cameras read it on the sole's edge either side, the true edge can lie no further inside it than the chord through
+# those sides' edges, less the outline's own bulge over that chord, and less what an edge curving inward with
+# MIN_CONCAVE_RADIUS_MM (the tightest a sole's edge bends, as for check_outline_notch) sags behind the chord. Deeper, the masks have a notch the sole has not: a patch of the table's
 # colour meeting a white sole's edge (fresh sole 46059: both cameras 2.4-3.6 mm inside over 2 points, the outline
 # 0.36 mm from the true edge there) or a speck of a black sole's edge left unchanged (46073: 1.9-2.9 mm over 2-3
 # points, the outline 0.1 mm off). Every chord of 1 to NOTCH_MAX_HALF_CHORD_MM points either side whose ends the
