@@ -355,7 +355,7 @@ def _own_sign_contrast(
     return own
 
 
-def _holes(changed: np.ndarray) -> np.ndarray:
+def enclosed_unchanged(changed: np.ndarray) -> np.ndarray:
     """Unchanged pixels not connected (4-neighbours) to the image's border through unchanged pixels."""
     height, width = changed.shape
     padded = np.pad(changed.astype(np.uint8), 1)  # a border of unchanged pixels: the outside
@@ -394,7 +394,7 @@ def _rim_ring(
 ) -> np.ndarray:
     """The pixels of the holes in `changed` on the raised sole whose residual exceeds half the contrast of
     their own sign (RIM_RING; a 3 x 3 majority as for the mask itself)."""
-    holes = _holes(changed)
+    holes = enclosed_unchanged(changed)
     holes &= raised
     found = np.zeros_like(holes)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(holes.view(np.uint8), connectivity=8)

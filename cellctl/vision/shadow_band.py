@@ -37,7 +37,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from cellctl.vision.change import MAX_SHADOW_FACTOR, MIN_TEXTURE_GAIN, ChangeTest
+from cellctl.vision.change import MAX_SHADOW_FACTOR, MIN_TEXTURE_GAIN, ChangeTest, enclosed_unchanged
 from cellctl.vision.table import TableDisparity
 
 # |left - right at the table's disparity| on the table: within 3 sigma of the difference's noise but for 0.3 % of
@@ -155,11 +155,8 @@ def _outer(changed: np.ndarray) -> np.ndarray:
     sole like the table leaves unchanged patches inside its mask, some open to the table through a gap of a
     pixel or two) and its holes filled."""
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (OUTER_CLOSE_PX, OUTER_CLOSE_PX))
-    closed = cv2.morphologyEx(changed.astype(np.uint8), cv2.MORPH_CLOSE, disc)
-    _, labels = cv2.connectedComponents((closed == 0).astype(np.uint8), connectivity=4)
-    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
-    outer = np.unique(border[border > 0])
-    return np.isin(labels, outer) & ~changed
+    closed = cv2.morphologyEx(changed.astype(np.uint8), cv2.MORPH_CLOSE, disc) > 0
+    return ~closed & ~enclosed_unchanged(closed) & ~changed
 
 
 def shadow_band(

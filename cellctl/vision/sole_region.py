@@ -172,18 +172,16 @@ def _shadow_bands(
     # The right image's on the second core (numpy and OpenCV release the GIL): ~9 ms each.
     right_band = worker("shadow-band").submit(
         shadow_band,
-        *(
-            changed[1],
-            right,
-            left,
-            table,
-            True,
-            tests[1],
-            taught.right,
-            tests[0].sigma,
-            pixel_mm,
-            _heights(cloud, points, True),
-        ),
+        changed[1],
+        right,
+        left,
+        table,
+        True,
+        tests[1],
+        taught.right,
+        tests[0].sigma,
+        pixel_mm,
+        _heights(cloud, points, True),
     )
     try:
         band_left = shadow_band(
