@@ -147,6 +147,7 @@ def test_no_move_where_the_outermost_reading_contradicts_or_the_edge_is_too_far(
     inner[60:80] = 0.1  # innermost on the outline, outermost 1.0 beyond: the excused band is the sole's edge
     inner[100:120] = 2.5  # both cameras agree on an edge 2.5 mm out: too far for a depth error
     inner[140:160] = -(EDGE_MOVE_MAX_MM + 0.5)
+    inner[170:190] = 1.8  # a dark top edge's last 1.8 mm without depth (fresh sole 39082): moved
     outer = inner.copy()
     outer[20:40] = 1.0  # the outermost reading finds a changed band beyond the outline: no move either way
     outer[60:80] = 1.0
@@ -154,6 +155,7 @@ def test_no_move_where_the_outermost_reading_contradicts_or_the_edge_is_too_far(
     assert np.all(shift[15:45] == 0.0)
     assert np.all(np.abs(shift[65:75] - 1.0) < 0.05)
     assert np.all(shift[100:120] == 0.0) and np.all(shift[140:160] == 0.0)
+    assert np.all(np.abs(shift[175:185] - 1.8) < 0.05)
     moved = inner - shift
     failure = check_edge_offsets([moved, moved])  # the points left alone are still refused
     assert failure is not None
