@@ -4,13 +4,13 @@ silhouette lies (docs/measurements.md, Footprint), read as the edge-offset check
 cellctl.vision.outline_checks reads them (`stereo_offsets`, innermost and outermost of equally good steps).
 
 What it corrects: the depth outline stops short of a weakly textured (black) top edge, by 0.6-1.4 mm on the
-matrix soles. Where the census window straddles the step along an edge near the epipolar lines, the sole's
-and the table's disparities cost alike and the uniqueness test drops the last mm; next to a textured table
-the matcher drags the table's disparity onto the edge, so that band of the sole lies on table-level cells,
-which the innermost reading excuses (it stops on the outline) and the outermost reads as the sole.
+matrix soles (up to 1.9 mm on a few fresh ones). Where the census window straddles the step along an edge near
+the epipolar lines, the sole's and the table's disparities cost alike and the uniqueness test drops the last mm;
+next to a textured table the matcher drags the table's disparity onto the edge, so that band of the sole lies on
+table-level cells, which the innermost reading excuses (it stops on the outline) and the outermost reads as the sole.
 
-Guards: both cameras agree (each at its own silhouette height), the move is 0.5-1.5 mm (a dark cast shadow's
-edge lies 2-3 mm out: such a point is not moved and the check refuses it), the innermost readings do not
+Guards: both cameras agree (each at its own silhouette height), the move is 0.5-2 mm (EDGE_MOVE_MAX_MM; a dark cast
+shadow's edge lies 2-3 mm out: such a point is not moved and the check refuses it), the innermost readings do not
 put the edge inside, and depth is silent on the way (`depth_silent`: no raw table-level depth in the
 crossed band; a contact shadow on textured table is measured there). After a move the edge-offset check
 compares the outline with the masks it was moved onto, so there it refuses only errors beyond the cap or
