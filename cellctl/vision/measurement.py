@@ -236,6 +236,7 @@ def measure_sole(
             reconstruction.table_plane.obliqueness_deg(),
             quieter_than_one_exposure=_quieter_than_one_exposure(reconstruction),
             soft_edges=reconstruction.soft_edges,
+            exposures=reconstruction.surface_exposures,
         )
     if problem is not None:
         return _invalid(problem.kind, problem.reason, **base)

@@ -166,6 +166,27 @@ def test_glue_heights_fitted_on_the_mean_of_exposures_are_held_to_a_smaller_expe
     )
 
 
+def test_on_a_mean_of_more_than_four_exposures_the_limit_tightens_as_measured() -> None:
+    """Four exposures (the cycle's default) or fewer keep the mean's share; eight take it by the measured ratio of
+    the multiples (2.86 / 3.19), sixteen by its square; one exposure's share is not touched. A refusal on four names
+    eight exposures as a remedy with their limit; one on eight does not propose them again."""
+    assert glue_sd_limit(1.0, 0.0, True, 4) == glue_sd_limit(1.0, 0.0, True, None) == GLUE_TYPICAL_SD_SHARE_AVERAGED
+    assert glue_sd_limit(1.0, 0.0, True, 2) == GLUE_TYPICAL_SD_SHARE_AVERAGED
+    assert glue_sd_limit(1.0, 0.0, True, 8) == pytest.approx(0.19 * 2.86 / 3.19)
+    assert glue_sd_limit(1.0, 0.0, True, 16) == pytest.approx(0.19 * (2.86 / 3.19) ** 2)
+    assert glue_sd_limit(1.0, 0.0, False, 8) == GLUE_TYPICAL_SD_SHARE
+    sd = np.full(300, 0.18)
+    assert check_glue_precision(sd, 1.0, quieter_than_one_exposure=True, exposures=4) is None
+    on_eight = check_glue_precision(sd, 1.0, quieter_than_one_exposure=True, exposures=8)
+    assert on_eight is not None and "at most 0.17 for the 1 mm tolerance" in on_eight.reason
+    assert "averaged_frames" not in on_eight.reason
+    on_four = check_glue_precision(np.full(300, 0.2), 1.0, quieter_than_one_exposure=True, exposures=4)
+    assert on_four is not None
+    assert "or average 8 exposures per cycle ([cameras] averaged_frames: at most 0.17 then" in on_four.reason
+    on_one = check_glue_precision(np.full(300, 0.3), 1.0)  # one exposure: its share, no mean to average further
+    assert on_one is not None and "averaged_frames" not in on_one.reason
+
+
 def test_a_table_planes_obliqueness_is_the_angle_of_its_normal_to_the_viewing_axis() -> None:
     assert TablePlane(np.array([0.0, 0.0, 1.0]), 500.0).obliqueness_deg() == 0.0
     tilt = np.radians(9.7)
