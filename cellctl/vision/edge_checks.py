@@ -320,21 +320,21 @@ def offset_median(offsets: np.ndarray) -> np.ndarray:
 # cameras read 0.9-1.4 mm inside, its glue point 0.98 mm off; 9315, 1.4 mm at the toe, its length 0.97 mm long
 # (docs/sole-benchmark.md, twentieth round). Now the agreed readings count anywhere on the outline.
 AGREED_RUN_POINTS = 2
-# A reading more than MAX_EDGE_OFFSET_MM inside (the cameras' mean, or their agreed one) is the outline's error only
-# as far as the shape of a sole's edge allows. Where the outline runs smoothly past a stretch of such readings and the
+# A reading more than MAX_EDGE_OFFSET_MM inside (the cameras' mean, or their agreed one) is the outline's error only as
+# far as the shape of a sole's edge allows. Where the outline runs smoothly past a stretch of such readings and the
 # cameras read it on the sole's edge either side, the true edge can lie no further inside it than the chord through
 # those sides' edges, less the outline's own bulge over that chord, and less what an edge curving inward with
-# MIN_CONCAVE_RADIUS_MM (the tightest a sole's edge bends, as for check_outline_notch) sags behind the chord. Deeper, the masks have a notch the sole has not: a patch of the table's
-# colour meeting a white sole's edge (fresh sole 46059: both cameras 2.4-3.6 mm inside over 2 points, the outline
-# 0.36 mm from the true edge there) or a speck of a black sole's edge left unchanged (46073: 1.9-2.9 mm over 2-3
-# points, the outline 0.1 mm off). Every chord of 1 to NOTCH_MAX_HALF_CHORD_MM points either side whose ends the
-# cameras read on the outline (within CHORD_END_MM, half the limit: the readings' own scatter and step) bounds the
-# true edge, so the tightest of those bounds holds. A real bump of the outline bulges over such chords (the bound
-# keeps its reading; over chords lying on the bump itself its flanks read inside, fresh sole 39015: 0.4-0.6 mm on a
-# 5 mm bump 0.8-1.06 mm beyond the edge, and give no bound), a smeared stretch reads inside at the chords' ends (std20
-# sole 1: 0.6 mm over 9 mm, 0.9 on its peak's two points), a long offset has no ends beyond it, and a wide shallow
-# concavity the outline bridged is allowed its sag: their readings stand. A chord's ends read beyond the outline do
-# not lift the bound (no reading beyond counts in the outline's favour).
+# MIN_CONCAVE_RADIUS_MM (the tightest a sole's edge bends, as for check_outline_notch) sags behind the chord. Deeper,
+# the masks have a notch the sole has not: a patch of the table's colour meeting a white sole's edge (fresh sole 46059:
+# both cameras 2.4-3.6 mm inside over 2 points, the outline 0.36 mm from the true edge there) or a speck of a black
+# sole's edge left unchanged (46073: 1.9-2.9 mm over 2-3 points, the outline 0.1 mm off). Every chord of 1 to
+# NOTCH_MAX_HALF_CHORD_MM points either side whose ends the cameras read on the outline (within CHORD_END_MM, half the
+# limit: the readings' own scatter and step) bounds the true edge, so the tightest of those bounds holds. A real bump of
+# the outline bulges over such chords (the bound keeps its reading; over chords lying on the bump itself its flanks read
+# inside, fresh sole 39015: 0.4-0.6 mm on a 5 mm bump 0.8-1.06 mm beyond the edge, and give no bound), a smeared stretch
+# reads inside at the chords' ends (std20 sole 1: 0.6 mm over 9 mm, 0.9 on its peak's two points), a long offset has no
+# ends beyond it, and a wide shallow concavity the outline bridged is allowed its sag: their readings stand. A chord's
+# ends read beyond the outline do not lift the bound (no reading beyond counts in the outline's favour).
 CHORD_END_MM = 0.5 * MAX_EDGE_OFFSET_MM
 
 
