@@ -43,7 +43,7 @@ def open_frame_source(config: CameraConfig, calib: Calibration | None) -> FrameS
             skew_s=sim.skew_ms / 1000.0,
             sync_tolerance_s=tolerance_s,
             max_regrabs=config.max_regrabs,
-            exposures=config.averaged_frames,
+            exposures=max(config.averaged_frames, config.retry_averaged_frames),
         )
     if config.backend == "replay":
         from cellctl.cameras.replay import ReplayCameras

@@ -48,6 +48,12 @@ class FrameSource(Protocol):
         them, for a cycle to average (cellctl.cameras.averaging); a source of stored pairs gives one."""
         ...
 
+    def grab_further(self, count: int) -> list[StereoFrame]:
+        """Up to `count` more pairs of the scene the last `grab_exposures` showed, for a cycle that measures it
+        once more on more exposures (cellctl.service.measuring); none from a source that has no more of it (a
+        stored pair)."""
+        ...
+
     def close(self) -> None: ...
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cellctl.vision.defaults import AVERAGED_FRAMES  # its home: the measurement assumes it for a replayed mean
+# Their home: the measurement assumes the first for a replayed mean, and its glue heights' limit is calibrated on both.
+from cellctl.vision.defaults import AVERAGED_FRAMES, MORE_EXPOSURES
 
 MAX_AVERAGED_FRAMES = 16
 
@@ -16,6 +17,18 @@ def frames_option(frames: int | None) -> int:
     if not 1 <= frames <= MAX_AVERAGED_FRAMES:
         raise ValueError(
             f"--frames must be 1..{MAX_AVERAGED_FRAMES} (exposures averaged per measurement), got {frames}"
+        )
+    return frames
+
+
+def retry_frames_option(frames: int | None) -> int:
+    """A benchmark's `--retry-frames` (None: the cycle's MORE_EXPOSURES; 0: never); ValueError outside
+    0..MAX_AVERAGED_FRAMES."""
+    frames = MORE_EXPOSURES if frames is None else frames
+    if not 0 <= frames <= MAX_AVERAGED_FRAMES:
+        raise ValueError(
+            f"--retry-frames must be 0..{MAX_AVERAGED_FRAMES} (exposures averaged in all on a second measurement; "
+            f"0: none), got {frames}"
         )
     return frames
 
@@ -43,4 +56,7 @@ class CameraConfig:
     timeout_ms: float = 1000.0
     max_regrabs: int = 4
     averaged_frames: int = AVERAGED_FRAMES
+    # Pairs averaged in all when a cycle is refused for its glue heights' precision and more may pass: the cycle
+    # grabs the difference and measures once more (cellctl.service.measuring); 0, or not above averaged_frames: never.
+    retry_averaged_frames: int = MORE_EXPOSURES
     simulated: SimulatedCameraConfig = field(default_factory=SimulatedCameraConfig)

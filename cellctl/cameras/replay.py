@@ -55,5 +55,9 @@ class ReplayCameras:
         """The next stored pair alone: a stored pair is one exposure (with its stored mean, if any)."""
         return [self.grab_pair(not_before)]
 
+    def grab_further(self, count: int) -> list[StereoFrame]:
+        """None: a stored pair has no further exposures."""
+        return []
+
     def close(self) -> None:
         pass

@@ -3,10 +3,10 @@
 Each grab_pair() shows the next scene of `seeds` in turn (SoleScene.random(seed)), rendered once per seed
 and cached, so cycles after the first round cost no rendering. grab_exposures(n) shows the next scene in up to
 `exposures` exposures, each with its own sensor noise (cellctl.sim.render_cache.render_exposures), as a still
-sole looks to real cameras frame after frame. The two cameras run free at FRAME_PERIOD_S
-like real USB cameras; `skew_s` offsets the right camera's frame clock, and the pairs go through the same
-timestamp pairing as the V4L2 backend (cellctl.cameras.sync), so a skew near half a frame period yields
-out-of-sync pairs that re-grabbing cannot fix. Faults for tests and drills: unplug()/replug(),
+sole looks to real cameras frame after frame; grab_further(n) that scene's next ones. The two cameras run
+free at FRAME_PERIOD_S like real USB cameras; `skew_s` offsets the right camera's frame clock, and the pairs go
+through the same timestamp pairing as the V4L2 backend (cellctl.cameras.sync), so a skew near half a frame period
+yields out-of-sync pairs that re-grabbing cannot fix. Faults for tests and drills: unplug()/replug(),
 drop_frames(n).
 """
 
@@ -58,6 +58,7 @@ class SimulatedCameras:
         self._lock = threading.Lock()
         self._unplugged: str | None = None
         self._frames_to_drop = 0
+        self._shown: tuple[int, int] | None = None  # the last grab's scene seed and how many exposures it showed
 
     # ---- fault injection (thread-safe: tests call these while the service runs) ----------------
 
@@ -107,6 +108,22 @@ class SimulatedCameras:
         self._check_plugged()
         seed = self.seeds[self._next % len(self.seeds)]
         self._next += 1
+        self._shown = (seed, max(1, min(count, self.exposures)))
+        return self._frames(seed, 0, self._shown[1], not_before)
+
+    def grab_further(self, count: int) -> list[StereoFrame]:
+        """Up to `count` further exposures of the scene the last grab showed, as many as it has rendered beyond
+        those shown (`exposures` in all)."""
+        self._check_plugged()
+        if self._shown is None:
+            return []
+        seed, shown = self._shown
+        further = max(0, min(count, self.exposures - shown))
+        self._shown = (seed, shown + further)
+        return self._frames(seed, shown, further, None)
+
+    def _frames(self, seed: int, first: int, count: int, not_before: float | None) -> list[StereoFrame]:
+        """Exposures first .. first + count - 1 of the seed's scene, through the cameras' free-running clocks."""
         start = time.monotonic()
         frame_number = {"left": 0, "right": 0}
 
@@ -118,7 +135,7 @@ class SimulatedCameras:
             return TimedFrame(timestamp, None)
 
         pair, info = self.scene_for(seed)
-        images = [(pair.left, pair.right), *self._further[seed]][: max(1, min(count, self.exposures))]
+        images = [(pair.left, pair.right), *self._further[seed]][first : first + count]
         frames = []
         for left_image, right_image in images:
             left, right = grab_synchronised(

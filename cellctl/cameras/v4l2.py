@@ -154,6 +154,11 @@ class V4l2Cameras:
         """The next `count` pairs of the streams (the sole lies still: the same scene, new sensor noise)."""
         return consecutive_pairs(self, count, not_before)
 
+    def grab_further(self, count: int) -> list[StereoFrame]:
+        """The streams' next `count` pairs: the sole still lies where the last exposures saw it (the averaging
+        leaves out any that moved)."""
+        return consecutive_pairs(self, count)
+
     def close(self) -> None:
         self.left.close()
         self.right.close()

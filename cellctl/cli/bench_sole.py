@@ -77,6 +77,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="exposures of each sole averaged per measurement (default: as a cycle takes them, the default of "
         "[cameras] averaged_frames)",
     )
+    parser.add_argument(
+        "--retry-frames",
+        type=int,
+        metavar="N",
+        help="exposures averaged in all when a measurement refused for its glue heights' precision may pass on "
+        "more, as a cycle measures once more (default: the default of [cameras] retry_averaged_frames; 0: never)",
+    )
     parser.add_argument("--json", action="store_true", help="print JSON instead of markdown")
     parser.set_defaults(func=run)
 
@@ -97,9 +104,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--combined needs --matrix --variations NAME,... (the variations every sole combines)")
     if args.declared_walls and not args.matrix:
         raise UserError("--declared-walls needs --matrix")
-    from cellctl.cameras.config import frames_option
+    from cellctl.cameras.config import frames_option, retry_frames_option
 
     args.frames = frames_option(args.frames)
+    args.retry_frames = retry_frames_option(args.retry_frames)
     if args.render_only and not args.cache:
         raise UserError("--render-only needs --cache DIR (where the renders go)")
     if args.matrix:
@@ -119,13 +127,14 @@ def run(args: argparse.Namespace) -> int:
         taught=args.taught,
         cache=cache,
         frames=args.frames,
+        retry_frames=args.retry_frames,
     )
     if args.json:
         print(json.dumps(bench_sole.as_json(rows), indent=2))
     else:
         command = f"cellctl bench-sole --soles {args.soles} --first-seed {args.first_seed}"
         command += " --taught" if args.taught else ""
-        command += _frames_flag(args.frames)
+        command += _frames_flag(args.frames, args.retry_frames)
         print(bench_sole.to_markdown(rows, command + (f" --calib {args.calib}" if args.calib else "")))
     return 0
 
@@ -168,6 +177,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
         cache=cache,
         declared_walls=args.declared_walls,
         frames=args.frames,
+        retry_frames=args.retry_frames,
     )
     if args.json:
         print(json.dumps(sole_matrix.as_json(results), indent=2))
@@ -179,7 +189,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
         command += f" --calib {args.calib}" if args.calib else ""
         command += " --taught" if args.taught else ""
         command += " --declared-walls" if args.declared_walls else ""
-        command += _frames_flag(args.frames)
+        command += _frames_flag(args.frames, args.retry_frames)
         print(sole_matrix.matrix_markdown(results, command))
     return 0 if sole_matrix.acceptance(results).passed else 1
 
@@ -225,8 +235,10 @@ def _render_only(scenes: list[SoleScene], cache: RenderCache, taught: bool, fram
     return 0
 
 
-def _frames_flag(frames: int) -> str:
-    """ " --frames N" for a report's command line, unless N is the cycle's default."""
-    from cellctl.cameras.config import AVERAGED_FRAMES
+def _frames_flag(frames: int, retry_frames: int) -> str:
+    """ " --frames N --retry-frames M" for a report's command line, each unless it is the cycle's default."""
+    from cellctl.cameras.config import AVERAGED_FRAMES, MORE_EXPOSURES
 
-    return "" if frames == AVERAGED_FRAMES else f" --frames {frames}"
+    return ("" if frames == AVERAGED_FRAMES else f" --frames {frames}") + (
+        "" if retry_frames == MORE_EXPOSURES else f" --retry-frames {retry_frames}"
+    )

@@ -22,7 +22,7 @@ from cellctl.sim.render_cache import RenderCache, exposure_shots, render_exposur
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.checks import MIN_GLUE_NZ
-from cellctl.vision.defaults import GLUE_OFFSET_MM
+from cellctl.vision.defaults import GLUE_OFFSET_MM, MORE_EXPOSURES
 from cellctl.vision.edge_checks import LOW_WALL_QUANTILE, WALL_HEIGHT_INSET_MM
 from cellctl.vision.image_noise import exposure_noise_dn
 from cellctl.vision.measurement import MeasurementRefused, MeasurementResult, SoleMeasurement, measure_sole
@@ -60,6 +60,9 @@ class SoleBenchRow:
     # percentile, as edge_checks.check_wall_height reads the measured one): below the check's limit the cell
     # cannot confirm the outline as the foot, and a `wall_too_low` refusal is the right answer.
     wall_height_true_mm: float | None = None
+    # Where a refusal on the bench's --frames exposures named more that may pass and the bench measured once more
+    # on this many, as the cycle does ([cameras] retry_averaged_frames): the row is that second measurement's.
+    retried_on: int | None = None
 
 
 def bench_soles(
@@ -69,19 +72,21 @@ def bench_soles(
     taught: bool = False,
     cache: RenderCache | None = None,
     frames: int = AVERAGED_FRAMES,
+    retry_frames: int = MORE_EXPOSURES,
 ) -> list[SoleBenchRow]:
     """Measure each (seed, colour) plain sole once and compare with its truth.
 
     taught: teach each scene's empty table first (not timed), as a cell does once at set-up
-    (cellctl.vision.teach); else measure without a taught table. cache: renders kept on disk. frames: exposures
-    averaged per measurement (`scene_frame`).
+    (cellctl.vision.teach); else measure without a taught table. cache: renders kept on disk. frames, retry_frames:
+    exposures averaged per measurement, and in all where it may pass on more (`measure_scene`).
     """
     reconstructor = SoleReconstructor(calib)
     rows = []
     for seed, color in soles:
         scene = SoleScene.random(seed, color, calib)
         chosen = taught_reconstructor(calib, scene, cache) if taught else reconstructor
-        rows.append(measure_scene(chosen, scene, "plain" + fallback_note(taught, chosen), cache, frames=frames))
+        label = "plain" + fallback_note(taught, chosen)
+        rows.append(measure_scene(chosen, scene, label, cache, frames=frames, retry_frames=retry_frames))
         if progress:
             progress(_row_text(rows[-1]))
     return rows
@@ -91,6 +96,19 @@ def fallback_note(taught: bool, reconstructor: SoleReconstructor) -> str:
     """ "+untaught" for a row asked to be taught whose table could not be (`taught_reconstructor`): the result is
     the untaught cell's, and a reader of the table must see that."""
     return "+untaught" if taught and reconstructor.taught is None else ""
+
+
+def retried_note(rows: list[SoleBenchRow]) -> str:
+    """A sentence for a report whose rows include soles measured once more on more exposures (`measure_scene`)."""
+    retried = [r for r in rows if r.retried_on is not None]
+    if not retried:
+        return ""
+    measured = sum(r.valid for r in retried)
+    seeds = ", ".join(str(r.seed) for r in retried)
+    return (
+        f" {len(retried)} of them refused for their glue heights' precision and measured again on "
+        f"{retried[0].retried_on} exposures, {measured} valid then: {seeds}."
+    )
 
 
 def untaught_note(rows: list[SoleBenchRow]) -> str:
@@ -157,26 +175,27 @@ def measure_scene(
     cache: RenderCache | None = None,
     declared_wall: bool = False,
     frames: int = AVERAGED_FRAMES,
+    retry_frames: int = MORE_EXPOSURES,
 ) -> SoleBenchRow:
     """Render one scene (not timed) in `frames` exposures averaged as a cycle takes them (`scene_frame`), measure it
     like `cellctl measure` (timed) and compare with its truth; declared_wall: with the sole model's wall stated as a
-    recipe would (`declared_draft`)."""
+    recipe would (`declared_draft`). A refusal that names more exposures that may pass is measured once more on
+    `retry_frames` of them (the first `frames` among them), as the cycle does (cellctl.service.measuring); the
+    time is both measurements'."""
     assert scene.sole is not None
-    pair = scene_frame(scene, frames, cache)
     draft = declared_draft(scene) if declared_wall else None
-    start = time.perf_counter()
-    result: MeasurementResult | None
-    try:
-        reconstruction = reconstructor.reconstruct(
-            pair.left, pair.right, pair.averaged, pair.info.get("averaged_frames")
-        )
-        result = measure_sole(reconstruction, wall_draft_deg=draft)
-        reason, failure = (
-            (result.reason, result.failure.value) if isinstance(result, MeasurementRefused) else (None, None)
-        )
-    except Exception as exc:  # noqa: BLE001 - a crash is a finding of the benchmark, not the end of the run
-        result, reason, failure = None, f"{CRASHED}: {type(exc).__name__}: {exc}", CRASHED
-    seconds = time.perf_counter() - start
+    result, seconds = _measure_pair(reconstructor, scene_frame(scene, frames, cache), draft)
+    retried_on = None
+    if isinstance(result, MeasurementRefused) and result.more_exposures is not None and retry_frames > frames:
+        result, again = _measure_pair(reconstructor, scene_frame(scene, retry_frames, cache), draft)
+        seconds, retried_on = seconds + again, retry_frames
+    reason, failure = (
+        (result, CRASHED)
+        if isinstance(result, str)
+        else (result.reason, result.failure.value)
+        if isinstance(result, MeasurementRefused)
+        else (None, None)
+    )
     truth = scene.sole.truth()
     row = SoleBenchRow(
         scene.seed,
@@ -196,6 +215,7 @@ def measure_scene(
         truth.half_area_difference,
         glue_line_steep(scene),
         wall_height_true_mm=wall_height_true(scene),
+        retried_on=retried_on,
     )
     if isinstance(result, SoleMeasurement):
         row.length_error_mm = result.length_mm - truth.length_mm
@@ -212,6 +232,22 @@ def measure_scene(
     elif isinstance(result, MeasurementRefused):
         row.outline_error_max_mm = outline_error(scene, result)
     return row
+
+
+def _measure_pair(
+    reconstructor: SoleReconstructor, pair: StereoFrame, draft: float | None
+) -> tuple[MeasurementResult | str, float]:
+    """The measurement of one averaged pair, or the words of the exception it raised, and its time (s)."""
+    start = time.perf_counter()
+    result: MeasurementResult | str
+    try:
+        reconstruction = reconstructor.reconstruct(
+            pair.left, pair.right, pair.averaged, pair.info.get("averaged_frames")
+        )
+        result = measure_sole(reconstruction, wall_draft_deg=draft)
+    except Exception as exc:  # noqa: BLE001 - a crash is a finding of the benchmark, not the end of the run
+        result = f"{CRASHED}: {type(exc).__name__}: {exc}"
+    return result, time.perf_counter() - start
 
 
 def declared_draft(scene: SoleScene) -> float | None:
@@ -320,7 +356,8 @@ def to_markdown(rows: list[SoleBenchRow], command: str) -> str:
     lines = [
         f"{measured} of {len(rows)} simulated soles measured "
         f"({sum(r.color == 'white' for r in rows)} white, {sum(r.color == 'black' for r in rows)} black). Command: `{command}`"
-        + untaught_note(rows),
+        + untaught_note(rows)
+        + retried_note(rows),
         "",
         "| Error (measured - true) | mean abs | max abs | mean (signed) |",
         "| :-- | --: | --: | --: |",

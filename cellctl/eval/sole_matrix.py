@@ -22,13 +22,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from cellctl.cameras.config import AVERAGED_FRAMES
+from cellctl.cameras.config import AVERAGED_FRAMES, MORE_EXPOSURES
 from cellctl.errors import FailureKind
 from cellctl.eval.sole_bench import (
     CRASHED,
     SoleBenchRow,
     fallback_note,
     measure_scene,
+    retried_note,
     taught_reconstructor,
     untaught_note,
 )
@@ -149,13 +150,15 @@ def bench_matrix(
     cache: RenderCache | None = None,
     declared_walls: bool = False,
     frames: int = AVERAGED_FRAMES,
+    retry_frames: int = MORE_EXPOSURES,
 ) -> list[MatrixRow]:
     """Render, measure and judge every sole; `calib` replaces the looks' rigs (default: each look's own rig).
 
     taught: teach each scene's empty table first (not timed), as the cell does once at set-up.
     cache: renders kept on disk (`cellctl.sim.render_cache`).
     declared_walls: measure each sole with its model's wall stated as its recipe would (sole_bench.declared_draft).
-    frames: exposures averaged per measurement (sole_bench.scene_frame).
+    frames, retry_frames: exposures averaged per measurement, and in all where it may pass on more
+    (sole_bench.measure_scene).
     """
     reconstructors: dict[str, SoleReconstructor] = {}
     rows = []
@@ -169,7 +172,8 @@ def bench_matrix(
         if taught:
             reconstructor = taught_reconstructor(reconstructor.calib, scene, cache)
         label = sole.label + fallback_note(taught, reconstructor)
-        result = judge(sole, measure_scene(reconstructor, scene, label, cache, declared_walls, frames))
+        row = measure_scene(reconstructor, scene, label, cache, declared_walls, frames, retry_frames)
+        result = judge(sole, row)
         rows.append(result)
         if progress:
             progress(_progress_text(result))
@@ -178,7 +182,8 @@ def bench_matrix(
 
 def _progress_text(result: MatrixRow) -> str:
     r = result.row
-    head = f"sole {r.seed} {r.color} {r.variations}: {result.verdict}"
+    again = "" if r.retried_on is None else f" (measured again on {r.retried_on} exposures)"
+    head = f"sole {r.seed} {r.color} {r.variations}: {result.verdict}{again}"
     if not r.valid:
         return f"{head}: {r.reason}{_outline_note(r)}"
     return (
@@ -277,7 +282,7 @@ def matrix_markdown(results: list[MatrixRow], command: str) -> str:
         f"{acc.fair_refusals} refused with a fair reason, {acc.missed} refused with a wrong reason "
         f"({acc.missed_outline_off} of them as outline_inconsistent with the outline truly more than "
         f"{OUTLINE_TRULY_OFF_MM:.1f} mm off the sole's edge: the segmentation missed, the check's claim is true), "
-        f"{acc.crashed} crashed.{untaught_note([r.row for r in results])} "
+        f"{acc.crashed} crashed.{untaught_note([r.row for r in results])}{retried_note([r.row for r in results])} "
         f"Acceptance {'met' if acc.passed else 'NOT met'}.",
         "",
         "A row per variation over every sole that has it (soles mix variations, so a sole counts in several "

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 from cellctl.cameras import CameraError, FrameSource, StereoFrame
 from cellctl.cameras.averaging import average_frames
@@ -71,19 +72,38 @@ class CameraHealth:
 
     def grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
         """The last of `averaged_frames` pairs exposed after `not_before` (the trigger), with the mean of those that
-        show the same still scene (cellctl.cameras.averaging); CycleFailed with the camera's code otherwise."""
+        show the same still scene (`averaged`); CycleFailed with the camera's code otherwise."""
+        return self.averaged(self.grab_exposures(timings, not_before), timings)
+
+    def grab_exposures(self, timings: dict[str, float], not_before: float) -> list[StereoFrame]:
+        """The `averaged_frames` pairs a cycle grabs after `not_before` (the trigger); CycleFailed otherwise."""
+        return self._grabbing(timings, "grab", lambda: self.source.grab_exposures(self.averaged_frames, not_before))
+
+    def grab_further(self, count: int, timings: dict[str, float]) -> list[StereoFrame]:
+        """Up to `count` more pairs of the scene just grabbed (FrameSource.grab_further); CycleFailed otherwise."""
+        return self._grabbing(timings, "grab_further", lambda: self.source.grab_further(count))
+
+    @staticmethod
+    def averaged(frames: list[StereoFrame], timings: dict[str, float]) -> StereoFrame:
+        """The last of `frames` with the mean of those that show the same still scene (cellctl.cameras.averaging)."""
+        start = time.perf_counter()
+        frame = average_frames(frames)
+        timings["average"] = time.perf_counter() - start
+        return frame
+
+    def _grabbing(
+        self, timings: dict[str, float], step: str, grab: Callable[[], list[StereoFrame]]
+    ) -> list[StereoFrame]:
+        """`grab()` under the lock, timed as `step`; a camera error marks the cameras failed and is the cycle's."""
         start = time.perf_counter()
         try:
             with self.lock:  # frames exposed after the trigger only
-                frames = self.source.grab_exposures(self.averaged_frames, not_before=not_before)
+                frames = grab()
         except CameraError as exc:
             self.ok = False
             self._last_probe = time.monotonic()
             raise CycleFailed.of(exc.kind, str(exc)) from exc
         finally:
-            timings["grab"] = time.perf_counter() - start
+            timings[step] = time.perf_counter() - start
         self.ok = True
-        start = time.perf_counter()
-        frame = average_frames(frames)
-        timings["average"] = time.perf_counter() - start
-        return frame
+        return frames

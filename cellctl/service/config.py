@@ -20,7 +20,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cellctl.cameras.config import AVERAGED_FRAMES, MAX_AVERAGED_FRAMES, CameraConfig, SimulatedCameraConfig
+from cellctl.cameras.config import (
+    AVERAGED_FRAMES,
+    MAX_AVERAGED_FRAMES,
+    MORE_EXPOSURES,
+    CameraConfig,
+    SimulatedCameraConfig,
+)
 from cellctl.service.config_plc import PlcConfig, read_plc
 from cellctl.service.config_table import ConfigError, Table, read_toml
 from cellctl.vision.defaults import (
@@ -216,6 +222,7 @@ def _cameras(t: Table) -> CameraConfig:
         timeout_ms=t.number("timeout_ms", 1000.0, above=0, high=60000),
         max_regrabs=t.integer("max_regrabs", 4, low=0, high=100),
         averaged_frames=t.integer("averaged_frames", AVERAGED_FRAMES, low=1, high=MAX_AVERAGED_FRAMES),
+        retry_averaged_frames=t.integer("retry_averaged_frames", MORE_EXPOSURES, low=0, high=MAX_AVERAGED_FRAMES),
         simulated=simulated,
     )
     t.finish()

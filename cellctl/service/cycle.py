@@ -51,6 +51,9 @@ class Refused:
     failure: FailureKind
     reason: str
     timings: dict[str, float] = field(default_factory=dict)
+    # Set where the same still sole on the mean of this many exposures in all may be measured (the glue heights'
+    # precision: cellctl.vision.checks.CheckFailure).
+    more_exposures: int | None = None
 
 
 CycleResult = Measured | Refused
@@ -77,7 +80,7 @@ def measure_frame(frame: StereoFrame, reconstructor: SoleReconstructor, settings
             reconstructor.calib, frame.left, frame.right, reconstructor.min_disparity
         ):
             return Refused(FailureKind.CALIBRATION_MISMATCH, SWAPPED, timings)
-        return Refused(measurement.failure, measurement.reason, timings)
+        return Refused(measurement.failure, measurement.reason, timings, measurement.more_exposures)
     # A measurement is only made of a reconstruction that found a sole.
     assert isinstance(reconstruction, Reconstruction)
     return Measured(outliving_the_cycle(reconstruction), measurement, timings)

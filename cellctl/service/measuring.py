@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterable
+from dataclasses import replace
 
 from cellctl.cameras import CameraError, FrameSource, StereoFrame
 from cellctl.cameras.identity import identity_problem
@@ -30,6 +31,12 @@ from firmware_io.handshake import Trigger
 from firmware_io.registers import ErrorCode
 
 log = logging.getLogger("cellctl.service.daemon")  # the service's one log, as operators know it
+
+#: A cycle refused for its glue heights' precision measures once more on more exposures only where the cycle so far,
+#: taken twice (the retry repeats its measurement), stays within this share of [plc] cycle_timeout_s.
+RETRY_TIME_SHARE = 0.8
+#: The cycle's timing step of that second measurement (its further grab and its measurement), in the journal.
+RETRY_STEP = "retry"
 
 
 class CellMeasurer:
@@ -94,16 +101,24 @@ class CellMeasurer:
                 raise CycleFailed.of(
                     FailureKind.RECIPE_UNKNOWN, f"recipe {trigger.recipe} selected by the PLC is not loaded"
                 )
-            frame = cameras.grab(timings, not_before=trigger.received_at)
-            return frame, (ErrorCode.NONE, None, self.measure(frame, timings, recipe))
+            exposures = cameras.grab_exposures(timings, not_before=trigger.received_at)
+            frame = cameras.averaged(exposures, timings)
+            result = self.measure(frame, timings, recipe)
+            if more := self._more_exposures(result, len(exposures), trigger):
+                again = self._measure_again(exposures, more, cameras, timings, recipe, trigger.cycle)
+                frame, result = again or (frame, result)
+            if isinstance(result, Refused):
+                raise CycleFailed.of(result.failure, result.reason)
+            return frame, (ErrorCode.NONE, None, result)
         except CycleFailed as failure:
             return frame, (failure.code, str(failure), None)
         except Exception as exc:  # never leave the PLC without an answer
             log.exception("cycle %d: unexpected failure", trigger.cycle)
             return frame, (ErrorCode.INTERNAL_ERROR, f"internal error: {type(exc).__name__}: {exc}", None)
 
-    def measure(self, frame: StereoFrame, timings: dict[str, float], recipe: Recipe) -> Measured:
-        """The sole in `frame`, measured as `recipe` asks; CycleFailed with the failure's code otherwise."""
+    def measure(self, frame: StereoFrame, timings: dict[str, float], recipe: Recipe) -> Measured | Refused:
+        """The sole in `frame`, measured as `recipe` asks, or why not; CycleFailed where the cell cannot measure
+        at all (no calibration, other cameras, no taught table)."""
         if self.calib is None:
             raise CycleFailed.of(FailureKind.CALIBRATION_MISSING, f"no calibration loaded: {self.calibration_problem}")
         if problem := identity_problem(self.calib.cameras, frame.info):
@@ -119,9 +134,55 @@ class CellMeasurer:
             reconstructor = self._reconstructor_for(recipe.depth_range_mm)
         result = measure_frame(frame, reconstructor, self._settings(recipe))
         timings.update(result.timings)
-        if isinstance(result, Refused):
-            raise CycleFailed.of(result.failure, result.reason)
         return result
+
+    def _more_exposures(self, result: Measured | Refused, grabbed: int, trigger: Trigger) -> int:
+        """How many more pairs a cycle refused after `grabbed` grabs to measure the sole once more (0: none): where
+        its glue heights' precision may pass on more exposures ([cameras] retry_averaged_frames in all), and the
+        cycle so far, taken twice, leaves RETRY_TIME_SHARE of cycle_timeout_s (a retry must not turn a refusal
+        into a CYCLE_TIMEOUT the PLC cannot tell from a hung cell)."""
+        wanted = self.config.cameras.retry_averaged_frames
+        if not isinstance(result, Refused) or result.more_exposures is None or wanted <= grabbed:
+            return 0
+        taken = time.monotonic() - trigger.received_at
+        timeout = self.config.plc.cycle_timeout_s
+        if 2.0 * taken > RETRY_TIME_SHARE * timeout:
+            log.info(
+                "cycle %d: not measured again on %d exposures: the cycle has taken %.1f s of cycle_timeout_s = %g s",
+                trigger.cycle,
+                wanted,
+                taken,
+                timeout,
+            )
+            return 0
+        return wanted - grabbed
+
+    def _measure_again(
+        self,
+        exposures: list[StereoFrame],
+        more: int,
+        cameras: CameraHealth,
+        timings: dict[str, float],
+        recipe: Recipe,
+        cycle: int,
+    ) -> tuple[StereoFrame, Measured | Refused] | None:
+        """The sole measured once more on `exposures` and up to `more` further pairs of it, averaged together (the
+        mean leaves out any that moved); timed as RETRY_STEP. A refusal on them says it was measured again. None where
+        the cameras have no further pairs of it (stored pairs)."""
+        start = time.perf_counter()
+        further = cameras.grab_further(more, timings)
+        if not further:
+            return None
+        frame = cameras.averaged(exposures + further, timings)
+        count = frame.info.get("averaged_frames", 1)
+        log.info(
+            "cycle %d: glue heights too coarse on %d exposures; measuring again on %d", cycle, len(exposures), count
+        )
+        result = self.measure(frame, timings, recipe)
+        timings[RETRY_STEP] = time.perf_counter() - start
+        if isinstance(result, Refused):
+            result = replace(result, reason=f"{result.reason} (measured again on the mean of {count} exposures)")
+        return frame, result
 
     def _settings(self, recipe: Recipe) -> MeasureSettings:
         """What a cycle measuring for `recipe` needs: its glue path and wall, the cell's glue height tolerance."""

@@ -19,6 +19,7 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 from prometheus_client.registry import Collector
 
 from cellctl.service.events import CellEvent, CellState, CycleDone
+from cellctl.service.measuring import RETRY_STEP
 from firmware_io.registers import ErrorCode
 from firmware_io.server import PlcLink
 
@@ -40,6 +41,12 @@ class CellMetrics:
         )
         self.cycles = Counter(
             "cellctl_cycles", "Cycles by result and PLC error code", ("result", "code"), registry=self.registry
+        )
+        self.measured_again = Counter(
+            "cellctl_cycles_measured_again",
+            "Cycles measured once more on more exposures for their glue heights' precision, by result",
+            ("result",),
+            registry=self.registry,
         )
         self.camera_reconnects = Counter(
             "cellctl_camera_reconnects", "Times the cameras came back after failing", registry=self.registry
@@ -64,6 +71,8 @@ class CellMetrics:
             record = event.record
             self.cycle_time.observe(record.cycle_time_ms / 1000.0)
             self.cycles.labels(record.status, _code_name(record.error_code)).inc()
+            if RETRY_STEP in record.timings:
+                self.measured_again.labels(record.status).inc()
         elif isinstance(event, CellState) and event.phase != "starting":
             if self._cameras_were_ok is False and event.cameras_ok:
                 self.camera_reconnects.inc()

@@ -26,7 +26,7 @@ import numpy as np
 
 from cellctl.errors import FailureKind
 from cellctl.vision.closed_path import outward_normals, running_median
-from cellctl.vision.defaults import AVERAGED_FRAMES, GLUE_HEIGHT_TOLERANCE_MM
+from cellctl.vision.defaults import AVERAGED_FRAMES, GLUE_HEIGHT_TOLERANCE_MM, MORE_EXPOSURES
 from cellctl.vision.footprint import Footprint
 
 OUTLINE_INSIDE_MM = 2.0  # the sole must rise above the table this far inside its outline...
@@ -163,9 +163,6 @@ GLUE_TYPICAL_SD_SHARE_AVERAGED = 0.19
 # measured, the same factor per doubling taken: 0.152 on sixteen). Fewer than four leave more noise and a smaller
 # multiple: 0.19 holds there with room.
 GLUE_SD_SHARE_PER_DOUBLING = 2.86 / 3.19
-# The further exposures a refusal for the glue heights' precision on the mean proposes: on eight, 8 of the 15 soles the
-# four fresh sets refused for it on four were measured right, none wrong (the fortieth round).
-MORE_EXPOSURES = 8
 # Each glue point's own expected error, besides the median's: at most this share of the tolerance. Half the
 # tolerance is one where an error of two expected errors (one point in twenty where the model holds) is already out
 # of it: no height there is a measurement within the tolerance, whatever the rest of the path. Over the 131 results
@@ -189,6 +186,9 @@ OBLIQUE_SD_SHARE_FACTOR = 0.84
 class CheckFailure:
     kind: FailureKind
     reason: str
+    # Set where the same scene on the mean of this many exposures in all may pass (check_glue_precision): a
+    # cycle may grab the further ones and measure once more (cellctl.service.measuring).
+    more_exposures: int | None = None
 
 
 def check_outline_depth(
@@ -440,6 +440,24 @@ def glue_sd_limit(
     return share * tolerance_mm
 
 
+def more_exposures_reachable(
+    typical_mm: float,
+    tolerance_mm: float,
+    obliqueness_deg: float,
+    quieter_than_one_exposure: bool,
+    exposures: int | None,
+) -> bool:
+    """Whether a median expected error `typical_mm`, refused on the mean of a clean camera's `exposures` (None: the
+    cycle's AVERAGED_FRAMES), may pass on MORE_EXPOSURES: only the sensor's noise averages, so the error falls by
+    at most the square root of the exposures' ratio (the scene's own part not at all: 7 of the 15 soles the
+    fortieth round re-measured on eight fell by less); beyond that the further exposures cannot help."""
+    count = AVERAGED_FRAMES if exposures is None else exposures
+    if not quieter_than_one_exposure or count >= MORE_EXPOSURES:
+        return False
+    best = typical_mm * float(np.sqrt(count / MORE_EXPOSURES))
+    return best <= glue_sd_limit(tolerance_mm, obliqueness_deg, True, MORE_EXPOSURES)
+
+
 def check_glue_precision(
     height_sd: np.ndarray,
     tolerance_mm: float = GLUE_HEIGHT_TOLERANCE_MM,
@@ -469,7 +487,10 @@ def check_glue_precision(
         )
         on_mean = " on the mean of the exposures" if quieter_than_one_exposure else ""
         more = ""
-        if quieter_than_one_exposure and (exposures is None or exposures < MORE_EXPOSURES):
+        reachable = more_exposures_reachable(
+            typical, tolerance_mm, obliqueness_deg, quieter_than_one_exposure, exposures
+        )
+        if reachable:
             more_limit = glue_sd_limit(tolerance_mm, obliqueness_deg, True, MORE_EXPOSURES)
             more = (
                 f"; or average {MORE_EXPOSURES} exposures per cycle ([cameras] averaged_frames: at most "
@@ -481,6 +502,7 @@ def check_glue_precision(
             f"(median along the path{on_mean}; at most {limit:.2f} for the {tolerance_mm:g} mm tolerance{oblique}): "
             + remedy
             + more,
+            MORE_EXPOSURES if reachable else None,
         )
     worst, point_limit = int(np.nanargmax(height_sd)), GLUE_POINT_SD_SHARE * tolerance_mm
     if height_sd[worst] > point_limit:

@@ -25,6 +25,12 @@ WALL_DRAFT_RANGE_DEG: tuple[float, float] = (0.0, 10.0)
 #: need for their glue heights; a cycle waits (n - 1) frame periods longer for them (~100 ms at 30 fps). The
 #: measurement assumes it where a mean's count is not known (a mean replayed from the image log).
 AVERAGED_FRAMES = 4
+#: Pairs averaged in all when a cycle refused for its glue heights' precision on the mean measures the same still
+#: sole once more ([cameras] retry_averaged_frames, cellctl.service.measuring; cellctl.vision.checks proposes it
+#: only where the sensor's noise averaging further can bring the error under the limit): on eight, 8 of the 15
+#: soles four fresh sets refused for it on four were measured right, none wrong (docs/sole-benchmark.md, fortieth
+#: round). The limit is calibrated on eight (checks.GLUE_SD_SHARE_PER_DOUBLING).
+MORE_EXPOSURES = 8
 #: Results outside these ranges are no sole on this cell: refused, never published.
 PLAUSIBLE_LENGTH_MM: tuple[float, float] = (100.0, 400.0)
 PLAUSIBLE_HEIGHT_MM: tuple[float, float] = (0.5, 150.0)

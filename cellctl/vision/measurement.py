@@ -239,7 +239,7 @@ def measure_sole(
             exposures=reconstruction.surface_exposures,
         )
     if problem is not None:
-        return _invalid(problem.kind, problem.reason, **base)
+        return _invalid(problem.kind, problem.reason, more_exposures=problem.more_exposures, **base)
     implausible = _implausible(length, heel_z, toe_z)
     if implausible:
         return _invalid(FailureKind.MEASUREMENT_INVALID, implausible, **base)

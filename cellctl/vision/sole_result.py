@@ -95,6 +95,8 @@ class MeasurementRefused:
     outline: np.ndarray | None = None
     half_area_difference: float | None = None
     camera_to_table: np.ndarray | None = None
+    # Set where the scene on the mean of this many exposures in all may be measured (checks.CheckFailure).
+    more_exposures: int | None = None
 
     @property
     def valid(self) -> bool:

@@ -103,6 +103,10 @@ class Exposures:
         self.asked.append(count)
         return [stereo(exposure(scene(), k), exposure(scene(), 50 + k), k) for k in range(count)]
 
+    def grab_further(self, count: int) -> list[StereoFrame]:
+        self.asked.append(-count)
+        return [stereo(exposure(scene(), 10 + k), exposure(scene(), 60 + k), 10 + k) for k in range(count)]
+
 
 def test_a_cycle_grabs_and_averages_the_configured_exposures() -> None:
     source = Exposures()
@@ -110,3 +114,20 @@ def test_a_cycle_grabs_and_averages_the_configured_exposures() -> None:
     grabbed = CameraHealth(source, None, averaged_frames=3).grab(timings, not_before=0.0)
     assert source.asked == [3] and grabbed.info["averaged_frames"] == 3 and grabbed.averaged is not None
     assert set(timings) == {"grab", "average"}
+
+
+def test_further_exposures_of_a_cycle_average_with_the_first() -> None:
+    """A cycle measured again on more exposures: the further pairs of the same still scene join the first in one
+    mean, the last of them the frame; timed apart from the first grab."""
+    source = Exposures()
+    cameras = CameraHealth(source, None, averaged_frames=4)
+    timings: dict[str, float] = {}
+    first = cameras.grab_exposures(timings, not_before=0.0)
+    further = cameras.grab_further(4, timings)
+    frame = cameras.averaged(first + further, timings)
+    assert source.asked == [4, -4] and frame.info["averaged_frames"] == 8 and frame.left is further[-1].left
+    assert set(timings) == {"grab", "grab_further", "average"}
+    four = average_frames(first)
+    assert four.averaged is not None and frame.averaged is not None
+    clean = scene()
+    assert np.std(frame.averaged[0][..., 0] - clean) < 0.85 * np.std(four.averaged[0][..., 0] - clean)

@@ -88,6 +88,21 @@ def test_simulated_exposures_show_one_scene_with_new_noise_each() -> None:
     assert sim.grab_exposures(1)[0].left is frames[0].left  # the scene's first exposure is its pair
 
 
+def test_simulated_further_exposures_are_the_same_scenes_next_ones() -> None:
+    """A cycle that measures once more on more exposures gets the scene it grabbed, not the next seed's."""
+    sim = SimulatedCameras(half_size_rig(), seeds=(1, 2), exposures=5)
+    assert sim.grab_further(3) == []  # nothing grabbed yet
+    first = sim.grab_exposures(2)
+    further = sim.grab_further(2)
+    assert [f.info["seed"] for f in first + further] == [1, 1, 1, 1]
+    assert len({id(f.left) for f in first + further}) == 4  # each its own exposure
+    assert [f.info["seed"] for f in sim.grab_further(4)] == [1]  # the fifth and last rendered
+    assert sim.grab_further(1) == [] and sim.grab_pair().info["seed"] == 2
+    sim.unplug()
+    with pytest.raises(CameraMissing):
+        sim.grab_further(1)
+
+
 def test_simulated_faults_and_recovery(sim: SimulatedCameras) -> None:
     sim.unplug("right")
     with pytest.raises(CameraMissing, match="right camera"):
@@ -114,6 +129,7 @@ def test_replay_serves_pairs_in_turn(tmp_path: Path) -> None:
     values = [int(replay.grab_pair().right[0, 0, 0]) for _ in range(3)]
     assert values == [11, 21, 11]
     assert [int(f.right[0, 0, 0]) for f in replay.grab_exposures(4)] == [21]  # a stored pair is one exposure
+    assert replay.grab_further(4) == []  # and has no further ones
     assert replay.grab_pair().averaged is None
     for side, value in (("left", 12), ("right", 13)):  # the image log's mean of a cycle's exposures, beside its pair
         cv2.imwrite(str(tmp_path / f"mean{side}_02.png"), np.full((8, 8, 3), value, np.uint8))
@@ -189,6 +205,8 @@ def test_v4l2_pairs_decodes_and_reconnects_after_unplug(tmp_path: Path) -> None:
     assert left_capture.props[cv2.CAP_PROP_FOURCC] == cv2.VideoWriter.fourcc(*"MJPG")
     assert left_capture.props[cv2.CAP_PROP_EXPOSURE] == 100 and left_capture.props[cv2.CAP_PROP_GAIN] == 2
     assert frame.skew_s <= 0.005 and frame.info["left"] == str(devices[0])
+    further = source.grab_further(2)  # a retry's further pairs: the streams' next ones
+    assert len(further) == 2 and further[0].t_left < further[1].t_left and further[0].t_left > frame.t_left
 
     devices[1].unlink()  # right camera unplugged: its grab fails and the device node is gone
     FakeCapture.opened[1].fail_grab = True

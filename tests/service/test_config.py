@@ -118,6 +118,10 @@ def test_mistakes_are_refused_naming_the_key(tmp_path: Path, extra: str, message
         ('backend = "simulated"\nsync_tolerance_ms = -1', r"sync_tolerance_ms: -1 is impossible"),
         ('backend = "simulated"\naveraged_frames = 0', r"averaged_frames: 0 is impossible: must be in 1..16"),
         (
+            'backend = "simulated"\nretry_averaged_frames = 17',
+            r"retry_averaged_frames: 17 is impossible: must be in 0..16",
+        ),
+        (
             'backend = "simulated"\n[cameras.simulated]\nseeds = []',
             r"\[cameras.simulated\] seeds: expected a non-empty",
         ),

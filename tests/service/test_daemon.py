@@ -19,10 +19,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cellctl.cameras.base import StereoFrame
 from cellctl.cameras.simulated import FRAME_PERIOD_S, SimulatedCameras
 from cellctl.errors import FailureKind
+from cellctl.service import measuring
 from cellctl.service.codes import FAILURE_CODES
 from cellctl.service.config import CellConfig
+from cellctl.service.cycle import CycleResult, MeasureSettings, Refused
 from cellctl.service.daemon import Daemon
 from cellctl.service.journal import Journal
 from cellctl.service.sdnotify import SystemdNotifier
@@ -30,6 +33,7 @@ from cellctl.sim.rig import default_rig
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.reconstruction import ReconstructionRefused, ReconstructionResult, SoleReconstructor
 from firmware_io.endpoints import TcpEndpoint
+from firmware_io.handshake import Trigger
 from firmware_io.plc_sim import ModbusRequestError, PlcSimulator, TriggerRefused
 from firmware_io.registers import ErrorCode, Register, StatusBit
 from tests.sim_rig import HALF_RIG_MEASURE, UNTAUGHT_MEASURE, write_half_size_rig
@@ -325,6 +329,64 @@ def test_each_failure_kind_reaches_the_plc_as_its_error_code(
     assert record is not None and record.error_code == EXPECTED_CODES[kind]
     expected_text = "calibration is for" if kind is FailureKind.CALIBRATION_MISMATCH else failing.reason
     assert expected_text in record.reason  # the words go to the journal with the code
+
+
+class CoarseOnFewExposures:
+    """measure_frame as a black sole's glue heights make it: on fewer than `passes_on` exposures refused for their
+    precision with more exposures named (checks.check_glue_precision), on that many measured as usual."""
+
+    def __init__(self, passes_on: int) -> None:
+        self.real, self.passes_on, self.counts = measuring.measure_frame, passes_on, list[int]()
+
+    def __call__(self, frame: StereoFrame, reconstructor: SoleReconstructor, settings: MeasureSettings) -> CycleResult:
+        self.counts.append(frame.info["averaged_frames"])
+        if self.counts[-1] < self.passes_on:
+            return Refused(FailureKind.SURFACE_NOT_MEASURED, "glue heights coarse (simulated)", {}, more_exposures=8)
+        return self.real(frame, reconstructor, settings)
+
+
+def test_a_cycle_refused_for_its_glue_heights_precision_is_measured_again_on_more_exposures(
+    service: Service, plc: PlcSimulator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """[cameras] retry_averaged_frames (8 by default): the same still sole's four further pairs join the first
+    four, and the PLC gets the result measured on their mean, in one cycle."""
+    coarse = CoarseOnFewExposures(passes_on=8)
+    monkeypatch.setattr(measuring, "measure_frame", coarse)
+    reading = plc.run_cycle()
+    assert coarse.counts == [4, 8]
+    assert reading.error_code == ErrorCode.NONE and reading.status & StatusBit.RESULT_VALID
+    record = Journal.open(service.daemon.config.journal.state_dir, readonly=True).find(reading.cycle)
+    assert record is not None and record.source["averaged_frames"] == 8 and "retry" in record.timings
+    assert record.source["seed"] == 1  # the same scene, not the simulated cameras' next
+
+
+def test_a_cycle_refused_again_on_more_exposures_says_so_and_no_third_time(
+    service: Service, plc: PlcSimulator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    coarse = CoarseOnFewExposures(passes_on=100)
+    monkeypatch.setattr(measuring, "measure_frame", coarse)
+    reading = plc.run_cycle()
+    assert coarse.counts == [4, 8] and reading.error_code == FAILURE_CODES[FailureKind.SURFACE_NOT_MEASURED]
+    record = Journal.open(service.daemon.config.journal.state_dir, readonly=True).find(reading.cycle)
+    assert record is not None and "measured again on the mean of 8 exposures" in record.reason
+
+
+def test_no_measuring_again_when_switched_off_or_without_the_time_for_it(
+    service: Service, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A retry repeats the cycle's measurement: not where the cycle so far, taken twice, would pass
+    RETRY_TIME_SHARE of cycle_timeout_s (a refusal must not become a CYCLE_TIMEOUT), nor with the setting at 0."""
+    measurer = service.daemon.measurer
+    refused = Refused(FailureKind.SURFACE_NOT_MEASURED, "coarse", {}, more_exposures=8)
+    now = time.monotonic()
+    assert measurer._more_exposures(refused, 4, Trigger(1, now)) == 4
+    late = now - 0.5 * measuring.RETRY_TIME_SHARE * measurer.config.plc.cycle_timeout_s - 0.1
+    assert measurer._more_exposures(refused, 4, Trigger(1, late)) == 0
+    assert measurer._more_exposures(dataclasses.replace(refused, more_exposures=None), 4, Trigger(1, now)) == 0
+    assert measurer._more_exposures(refused, 8, Trigger(1, now)) == 0  # already as many as the setting
+    cameras = dataclasses.replace(measurer.config.cameras, retry_averaged_frames=0)
+    monkeypatch.setattr(measurer, "config", dataclasses.replace(measurer.config, cameras=cameras))
+    assert measurer._more_exposures(refused, 4, Trigger(1, now)) == 0
 
 
 def test_a_cell_that_requires_a_taught_table_refuses_every_cycle_without_one(tmp_path: Path) -> None:

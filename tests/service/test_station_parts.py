@@ -3,6 +3,7 @@ metrics from events, history filter and trend plots."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import socket
 import threading
@@ -138,6 +139,7 @@ def test_metrics_count_cycles_by_result_and_camera_reconnects(tmp_path: Path) ->
         CellState("ready", True, True),
         CycleDone(record(1, True), None, None),
         CycleDone(record(2, False), None, None),
+        CycleDone(dataclasses.replace(record(3, True), timings={"match": 0.2, "retry": 1.1}), None, None),
         CellState("error", False, True),
         CellState("ready", True, True),
     ):
@@ -147,10 +149,11 @@ def test_metrics_count_cycles_by_result_and_camera_reconnects(tmp_path: Path) ->
         for family in text_string_to_metric_families(metrics.exposition().decode())
         for s in family.samples
     }
-    assert samples[("cellctl_cycles_total", (("code", "NONE"), ("result", "ok")))] == 1
+    assert samples[("cellctl_cycles_total", (("code", "NONE"), ("result", "ok")))] == 2
+    assert samples[("cellctl_cycles_measured_again_total", (("result", "ok"),))] == 1  # cycle 3 only
     assert samples[("cellctl_cycles_total", (("code", "NO_SOLE"), ("result", "error")))] == 1
     assert samples[("cellctl_camera_reconnects_total", ())] == 1
-    assert samples[("cellctl_cycle_time_seconds_count", ())] == 2
+    assert samples[("cellctl_cycle_time_seconds_count", ())] == 3
     assert samples[("cellctl_state_dir_bytes", ())] >= 1000
 
 

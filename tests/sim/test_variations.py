@@ -20,6 +20,7 @@ from cellctl.eval.sole_bench import (
     glue_line_steep,
     measure_scene,
     outline_error,
+    retried_note,
     wall_height_true,
 )
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
@@ -714,6 +715,36 @@ def test_a_measurement_that_raises_is_a_crash_not_the_end_of_the_run() -> None:
     assert not row.valid and row.reason is not None and "LinAlgError" in row.reason
     assert judge(MatrixSole(5, "white", ("plain",)), row).verdict == "CRASH"
     assert not acceptance([judge(MatrixSole(5, "white", ("plain",)), row)]).passed
+
+
+def test_a_refusal_naming_more_exposures_is_measured_again_on_them_as_the_cycle_does(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The bench follows the cycle ([cameras] retry_averaged_frames): a refusal for the glue heights' precision
+    that names more exposures is measured once more on eight; the row says so and times both; at 0, never."""
+    import cellctl.eval.sole_bench as sole_bench
+
+    counts: list[int] = []
+
+    class Counting:
+        def reconstruct(self, left: np.ndarray, right: np.ndarray, surface: object, exposures: int) -> int:
+            counts.append(exposures)
+            return exposures
+
+    def coarse_on_four(reconstruction: int, wall_draft_deg: float | None = None) -> MeasurementRefused:
+        more = 8 if reconstruction < 8 else None
+        return MeasurementRefused(
+            FailureKind.SURFACE_NOT_MEASURED, f"coarse on {reconstruction}", 0, more_exposures=more
+        )
+
+    monkeypatch.setattr(sole_bench, "measure_sole", coarse_on_four)
+    scene = SoleScene.random(5, "black", half_size_rig())
+    row = measure_scene(Counting(), scene)  # type: ignore[arg-type]
+    assert counts == [4, 8] and row.retried_on == 8 and row.reason == "coarse on 8"
+    assert "measured again on 8 exposures, 0 valid then: 5." in retried_note([row])
+    counts.clear()
+    row = measure_scene(Counting(), scene, retry_frames=0)  # type: ignore[arg-type]
+    assert counts == [4] and row.retried_on is None and row.reason == "coarse on 4" and retried_note([row]) == ""
 
 
 def test_the_distorted_rigs_images_and_rectification_leave_no_vertical_disparity() -> None:

@@ -187,6 +187,35 @@ def test_on_a_mean_of_more_than_four_exposures_the_limit_tightens_as_measured() 
     assert on_one is not None and "averaged_frames" not in on_one.reason
 
 
+def test_a_refusal_names_more_exposures_only_where_their_noise_averaging_can_bring_it_under_the_limit() -> None:
+    """More exposures lower the error by at most the square root of their ratio (the sensor's noise; the scene's own
+    error stays), so a cycle measures again on eight only where four's error, so lowered, meets eight's limit."""
+    limit_on_eight = 0.19 * 2.86 / 3.19
+    reachable = check_glue_precision(
+        np.full(300, 0.99 * limit_on_eight * 2**0.5), 1.0, quieter_than_one_exposure=True, exposures=4
+    )
+    assert reachable is not None and reachable.more_exposures == 8 and "or average 8 exposures" in reachable.reason
+    hopeless = check_glue_precision(
+        np.full(300, 1.01 * limit_on_eight * 2**0.5), 1.0, quieter_than_one_exposure=True, exposures=4
+    )
+    assert hopeless is not None and hopeless.more_exposures is None and "averaged_frames" not in hopeless.reason
+    unknown_count = check_glue_precision(
+        np.full(300, 0.2), 1.0, quieter_than_one_exposure=True
+    )  # a replayed mean: the cycle's four
+    assert unknown_count is not None and unknown_count.more_exposures == 8
+    for already, quieter in ((8, True), (16, True), (4, False)):  # on eight already; one exposure's share
+        refused = check_glue_precision(np.full(300, 0.4), 1.0, quieter_than_one_exposure=quieter, exposures=already)
+        assert refused is not None and refused.more_exposures is None
+    tolerance_two = check_glue_precision(
+        np.full(300, 0.4), 2.0, quieter_than_one_exposure=True, exposures=4
+    )  # the limit scales with it
+    assert tolerance_two is not None and tolerance_two.more_exposures == 8
+    per_point = np.full(300, 0.05)
+    per_point[7] = 0.9  # one point's own error: not the median's, no further exposures proposed
+    refused_point = check_glue_precision(per_point, 1.0, quieter_than_one_exposure=True, exposures=4)
+    assert refused_point is not None and refused_point.more_exposures is None
+
+
 def test_a_table_planes_obliqueness_is_the_angle_of_its_normal_to_the_viewing_axis() -> None:
     assert TablePlane(np.array([0.0, 0.0, 1.0]), 500.0).obliqueness_deg() == 0.0
     tilt = np.radians(9.7)
