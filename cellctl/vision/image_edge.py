@@ -171,6 +171,31 @@ def rise_to_outline(near: np.ndarray, far: np.ndarray) -> np.ndarray:
 
 
 Camera = tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], np.ndarray]  # change mask, projection, centre
+# One camera's readings (`_readings`): foot and top, each (innermost, outermost), and where it sees the wall.
+Readings = tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray], np.ndarray]
+
+
+def camera_readings(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    edge_height: np.ndarray,
+    cameras: tuple[Camera, Camera],
+    table_level: Footprint | None = None,
+) -> tuple[Readings, Readings]:
+    """Both cameras' foot and top readings along the outline (`stereo_offsets` reads them; so may a check)."""
+    left, right = (_readings(ring, outward, edge_height, camera, table_level) for camera in cameras)
+    return left, right
+
+
+def unpaired(readings: tuple[Readings, Readings]) -> np.ndarray:
+    """Per outline point: both cameras see the wall and no foot reading of one agrees with the other's top reading
+    within EDGE_MOVE_AGREE_MM (innermost readings), where `stereo_offsets` takes each camera's reading nearer the
+    outline (`_paired`): the masks alone cannot tell the foot from the top edge there."""
+    (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = readings
+    apart = np.minimum(
+        np.nan_to_num(np.abs(foot_l[0] - top_r[0]), nan=np.inf), np.nan_to_num(np.abs(top_l[0] - foot_r[0]), nan=np.inf)
+    )
+    return wall_l & wall_r & ~(apart <= EDGE_MOVE_AGREE_MM)
 
 
 def _readings(
@@ -222,6 +247,7 @@ def stereo_offsets(
     edge_height: np.ndarray,
     cameras: tuple[Camera, Camera],
     table_level: Footprint | None = None,
+    readings: tuple[Readings, Readings] | None = None,
 ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """Where each camera's silhouette puts the edge, in mm along the outward normal from each outline point:
     ((left, right) innermost, (left, right) outermost of equally good steps: edge_checks.edge_offset_pair; where
@@ -238,10 +264,11 @@ def stereo_offsets(
     the top's height ~1 mm further out) and was taken, so an outline 0.5-1 mm beyond a black pointed toe passed
     the edge-offset check with the other camera's correct -0.9 mm halved by the mean. Where both cameras see the
     wall it did the same: 3065's left top reading lay on a 1.4 mm spike of the outline (a second step of its
-    mask) while its foot, -1.4 mm, agreed with the right camera's -1.1."""
-    (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = (
-        _readings(ring, outward, edge_height, camera, table_level) for camera in cameras
-    )
+    mask) while its foot, -1.4 mm, agreed with the right camera's -1.1.
+    readings: `camera_readings` of the same outline and cameras, where already read."""
+    if readings is None:
+        readings = camera_readings(ring, outward, edge_height, cameras, table_level)
+    (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = readings
 
     def read(k: int) -> tuple[np.ndarray, np.ndarray]:
         both = _paired(foot_l[k], top_l[k], foot_r[k], top_r[k])

@@ -32,16 +32,20 @@ from cellctl.vision.edge_checks import (
 )
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
+    Camera,
     PlacedOutline,
+    camera_readings,
     edge_heights,
     mm_per_pixel,
     projections,
     stereo_offsets,
     table_level,
+    unpaired,
 )
 from cellctl.vision.reconstruction import Reconstruction
 from cellctl.vision.shadow import one_camera_shadows, shadow_cleared
 from cellctl.vision.surface import SoleSurface
+from cellctl.vision.wall_foot import feet_confirmed, read_feet, wall_inside
 
 SHADOW_CLEARED = True  # the edge-offset check reads the masks without detached shadow slivers (vision.shadow)
 
@@ -129,7 +133,12 @@ def _check_outline_images(
         (reconstruction.changed_left, left_pixel, left_centre),
         (changed_right, right_pixel, right_centre),
     )
-    inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level)  # both readings from one sampling
+    images = (
+        None
+        if reconstruction.rectified is None or reconstruction.taught is None
+        else (reconstruction.rectified, (reconstruction.taught.left, reconstruction.taught.right))
+    )
+    inner, outer = _offsets(ring, outward, edge_height, cameras, level, images)  # both readings from one sampling
     inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
     problem = _edge_offsets_problem(inner, outer, ring)
     if problem is None or not SHADOW_CLEARED or reconstruction.rectified is None or reconstruction.taught is None:
@@ -146,11 +155,36 @@ def _check_outline_images(
     )
     inner_cleared, outer_cleared = (
         by_one_camera(readings, one_camera)
-        for readings in stereo_offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level)
+        for readings in _offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level, images)
     )
     return _edge_offsets_problem(
         one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared), ring
     )
+
+
+def _offsets(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    edge_height: np.ndarray,
+    cameras: tuple[Camera, Camera],
+    level: Footprint | None,
+    images: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None,
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Both cameras' edge offsets (`stereo_offsets`: innermost, outermost), with their foot readings where the masks
+    cannot tell foot from top and the `images` (current and taught grey pairs) show a wall's face inside both
+    feet (cellctl.vision.wall_foot)."""
+    readings = camera_readings(ring, outward, edge_height, cameras, level)
+    inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level, readings)
+    if images is None or not np.any(unpaired(readings)):
+        return inner, outer
+    wall = [
+        wall_inside(current, reference, changed, pixel, ring, outward, reading[0][0], reading[1][0])
+        for (changed, pixel, _), current, reference, reading in zip(
+            cameras, images[0], images[1], readings, strict=True
+        )
+    ]
+    confirmed = feet_confirmed(readings, wall[0], wall[1])
+    return read_feet(inner, readings, confirmed, 0), read_feet(outer, readings, confirmed, 1)
 
 
 def by_one_camera(readings: tuple[np.ndarray, np.ndarray], one_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
