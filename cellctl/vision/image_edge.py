@@ -192,10 +192,14 @@ def unpaired(readings: tuple[Readings, Readings]) -> np.ndarray:
     within EDGE_MOVE_AGREE_MM (innermost readings), where `stereo_offsets` takes each camera's reading nearer the
     outline (`_paired`): the masks alone cannot tell the foot from the top edge there."""
     (foot_l, top_l, wall_l), (foot_r, top_r, wall_r) = readings
-    apart = np.minimum(
-        np.nan_to_num(np.abs(foot_l[0] - top_r[0]), nan=np.inf), np.nan_to_num(np.abs(top_l[0] - foot_r[0]), nan=np.inf)
-    )
-    return wall_l & wall_r & ~(apart <= EDGE_MOVE_AGREE_MM)
+    best = np.min(_mixed_apart(foot_l[0], top_l[0], foot_r[0], top_r[0]), axis=0)
+    return wall_l & wall_r & ~(best <= EDGE_MOVE_AGREE_MM)
+
+
+def _mixed_apart(foot_l: np.ndarray, top_l: np.ndarray, foot_r: np.ndarray, top_r: np.ndarray) -> np.ndarray:
+    """Per outline point how far apart one camera's foot and the other's top reading lie (2 x N: left foot with
+    right top, left top with right foot; inf where either is unknown)."""
+    return np.stack([np.nan_to_num(np.abs(a - b), nan=np.inf) for a, b in ((foot_l, top_r), (top_l, foot_r))])
 
 
 def _readings(
@@ -230,7 +234,7 @@ def _paired(
     no foot-and-top pair agrees within EDGE_MOVE_AGREE_MM, each camera's reading nearer the outline, as for one
     camera."""
     pairs = ((foot_l, top_r), (top_l, foot_r))
-    apart = np.stack([np.nan_to_num(np.abs(a - b), nan=np.inf) for a, b in pairs])
+    apart = _mixed_apart(foot_l, top_l, foot_r, top_r)
     off = np.stack([np.nan_to_num(np.abs(a) + np.abs(b), nan=np.inf) for a, b in pairs])
     best = np.min(apart, axis=0)
     choice = np.argmin(np.where(apart <= best + 1e-9, off, np.inf), axis=0)  # readings are 0.25 mm steps: ties
