@@ -24,6 +24,7 @@ one or pass one the masks refuse; a wall shaded between its top and the table st
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import cv2
@@ -88,7 +89,8 @@ def wall_inside(
 def _median_where(values: np.ndarray, where: np.ndarray) -> np.ndarray:
     """Per row the median of `values` where `where` (NaN where none)."""
     chosen = np.where(np.broadcast_to(where, values.shape), values, np.nan)
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # a row off the image: all NaN, its median NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
         return np.nanmedian(chosen, axis=1)
 
 

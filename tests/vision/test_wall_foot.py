@@ -3,6 +3,8 @@ foot (the wall's face inside it) or at the top edge (the top inside it), cellctl
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from cellctl.vision.image_edge import Readings
@@ -50,6 +52,10 @@ def test_a_wall_face_darker_or_brighter_than_top_and_table_confirms_the_foot_rea
     unknown = np.full(len(ring), np.nan)
     assert not wall_inside(*scene(110.0, 20.0, 1.5), to_pixel, ring, outward, unknown, top).any()
     assert not wall_inside(*scene(110.0, 20.0, 1.5), to_pixel, ring, outward, foot, foot - 0.5).any()  # no slant
+    off_image = ring + [60.0, 0.0]  # beyond the image's edge: no evidence, and no warning of an empty median
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert not wall_inside(*scene(110.0, 20.0, 1.5), to_pixel, off_image, outward, foot, top).any()
 
 
 def readings(foot: float, top: float, wall: bool, count: int = 10) -> Readings:
