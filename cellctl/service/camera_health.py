@@ -70,13 +70,9 @@ class CameraHealth:
             log.error("calibration does not match the cameras: %s", self.identity_problem)
         return True
 
-    def grab(self, timings: dict[str, float], not_before: float) -> StereoFrame:
-        """The last of `averaged_frames` pairs exposed after `not_before` (the trigger), with the mean of those that
-        show the same still scene (`averaged`); CycleFailed with the camera's code otherwise."""
-        return self.averaged(self.grab_exposures(timings, not_before), timings)
-
     def grab_exposures(self, timings: dict[str, float], not_before: float) -> list[StereoFrame]:
-        """The `averaged_frames` pairs a cycle grabs after `not_before` (the trigger); CycleFailed otherwise."""
+        """The `averaged_frames` pairs a cycle grabs after `not_before` (the trigger), for `averaged`; CycleFailed
+        with the camera's code otherwise."""
         return self._grabbing(timings, "grab", lambda: self.source.grab_exposures(self.averaged_frames, not_before))
 
     def grab_further(self, count: int, timings: dict[str, float]) -> list[StereoFrame]:
@@ -97,7 +93,7 @@ class CameraHealth:
         """`grab()` under the lock, timed as `step`; a camera error marks the cameras failed and is the cycle's."""
         start = time.perf_counter()
         try:
-            with self.lock:  # frames exposed after the trigger only
+            with self.lock:  # one grab at a time: the station's live view grabs between cycles only
                 frames = grab()
         except CameraError as exc:
             self.ok = False

@@ -111,7 +111,8 @@ class Exposures:
 def test_a_cycle_grabs_and_averages_the_configured_exposures() -> None:
     source = Exposures()
     timings: dict[str, float] = {}
-    grabbed = CameraHealth(source, None, averaged_frames=3).grab(timings, not_before=0.0)
+    cameras = CameraHealth(source, None, averaged_frames=3)
+    grabbed = cameras.averaged(cameras.grab_exposures(timings, not_before=0.0), timings)
     assert source.asked == [3] and grabbed.info["averaged_frames"] == 3 and grabbed.averaged is not None
     assert set(timings) == {"grab", "average"}
 
