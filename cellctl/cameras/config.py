@@ -13,23 +13,22 @@ MAX_AVERAGED_FRAMES = 16
 
 def frames_option(frames: int | None) -> int:
     """A benchmark's `--frames` (None: the cycle's AVERAGED_FRAMES); ValueError outside 1..MAX_AVERAGED_FRAMES."""
-    frames = AVERAGED_FRAMES if frames is None else frames
-    if not 1 <= frames <= MAX_AVERAGED_FRAMES:
-        raise ValueError(
-            f"--frames must be 1..{MAX_AVERAGED_FRAMES} (exposures averaged per measurement), got {frames}"
-        )
-    return frames
+    return _count_option("--frames", frames, AVERAGED_FRAMES, 1, "exposures averaged per measurement")
 
 
 def retry_frames_option(frames: int | None) -> int:
     """A benchmark's `--retry-frames` (None: the cycle's MORE_EXPOSURES; 0: never); ValueError outside
     0..MAX_AVERAGED_FRAMES."""
-    frames = MORE_EXPOSURES if frames is None else frames
-    if not 0 <= frames <= MAX_AVERAGED_FRAMES:
-        raise ValueError(
-            f"--retry-frames must be 0..{MAX_AVERAGED_FRAMES} (exposures averaged in all on a second measurement; "
-            f"0: none), got {frames}"
-        )
+    return _count_option(
+        "--retry-frames", frames, MORE_EXPOSURES, 0, "exposures averaged in all on a second measurement; 0: none"
+    )
+
+
+def _count_option(flag: str, frames: int | None, default: int, low: int, meaning: str) -> int:
+    """An exposure count given as `flag` (None: `default`); ValueError outside low..MAX_AVERAGED_FRAMES."""
+    frames = default if frames is None else frames
+    if not low <= frames <= MAX_AVERAGED_FRAMES:
+        raise ValueError(f"{flag} must be {low}..{MAX_AVERAGED_FRAMES} ({meaning}), got {frames}")
     return frames
 
 
