@@ -141,7 +141,7 @@ def _check_outline_images(
     inner, outer = _offsets(ring, outward, edge_height, cameras, level, images)  # both readings from one sampling
     inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
     problem = _edge_offsets_problem(inner, outer, ring)
-    if problem is None or not SHADOW_CLEARED or reconstruction.rectified is None or reconstruction.taught is None:
+    if problem is None or not SHADOW_CLEARED or images is None:
         return problem
     # Refused: a cast shadow's slivers beside the sole that one camera's mask shows and the other's does not
     # (cellctl.vision.shadow) are read again without them. Only here: an outline the masks as they are pass is
@@ -149,9 +149,7 @@ def _check_outline_images(
     levels = [np.zeros(len(ring)), np.maximum(edge_height, 0.0)]
     cleared = tuple(
         (shadow_cleared(changed, current, reference, ring, outward, levels, pixel), pixel, centre)
-        for (changed, pixel, centre), current, reference in zip(
-            cameras, reconstruction.rectified, (reconstruction.taught.left, reconstruction.taught.right), strict=True
-        )
+        for (changed, pixel, centre), current, reference in zip(cameras, images[0], images[1], strict=True)
     )
     inner_cleared, outer_cleared = (
         by_one_camera(readings, one_camera)
@@ -171,8 +169,8 @@ def _offsets(
     images: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None,
 ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """Both cameras' edge offsets (`stereo_offsets`: innermost, outermost), with their foot readings where the masks
-    cannot tell foot from top and the `images` (current and taught grey pairs) show a wall's face inside both
-    feet (cellctl.vision.wall_foot)."""
+    cannot tell foot from top and the `images` (current and taught grey pairs) show a wall's face about either
+    camera's foot reading (cellctl.vision.wall_foot)."""
     readings = camera_readings(ring, outward, edge_height, cameras, level)
     inner, outer = stereo_offsets(ring, outward, edge_height, cameras, level, readings)
     if images is None or not np.any(unpaired(readings)):
