@@ -58,10 +58,36 @@ LIGHTS_MM = np.array([[-260.0, 0.0, 640.0], [260.0, 0.0, 640.0]])  # the cell's 
 SIDE_LIGHT_MM = np.array([-520.0, 180.0, 260.0])  # the `shadows` look: a low lamp beside the cell
 
 
+RING_LIGHT = (6, 90.0, 540.0)  # the `ring` lighting: lamps, radius (mm) round the rig's axis, height above the table
+OVERHEAD_LIGHT = (150.0, 900.0)  # the `overhead` lamp: offset from the rig's axis and height (mm)
+SIDE_BAR = (600.0, 420.0, 100.0)  # the `side` bar: distance out, height and the spacing of its two lamps (mm)
+
+
 def lights(look: SceneLook) -> tuple[np.ndarray, np.ndarray]:
-    """Light positions (N x 3, table frame) and relative intensities of a look."""
+    """Light positions (N x 3, table frame) and relative intensities of a look (the same total, two, for each
+    layout: the renderer normalises the diffuse light at the table's origin, not the highlights)."""
+    positions, power = _layout(look)
     if look.shadows:
-        return np.vstack([LIGHTS_MM, SIDE_LIGHT_MM]), np.array([0.6, 0.6, 1.6])
+        return np.vstack([positions, SIDE_LIGHT_MM]), np.append(0.6 * power, 1.6)
+    return positions, power
+
+
+def _layout(look: SceneLook) -> tuple[np.ndarray, np.ndarray]:
+    azimuth = np.radians(look.light_azimuth_deg)
+    direction = np.array([np.cos(azimuth), np.sin(azimuth), 0.0])
+    if look.lighting == "ring":
+        count, radius, height = RING_LIGHT
+        angles = 2.0 * np.pi * np.arange(count) / count
+        positions = np.column_stack([radius * np.cos(angles), radius * np.sin(angles), np.full(count, height)])
+        return positions, np.full(count, 2.0 / count)
+    if look.lighting == "overhead":
+        offset, height = OVERHEAD_LIGHT
+        return (offset * direction + [0.0, 0.0, height])[None], np.array([2.0])
+    if look.lighting == "side":
+        distance, height, spacing = SIDE_BAR
+        along = np.array([-direction[1], direction[0], 0.0])
+        centre = distance * direction + [0.0, 0.0, height]
+        return np.vstack([centre - 0.5 * spacing * along, centre + 0.5 * spacing * along]), np.ones(2)
     return LIGHTS_MM, np.ones(len(LIGHTS_MM))
 
 

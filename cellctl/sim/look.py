@@ -13,7 +13,7 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
+"light-table", "other-lights", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
 "large-sole", "narrow-sole", "wide-sole", "waisted-sole", "dished-top", "domed-top" and "sprung-toe" are kept
 out so that the matrix sets keep their soles, and are judged like any entry.
 """
@@ -39,6 +39,7 @@ PLACEMENTS = ("in-view", "off-image")
 SIZES = ("normal", "small", "large")  # cellctl.sim.sole.SIZE_LENGTH_RANGES_MM
 WIDTHS = ("normal", "narrow", "wide")  # cellctl.sim.sole.WIDTH_FRACTIONS
 WAISTS = ("normal", "deep")  # cellctl.sim.sole.WAIST_FRACTIONS
+LIGHTINGS = ("bars", "ring", "overhead", "side")  # cellctl.sim.appearance.lights
 DEFAULT_RIGHT_GAIN = 0.97  # the two cameras never expose identically
 
 
@@ -58,6 +59,11 @@ class SceneLook:
     colours: str = "plain"  # COLOUR_SCHEMES: rim = dark (or light) band round the edge and on the wall
     table: str = "dark"  # TABLE_LOOKS
     shadows: bool = False  # a low side light: the sole casts a long shadow onto the table
+    # The cell's lights (LIGHTINGS): bars = the two LED bars beside the rig, ring = a ring light round the lenses,
+    # overhead = one lamp high above, side = one bar to one side; all but bars cast their own shadows.
+    lighting: str = "bars"
+    light_azimuth_deg: float = 0.0  # where the overhead lamp's offset or the side bar points, about the table's z
+    ambient_scale: float = 1.0  # the room's diffuse light against the simulator's usual (render.AMBIENT)
     right_gain: float = DEFAULT_RIGHT_GAIN
     right_gamma: float = 1.0  # output = input ** gamma on the right camera only (1: linear)
     gloss: bool = False  # strong view-dependent highlights: they sit at different places in the two views
@@ -98,6 +104,7 @@ class SceneLook:
             ("size", SIZES),
             ("width", WIDTHS),
             ("waist", WAISTS),
+            ("lighting", LIGHTINGS),
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"scene look {name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}")
@@ -117,6 +124,8 @@ class SceneLook:
             raise ValueError("the cameras' defocus must be >= 0 px")
         if self.exposure_scale <= 0.0:
             raise ValueError("the cameras' exposure scale must be positive")
+        if not 0.0 < self.ambient_scale < 1.0 / 0.35:
+            raise ValueError("the ambient light's scale must be positive and leave the lights a share")
         if not 0.0 <= self.rig_tilt_deg < 30.0:
             raise ValueError("the rig's tilt must be in [0, 30) degrees")
 
@@ -225,6 +234,22 @@ VARIATIONS: dict[str, Variation] = {
             _set(table="patterned"),
         ),
         Variation("shadows", "low side light: long cast shadows", ("shadows",), _set(shadows=True)),
+        # Outside the matrix so that its sets keep their soles: lights the simulated cell never had, as another cell
+        # or simulator may (a ring light round the lenses leaves the walls dark and the top bright; one lamp or one
+        # bar to a side lights one side's walls and shades the other's, with its own cast shadows), and a room
+        # lighter or darker than the usual. Measurable like any sole.
+        Variation(
+            "other-lights",
+            "other lights: a ring light, one overhead lamp or one side bar, and 0.5-1.5 x the ambient light",
+            ("lighting", "light_azimuth_deg", "ambient_scale"),
+            lambda look, rng: replace(
+                look,
+                lighting=str(rng.choice(LIGHTINGS[1:])),
+                light_azimuth_deg=float(rng.uniform(0.0, 360.0)),
+                ambient_scale=float(rng.uniform(0.5, 1.5)),
+            ),
+            in_matrix=False,
+        ),
         Variation("gain-low", "right camera 15-20 % darker", ("right_gain",), _draw("right_gain", 0.80, 0.85)),
         Variation("gain-high", "right camera 15-20 % brighter", ("right_gain",), _draw("right_gain", 1.15, 1.20)),
         Variation(

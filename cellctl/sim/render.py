@@ -189,9 +189,14 @@ class SceneRenderer:
         if np.any(sole):
             albedo[sole] = self._shade_sole(hits, sole, normals, texture)
             specular[sole], shininess[sole] = self.material.specular, self.material.shininess
-        lit = self.rays.unshadowed(points, normals, hits["geometry"] >= 0, self.lights) if self.look.shadows else None
-        diffuse, highlight = _lighting(points, normals, pose[:3, 3], shininess, self.lights, self.light_power, lit)
-        radiance = albedo * (texture * (AMBIENT + diffuse))[:, None] + (specular * highlight)[:, None]
+        # The bars' shadows fall under the sole, out of both views: traced only for the other lights.
+        shadowed = self.look.shadows or self.look.lighting != "bars"
+        lit = self.rays.unshadowed(points, normals, hits["geometry"] >= 0, self.lights) if shadowed else None
+        ambient = AMBIENT * self.look.ambient_scale
+        diffuse, highlight = _lighting(
+            points, normals, pose[:3, 3], shininess, self.lights, self.light_power, lit, ambient
+        )
+        radiance = albedo * (texture * (ambient + diffuse))[:, None] + (specular * highlight)[:, None]
         radiance[hits["geometry"] < 0] = 0.0
         return radiance * EXPOSURE_DN
 
@@ -244,8 +249,9 @@ def _lighting(
     light_positions: np.ndarray,
     power: np.ndarray,
     lit: np.ndarray | None = None,
+    ambient: float = AMBIENT,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Diffuse and Blinn-Phong specular terms of the lights, normalised to 1 - AMBIENT at the table origin.
+    """Diffuse and Blinn-Phong specular terms of the lights, normalised to 1 - `ambient` at the table origin.
 
     `lit` (lights x points, bool) switches a light off where its light is blocked: a cast shadow.
     """
@@ -268,7 +274,7 @@ def _lighting(
         half = _unit(to_light + view)
         highlight += np.clip(np.einsum("ij,ij->i", normals, half), 0.0, None) ** shininess * falloff
         reference += power[k] * light[2] / np.linalg.norm(light)
-    return diffuse * np.float32((1.0 - AMBIENT) / reference), highlight
+    return diffuse * np.float32((1.0 - ambient) / reference), highlight
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:

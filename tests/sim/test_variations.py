@@ -519,6 +519,40 @@ def test_light_table_is_a_white_plate_outside_the_matrix() -> None:
     assert np.median(left) > 150  # the plate fills most of the view
 
 
+def test_other_lights_keep_the_tables_exposure_and_shade_the_walls_otherwise() -> None:
+    """other-lights draws a layout the cell never had, out of the matrix and judged like any entry. The renderer
+    normalises each layout to the same light at the table's origin, so exposure holds; a side bar lights the
+    walls facing it and shades those turned away, which the bars (one each side) never do."""
+    from cellctl.sim.appearance import lights
+
+    drawn = {look_for(("other-lights",), seed).lighting for seed in range(12)}
+    assert drawn == {"ring", "overhead", "side"} and "other-lights" not in MATRIX_ENTRIES
+    assert not fair_refusals(("other-lights",))
+    for lighting in ("ring", "overhead", "side"):
+        assert lights(SceneLook(lighting=lighting))[1].sum() == pytest.approx(2.0)
+    assert lights(SceneLook(lighting="side", shadows=True))[0].shape == (3, 3)  # the shadows' lamp as well
+    from cellctl.sim.render import AMBIENT, _lighting
+
+    def diffuse(look: SceneLook, normals: np.ndarray) -> np.ndarray:
+        positions, power = lights(look)
+        points, eye = np.zeros((len(normals), 3)), np.array([0.0, 0.0, 550.0])
+        return _lighting(points, normals, eye, np.ones(len(normals)), positions, power)[0]
+
+    up, facing, away = np.eye(3)[2], np.eye(3)[0], -np.eye(3)[0]  # the table; walls facing +x and -x
+    for look in (SceneLook(), SceneLook(lighting="ring"), SceneLook(lighting="side", light_azimuth_deg=0.0)):
+        assert diffuse(look, up[None])[0] == pytest.approx(1.0 - AMBIENT, rel=1e-5)  # the same exposure
+    bars = diffuse(SceneLook(), np.array([facing, away]))
+    assert bars[0] == pytest.approx(bars[1], rel=1e-5)  # the bars light both sides alike
+    side = diffuse(SceneLook(lighting="side", light_azimuth_deg=0.0), np.array([facing, away]))
+    assert side[0] > 0.3 and side[1] == 0.0  # the side bar lights one side's walls only
+    ring = diffuse(SceneLook(lighting="ring"), np.array([facing]))
+    assert ring[0] < 0.5 * bars[0]  # a ring round the lenses grazes the walls
+    with pytest.raises(ValueError, match="lighting"):
+        SceneLook(lighting="sun")
+    with pytest.raises(ValueError, match="ambient"):
+        SceneLook(ambient_scale=0.0)
+
+
 def test_patterned_table_has_strong_contrast() -> None:
     rng = np.random.default_rng(0)
     from cellctl.sim.appearance import table_texture
