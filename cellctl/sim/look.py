@@ -39,7 +39,7 @@ PLACEMENTS = ("in-view", "off-image")
 SIZES = ("normal", "small", "large")  # cellctl.sim.sole.SIZE_LENGTH_RANGES_MM
 WIDTHS = ("normal", "narrow", "wide")  # cellctl.sim.sole.WIDTH_FRACTIONS
 WAISTS = ("normal", "deep")  # cellctl.sim.sole.WAIST_FRACTIONS
-LIGHTINGS = ("bars", "ring", "overhead", "side")  # cellctl.sim.appearance.lights
+LIGHTINGS = ("bars", "shadowed-bars", "ring", "overhead", "side")  # cellctl.sim.appearance.lights
 DEFAULT_RIGHT_GAIN = 0.97  # the two cameras never expose identically
 
 
@@ -59,8 +59,11 @@ class SceneLook:
     colours: str = "plain"  # COLOUR_SCHEMES: rim = dark (or light) band round the edge and on the wall
     table: str = "dark"  # TABLE_LOOKS
     shadows: bool = False  # a low side light: the sole casts a long shadow onto the table
-    # The cell's lights (LIGHTINGS): bars = the two LED bars beside the rig, ring = a ring light round the lenses,
-    # overhead = one lamp high above, side = one bar to one side; all but bars cast their own shadows.
+    # The cell's lights (LIGHTINGS): bars = the two LED bars beside the rig, their shadows not traced (the matrix's
+    # light since the first render: the table beside each wall lit as if the sole were not there); shadowed-bars =
+    # the same bars casting their shadows (each darkens the table beside the walls facing away from it); ring = a
+    # ring light round the lenses; overhead = one lamp high above; side = one bar to one side. All but bars cast
+    # their shadows.
     lighting: str = "bars"
     light_azimuth_deg: float = 0.0  # where the overhead lamp's offset or the side bar points, about the table's z
     ambient_scale: float = 1.0  # the room's diffuse light against the simulator's usual (render.AMBIENT)
@@ -235,12 +238,13 @@ VARIATIONS: dict[str, Variation] = {
         ),
         Variation("shadows", "low side light: long cast shadows", ("shadows",), _set(shadows=True)),
         # Outside the matrix so that its sets keep their soles: lights the simulated cell never had, as another cell
-        # or simulator may (a ring light round the lenses leaves the walls dark and the top bright; one lamp or one
-        # bar to a side lights one side's walls and shades the other's, with its own cast shadows), and a room
-        # lighter or darker than the usual. Measurable like any sole.
+        # or simulator may (the bars' own shadows, which the matrix does not trace; a ring light round the lenses
+        # leaves the walls dark and the top bright; one lamp or one bar to a side lights one side's walls and shades
+        # the other's), each casting its shadows, and a room lighter or darker than the usual. Measurable like any
+        # sole: a contact shadow beside the wall is what every physically lit scene has.
         Variation(
             "other-lights",
-            "other lights: a ring light, one overhead lamp or one side bar, and 0.5-1.5 x the ambient light",
+            "other lights: the bars' own shadows, a ring light, one overhead lamp or one side bar; 0.5-1.5 x ambient",
             ("lighting", "light_azimuth_deg", "ambient_scale"),
             lambda look, rng: replace(
                 look,

@@ -189,7 +189,7 @@ class SceneRenderer:
         if np.any(sole):
             albedo[sole] = self._shade_sole(hits, sole, normals, texture)
             specular[sole], shininess[sole] = self.material.specular, self.material.shininess
-        # The bars' shadows fall under the sole, out of both views: traced only for the other lights.
+        # The matrix's bars cast no shadow (as every render before the other lights); every other layout does.
         shadowed = self.look.shadows or self.look.lighting != "bars"
         lit = self.rays.unshadowed(points, normals, hits["geometry"] >= 0, self.lights) if shadowed else None
         ambient = AMBIENT * self.look.ambient_scale

@@ -525,10 +525,10 @@ def test_other_lights_keep_the_tables_exposure_and_shade_the_walls_otherwise() -
     walls facing it and shades those turned away, which the bars (one each side) never do."""
     from cellctl.sim.appearance import lights
 
-    drawn = {look_for(("other-lights",), seed).lighting for seed in range(12)}
-    assert drawn == {"ring", "overhead", "side"} and "other-lights" not in MATRIX_ENTRIES
+    drawn = {look_for(("other-lights",), seed).lighting for seed in range(20)}
+    assert drawn == {"shadowed-bars", "ring", "overhead", "side"} and "other-lights" not in MATRIX_ENTRIES
     assert not fair_refusals(("other-lights",))
-    for lighting in ("ring", "overhead", "side"):
+    for lighting in ("shadowed-bars", "ring", "overhead", "side"):
         assert lights(SceneLook(lighting=lighting))[1].sum() == pytest.approx(2.0)
     assert lights(SceneLook(lighting="side", shadows=True))[0].shape == (3, 3)  # the shadows' lamp as well
     from cellctl.sim.render import AMBIENT, _lighting
