@@ -5,7 +5,9 @@ A lamp low beside the cell darkens a band of the table along the sole's edge (it
 where two lamps' shadows overlap). There the table's texture is too faint for the change test's vote
 (cellctl.vision.change: the band stays changed), and the matcher, with nothing to match in it, carries the sole's
 disparity out over it: the depth outline bulged 2-6 mm beyond the edge on 20 of the 25 shadowed soles of the
-fresh sets (docs/sole-benchmark.md, thirty-eighth round), and the outline's checks refused them.
+fresh sets (docs/sole-benchmark.md, thirty-eighth round), and the outline's checks refused them. Every lamp above
+the cell casts such a band beside the walls facing away from it, narrower and often sharp-edged: the cell's own
+light bars, a ring light round the lenses, one overhead lamp (forty-second round).
 
 What the images still show is where the band lies: on the table, the same in both views once the right image is
 shifted by the table's disparity, which the sole's edge and textured top are not (they stand higher, at a
@@ -17,17 +19,20 @@ larger disparity). A changed pixel is taken for shadowed table (`shadow_band`) w
 - darker than the sole beside it by MIN_SOLE_OVER_BAND (the lit sole casts the shadow; a dark part of a sole lies
   beside more of itself);
 - within BAND_MAX_MM of the unchanged table round the sole (`_outer`), in a connected stretch of such pixels that
-  meets the table the way a penumbra does (`_faded_stretches`: softly, directly, and wider than a blended edge
-  pixel), and which depth did not measure above the table (`_raised`: a rounded edge's curve, a leaning wall).
+  meets the table the way a shadow does (`_faded_stretches`: directly, and wider than a blended edge pixel; and
+  softly, as a penumbra does, or, a small lamp's sharp shadow, with the taught table's texture showing through
+  it), and which depth did not measure above the table (`_raised`: a rounded edge's curve, a leaning wall).
 
-The same for the right image against the left. Those pixels are no longer changed, and the depth points on
-them above the table are the sole's disparity carried over the band (cellctl.vision.segmentation drops them
-from the footprint and the depth step alike).
+Beside the sole's edge the sole hides a strip of the band from the other camera (up to the difference of the
+sole's and the table's disparities wide), where no stereo test can speak: a band found is grown over it, through
+changed pixels shadowed as the band is (`_hidden_strip`). The same for the right image against the left. Those
+pixels are no longer changed, and the depth points on them above the table are the sole's disparity carried over
+the band (cellctl.vision.segmentation drops them from the footprint and the depth step alike).
 
-Not found: where the sole hides the band from the other camera (beside its edge, up to the difference of the two
-disparities wide), a shadow with a sharp edge (a small lamp near the table), and a band beside a sole as dark
-as it (a black sole on a grey table): there the band stays changed, the outline bulges and the checks refuse it as
-before. Not told apart: a dark rim of a light sole beside a band, within BAND_MAX_MM of the table.
+Not found: a band beside a sole as dark as it (a black sole on a grey table): there the band stays changed, the
+outline bulges and the checks refuse it as before. Not told apart: a dark part of the sole (a rim, a black wall
+leaning into view) that joins a band's stretch; a stretch of them both is taken whole or not at all, and the
+outline's checks are what refuses the sole then (docs/sole-benchmark.md, forty-second round).
 """
 
 from __future__ import annotations
@@ -57,6 +62,14 @@ SOFT_EDGE_SHARE = 0.25
 # white matrix sole 39000 (as dark as a shadow's band, beside a brighter sole) 54 % and 52 %.
 MIN_SOFT_SHARE = 0.8
 MAX_RING_SHARE = 0.25
+# A shadow's band with a sharp outer edge (one small lamp, or each of a ring's) meets the table in a step, not softly;
+# it is still told from a dark part of the sole standing higher by that step's disparity (few ring pixels: the
+# sharp bands beside other-lights soles 0-11 %, the black rim round 39000 53-60 %) and, since a leaning black wall
+# seen from above meets the table at its foot just the same (46026: 0-4 %), by the taught table's texture showing
+# through it (correlation 0.33-0.38 in the deepest of those bands, 0.10-0.22 on that wall).
+MAX_SHARP_RING_SHARE = 0.15
+MIN_SHARP_TABLE_CORRELATION = 0.3
+HIDDEN_FACTOR_SHARE = 0.25
 RING_PX = 2.5  # the changed pixels on the table's side of a stretch: within a pixel or two of the table
 # The bands beside three shadowed matrix soles (39039, 39059, 39062): 1.5-2.6 px wide in the mean (area over its
 # pixels beside the table); the blend of a rounded black edge with the dark table (40026) 1.0-1.25 px. (The band's
@@ -113,10 +126,12 @@ def _faded_stretches(
     ring: np.ndarray,
     pixel_mm: float,
 ) -> np.ndarray:
-    """The connected stretches of candidates that meet the table round the sole the way a penumbra does: directly
+    """The connected stretches of candidates that meet the table round the sole the way a shadow does: directly
     (few of their pixels beside changed pixels on the table's side that do not agree at the table's disparity,
-    `ring`: the sharp outer edge of something standing higher, seen at the wrong disparity) and softly (most of
-    their pixels beside the table within SOFT_EDGE_SHARE of it). One soft pixel would not do: a dark rim's edge
+    `ring`: the sharp outer edge of something standing higher, seen at the wrong disparity), and softly (most of
+    their pixels beside the table within SOFT_EDGE_SHARE of it: a penumbra) or, stepping onto the table as a small
+    lamp's shadow does, with fewer still beside such an edge (MAX_SHARP_RING_SHARE) and the taught table's texture
+    showing through (`_table_correlation`). One soft pixel would not do: a dark rim's edge
     is soft where its contrast with the table happens to be low. And the stretch is a band, MIN_BAND_WIDTH_MM wide
     in the mean: the last pixel of a sole's edge that blends it with the table (a rounded edge's shaded curve beside
     a dark table) is not."""
@@ -127,12 +142,29 @@ def _faded_stretches(
     soft = on_table & _soft_edge(image, outside, predicted)
     count = int(labels.max()) + 1
     table_count, ring_count, soft_count = (np.bincount(labels[m], minlength=count) for m in (on_table, on_ring, soft))
-    faded = (table_count >= MIN_EDGE_PX) & (soft_count >= MIN_SOFT_SHARE * table_count)
-    faded &= ring_count <= MAX_RING_SHARE * (ring_count + table_count)
+    soft_band = (soft_count >= MIN_SOFT_SHARE * table_count) & (
+        ring_count <= MAX_RING_SHARE * (ring_count + table_count)
+    )
+    sharp_band = ring_count <= MAX_SHARP_RING_SHARE * (ring_count + table_count)
+    sharp_band &= _table_correlation(labels, count, image, predicted) >= MIN_SHARP_TABLE_CORRELATION
+    faded = (table_count >= MIN_EDGE_PX) & (soft_band | sharp_band)
     area = np.bincount(labels.ravel(), minlength=count)
     faded &= area * pixel_mm >= MIN_BAND_WIDTH_MM * np.maximum(table_count, 1)
     faded[0] = False
     return faded[labels]
+
+
+def _table_correlation(labels: np.ndarray, count: int, image: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Per labelled stretch: the correlation of its brightness with the taught table's as lit now. A shadow scales
+    the table's own texture; a wall or a dark part of the sole has a texture of its own."""
+    flat = labels.ravel()
+    n = np.maximum(np.bincount(flat, minlength=count), 1).astype(np.float64)
+    a, b = image.ravel().astype(np.float64), predicted.ravel().astype(np.float64)
+    mean_a, mean_b = np.bincount(flat, a, count) / n, np.bincount(flat, b, count) / n
+    da, db = a - mean_a[flat], b - mean_b[flat]
+    covariance = np.bincount(flat, da * db, count)
+    spread = np.sqrt(np.bincount(flat, da * da, count) * np.bincount(flat, db * db, count))
+    return covariance / np.maximum(spread, 1e-9)
 
 
 def _raised(band: np.ndarray, heights: np.ndarray) -> np.ndarray:
@@ -170,6 +202,7 @@ def shadow_band(
     other_sigma: float,
     pixel_mm: float,
     heights: Callable[[tuple[slice, slice]], np.ndarray],
+    hidden_px: float = 0.0,
 ) -> np.ndarray:
     """Bool image: the changed pixels of `current` that are a cast shadow's band on the table (module docstring).
 
@@ -214,4 +247,27 @@ def shadow_band(
     )
     if np.any(band[box]):
         band[box] &= ~_raised(band[box], heights(box))
+    if np.any(band[box]) and hidden_px > 0.0:
+        band[box] = _hidden_strip(band[box], window_changed & dark, here / np.maximum(predicted, 1e-3), hidden_px)
     return band
+
+
+def _hidden_strip(band: np.ndarray, allowed: np.ndarray, factor: np.ndarray, hidden_px: float) -> np.ndarray:
+    """The band grown over the dark changed pixels next to it, by at most `hidden_px`: the strip beside the sole's
+    edge that the sole hides from the other camera (no stereo test can confirm it there), shadowed as the band is
+    (its factor against the taught table within HIDDEN_FACTOR_SHARE of the band's nearby)."""
+    square = np.ones((3, 3), np.uint8)
+    reach = 2 * int(np.ceil(hidden_px)) + 1
+    window = np.ones((reach, reach), np.uint8)
+    band_factor = np.where(band, factor, 0.0).astype(np.float32)
+    highest = cv2.dilate(band_factor, window)
+    lowest = -cv2.dilate(np.where(band, -factor, -np.inf).astype(np.float32), window)
+    allowed = allowed & (factor <= highest * (1.0 + HIDDEN_FACTOR_SHARE))
+    allowed &= factor >= lowest * (1.0 - HIDDEN_FACTOR_SHARE)
+    grown = band.copy()
+    for _ in range(int(np.ceil(hidden_px))):
+        wider = (cv2.dilate(grown.view(np.uint8), square) > 0) & allowed
+        if not np.any(wider & ~grown):
+            break
+        grown |= wider
+    return grown

@@ -169,6 +169,13 @@ def _shadow_bands(
     left, right = cloud.rectified
     table = TableDisparity.of(taught.plane, cloud.calibration)
     pixel_mm = taught.plane.pixel_mm(cloud.calibration)
+    # How much wider than the table's the sole's disparity runs: the strip beside its edge one camera sees and the
+    # other does not (shadow_band grows a band found over it).
+    above = np.flatnonzero(points[:, 2] > WALL_FOOT_MM)
+    hidden_px = 0.0
+    if above.size:
+        x, y = cloud.pixels[above, 0], cloud.pixels[above, 1]
+        hidden_px = float(np.percentile(cloud.disparity[above] - (table.a * x + table.b * y + table.c), 99))
     # The right image's on the second core (numpy and OpenCV release the GIL): ~9 ms each.
     right_band = worker("shadow-band").submit(
         shadow_band,
@@ -182,6 +189,7 @@ def _shadow_bands(
         tests[0].sigma,
         pixel_mm,
         _heights(cloud, points, True),
+        hidden_px,
     )
     try:
         band_left = shadow_band(
@@ -195,6 +203,7 @@ def _shadow_bands(
             tests[1].sigma,
             pixel_mm,
             _heights(cloud, points, False),
+            hidden_px,
         )
     finally:
         band_right = right_band.result()

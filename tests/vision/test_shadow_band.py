@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from cellctl.vision.change import ChangeTest
-from cellctl.vision.shadow_band import TableDisparity, shadow_band
+from cellctl.vision.shadow_band import TableDisparity, _hidden_strip, shadow_band
 
 MM_PER_PX = 0.39
 HEIGHT, WIDTH = 200, 260
@@ -40,10 +40,13 @@ def _scene(
     shadow: bool,
     blur: float = 0.0,
     straight: float = 0.0,
+    sharp: float = 0.0,
+    mat: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(left, right, taught left, changed): `sole` = (brightness, texture spread); `rim` = (width px, brightness)
     of a dark band round its top edge; `shadow`: a penumbra on the table to the sole's right, 1.5-4 mm wide;
-    `blur`: a lens out of focus (Gaussian sigma, px); `straight`: a stadium's half side along the rows."""
+    `blur`: a lens out of focus (Gaussian sigma, px); `straight`: a stadium's half side along the rows; `sharp`: a
+    small lamp's shadow on the table, that wide (px) at 0.4 of the light, its edge a step, to the sole's left (where the sole hides the table beside it from the right camera); `mat` = (width px, brightness): something dark lying on the table round the sole, its own faint texture."""
     table = table_level + _texture(1, 3.0)  # table coordinates: left x + 100 (room for the right view's shift)
     sole_texture = _texture(2, sole[1])
     rng = np.random.default_rng(3)
@@ -57,7 +60,14 @@ def _scene(
             right_side = table_x > CENTRE[0]
             factor = np.clip(0.45 + 0.55 * (beyond - 2.0) / 8.0, 0.45, 1.0)
             lit = np.where(right_side & (beyond > -1.0), factor, 1.0)
+        if sharp:
+            beyond = _distance_from_sole(table_x, y)
+            lit = np.where((table_x < CENTRE[0]) & (beyond > -1.0) & (beyond < sharp), 0.4, lit)
         image = cv2.remap(table, table_x + 100.0, y, cv2.INTER_LINEAR) * lit
+        if mat is not None:
+            beyond = _distance_from_sole(table_x, y)
+            own = mat[1] + cv2.remap(_texture(5, 0.3), table_x + 100.0, y, cv2.INTER_LINEAR)
+            image = np.where((table_x > CENTRE[0]) & (beyond > -1.0) & (beyond < mat[0]), own, image)
         sole_x = x + disparity_sole  # the sole's point this pixel would see, in left coordinates
         inside = _distance_from_sole(sole_x, y, straight)
         top = sole[0] + cv2.remap(sole_texture, sole_x + 100.0, y, cv2.INTER_LINEAR)
@@ -80,11 +90,18 @@ def _scene(
 
 
 def _band(
-    left: np.ndarray, right: np.ndarray, reference: np.ndarray, changed: np.ndarray, heights: np.ndarray | None = None
+    left: np.ndarray,
+    right: np.ndarray,
+    reference: np.ndarray,
+    changed: np.ndarray,
+    heights: np.ndarray | None = None,
+    hidden_px: float = 0.0,
 ) -> np.ndarray:
     table = TableDisparity(0.0, 0.0, TABLE_DISPARITY)
     measured = np.full(left.shape, np.nan, np.float32) if heights is None else heights  # None: no depth beside the sole
-    return shadow_band(changed, left, right, table, False, TEST, reference, NOISE, MM_PER_PX, lambda box: measured[box])
+    return shadow_band(
+        changed, left, right, table, False, TEST, reference, NOISE, MM_PER_PX, lambda box: measured[box], hidden_px
+    )
 
 
 def _sole_mask() -> np.ndarray:
@@ -113,6 +130,55 @@ def _heights_beside_the_sole(changed: np.ndarray, low: float, high: float) -> np
     beside = changed & ~_sole_mask() & (rng.random(changed.shape) < 0.6)
     heights[beside] = rng.uniform(low, high, size=int(np.count_nonzero(beside)))
     return heights
+
+
+def test_a_sharp_shadow_beside_a_white_sole_is_the_table_up_to_the_sole() -> None:
+    """A small lamp's shadow steps onto the table: no penumbra, but the table's texture shows through it at one
+    factor and its step lies at the table's disparity. Beside the sole, where the sole hides the band from the right
+    camera, the band grows over the strip as wide as the two disparities differ, shadowed alike."""
+    left, right, reference, changed = _scene(40.0, (200.0, 15.0), None, shadow=False, sharp=12.0)
+    sole = _sole_mask()
+    shadowed = changed & ~sole
+    assert np.count_nonzero(shadowed) > 300
+    seen = _band(left, right, reference, changed)
+    whole = _band(left, right, reference, changed, hidden_px=SOLE_DISPARITY - TABLE_DISPARITY)
+    assert np.count_nonzero(seen & sole) == 0 and np.count_nonzero(whole & sole) == 0
+    y, x = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
+    hidden = _distance_from_sole(x + SOLE_DISPARITY - TABLE_DISPARITY, y) <= 0.0  # the right camera sees the sole
+    assert np.count_nonzero(seen & shadowed & hidden) < 0.5 * np.count_nonzero(shadowed & hidden)
+    assert np.count_nonzero(whole & shadowed) >= 0.9 * np.count_nonzero(shadowed)
+
+
+def test_something_dark_on_the_table_beside_the_sole_is_no_shadow() -> None:
+    """As dark as a shadow, its step onto the table at the table's disparity (a leaning wall's foot, a dark mat): its
+    own texture, not the table's, tells it apart."""
+    left, right, reference, changed = _scene(40.0, (200.0, 15.0), None, shadow=False, mat=(12.0, 16.0))
+    assert np.count_nonzero(changed & ~_sole_mask()) > 300
+    assert np.count_nonzero(_band(left, right, reference, changed, hidden_px=7.0)) == 0
+
+
+def test_a_dark_rim_next_to_a_shadow_is_not_taken_with_it() -> None:
+    """A uniform dark rim round the sole's edge (0.65 of the table's brightness) beside a small lamp's shadow (0.4):
+    uniform, it agrees at the table's disparity as the band does and joins its stretch, whose brightness then no
+    longer follows the table's texture: neither is taken for the table."""
+    left, right, reference, changed = _scene(40.0, (200.0, 15.0), (6.0, 26.0), shadow=False, sharp=12.0)
+    band = _band(left, right, reference, changed, hidden_px=SOLE_DISPARITY - TABLE_DISPARITY)
+    y, x = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
+    rim = (_distance_from_sole(x, y) <= 0.0) & (_distance_from_sole(x, y) > -6.0)
+    assert np.count_nonzero(changed & rim) > 500 and np.count_nonzero(band & rim) == 0
+
+
+def test_the_hidden_strip_grows_only_over_the_bands_own_light() -> None:
+    """The strip the sole hides from the other camera is taken where it is shadowed as the band beside it is (within
+    HIDDEN_FACTOR_SHARE of its factor), at most `hidden_px` wide: a darker or brighter part of the sole is not."""
+    band = np.zeros((20, 40), bool)
+    band[:, :10] = True
+    factor = np.full(band.shape, 0.4, np.float32)
+    factor[:, 16:] = 0.7  # beyond 6 px of the band's light: a dark part of the sole, lit
+    allowed = np.ones(band.shape, bool)
+    grown = _hidden_strip(band, allowed, factor, 8.0)
+    assert grown[:, :16].all() and not grown[:, 16:].any()
+    assert not _hidden_strip(band, allowed, np.full(band.shape, 0.4, np.float32), 3.0)[:, 13:].any()
 
 
 def test_depth_at_the_tables_level_on_a_band_leaves_it_the_table() -> None:
