@@ -148,6 +148,19 @@ class Texture:
         blurred = cv2.GaussianBlur(pattern, (0, 0), PIXEL_FOOTPRINT_SIGMA_MM / self.texel_mm)
         return Texture(self.image * blurred / float(blurred.mean()), self.origin, self.texel_mm)
 
+    def with_knurl(self, period_mm: float, angle_deg: float, contrast: float) -> Texture:
+        """This texture times a grid of bumps: 1 + contrast * sin(2 pi a / period) * sin(2 pi b / period), with
+        (a, b) the surface's axes turned by `angle_deg`, pre-filtered as the octaves are."""
+        height, width = self.image.shape
+        ys, xs = np.mgrid[0:height, 0:width].astype(np.float32) * np.float32(self.texel_mm)
+        angle = np.radians(angle_deg)
+        a = xs * np.float32(np.cos(angle)) + ys * np.float32(np.sin(angle))
+        b = ys * np.float32(np.cos(angle)) - xs * np.float32(np.sin(angle))
+        wave = np.float32(2.0 * np.pi / period_mm)
+        pattern = 1.0 + np.float32(contrast) * np.sin(wave * a) * np.sin(wave * b)
+        blurred = cv2.GaussianBlur(pattern, (0, 0), PIXEL_FOOTPRINT_SIGMA_MM / self.texel_mm)
+        return Texture(self.image * blurred, self.origin, self.texel_mm)
+
     def sample(self, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
         if len(x_mm) == 0:
             return np.zeros(0)

@@ -13,7 +13,7 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "other-lights", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
+"light-table", "other-lights", "knurled-top", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
 "large-sole", "narrow-sole", "wide-sole", "waisted-sole", "dished-top", "domed-top" and "sprung-toe" are kept
 out so that the matrix sets keep their soles, and are judged like any entry.
 """
@@ -80,6 +80,11 @@ class SceneLook:
     rig: str = "default"  # RIGS: distorted = a wide-angle rig with strong distortion and misalignment
     camouflage: bool = False  # the sole has the table's colour and texture statistics: no colour edge at all
     texture_contrast: float = 1.0  # the sole's texture contrast relative to its material's (1: as SOLE_MATERIALS)
+    # A regular pattern moulded into the top (a knurl: a grid of bumps), on top of the material's texture: its
+    # period (0: none), its grid's angle to the sole's axis and its contrast (relative brightness amplitude).
+    knurl_period_mm: float = 0.0
+    knurl_angle_deg: float = 0.0
+    knurl_contrast: float = 0.0
     rig_tilt_deg: float = 0.0  # the rig mounted this far off square to the table (0: the usual, render.RIG_TILT_DEG)
     heading: str = "along"  # HEADINGS: along = heel-toe axis within 35 degrees of the image rows, any = any heading
     placement: str = "in-view"  # PLACEMENTS: off-image = one end runs up to OFF_IMAGE_PX beyond an image's edge
@@ -119,6 +124,8 @@ class SceneLook:
             raise ValueError("a lip must rise >= 0 mm, over a positive width")
         if self.right_gain <= 0.0 or self.right_gamma <= 0.0:
             raise ValueError("right camera gain and gamma must be positive")
+        if self.knurl_period_mm < 0.0 or not 0.0 <= self.knurl_contrast < 1.0:
+            raise ValueError("a knurl's period must be >= 0 mm and its contrast in [0, 1)")
         if self.texture_contrast <= 0.0:
             raise ValueError("the sole's texture contrast must be positive")
         if self.noise_scale <= 0.0:
@@ -320,6 +327,22 @@ VARIATIONS: dict[str, Variation] = {
             "sole texture contrast 50-65 % of its material's (a smoother moulding, finer grain)",
             ("texture_contrast",),
             _draw("texture_contrast", 0.50, 0.65),
+            _SURFACE_LOST,
+            in_matrix=False,
+        ),
+        # Outside the matrix for the same reason: a regular pattern on the top, as a moulded or embossed sole may
+        # have, where the matcher's cost repeats every period along the rows (a 1.5 mm period is 4 px, inside the
+        # disparity range): a match a period off is a height 10-15 mm off. Refusing the surface is fair.
+        Variation(
+            "knurled-top",
+            "a knurled top: a grid of bumps every 1.5-4 mm at any angle, 6-15 % brightness contrast",
+            ("knurl_period_mm", "knurl_angle_deg", "knurl_contrast"),
+            lambda look, rng: replace(
+                look,
+                knurl_period_mm=float(rng.uniform(1.5, 4.0)),
+                knurl_angle_deg=float(rng.uniform(0.0, 90.0)),
+                knurl_contrast=float(rng.uniform(0.06, 0.15)),
+            ),
             _SURFACE_LOST,
             in_matrix=False,
         ),

@@ -120,6 +120,11 @@ class SceneRenderer:
         rng = np.random.default_rng([seed, 7])
         self._table_texture = table_texture(rng, self.look)
         self._sole_texture = Texture.fractal(rng, (-5.0, -80.0), (320.0, 160.0), 0.2, self.material.octaves)
+        if self.look.knurl_period_mm > 0.0:
+            look = self.look
+            self._sole_texture = self._sole_texture.with_knurl(
+                look.knurl_period_mm, look.knurl_angle_deg, look.knurl_contrast
+            )
         self._colours = (
             None if sole is None else ColourScheme.draw(np.random.default_rng([seed, 13]), color, self.look, sole.shape)
         )

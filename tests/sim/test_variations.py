@@ -553,6 +553,27 @@ def test_other_lights_keep_the_tables_exposure_and_shade_the_walls_otherwise() -
         SceneLook(ambient_scale=0.0)
 
 
+def test_knurled_top_repeats_along_its_axes_out_of_the_matrix() -> None:
+    """knurled-top multiplies the sole's texture by a grid of bumps: the same brightness one period along either
+    axis of the grid, other brightness half a period along; out of the matrix, a lost surface is a fair refusal."""
+    from cellctl.sim.appearance import Texture
+
+    look = look_for(("knurled-top",), 6)
+    assert 1.5 <= look.knurl_period_mm <= 4.0 and 0.06 <= look.knurl_contrast <= 0.15
+    assert "knurled-top" not in MATRIX_ENTRIES
+    assert fair_refusals(("knurled-top",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
+    flat = Texture(np.ones((400, 400), np.float32), (0.0, 0.0), 0.1)
+    knurl = flat.with_knurl(3.0, 30.0, 0.12)
+    axis = np.array([np.cos(np.radians(30.0)), np.sin(np.radians(30.0))])
+    start = 21.75 * axis + 12.75 * np.array([-axis[1], axis[0]])  # a quarter period past whole ones on both axes
+    along = [knurl.sample(*(start + k * 3.0 * axis)[:, None]) for k in (0.0, 0.5, 1.0, 2.0)]
+    assert along[0] == pytest.approx(along[2], abs=0.01) and along[0] == pytest.approx(along[3], abs=0.01)
+    assert abs(float(along[0][0] - along[1][0])) > 0.1  # half a period along: the other sign of the bump
+    assert SceneLook().knurl_period_mm == 0.0  # the default look renders as before the variation existed
+    with pytest.raises(ValueError, match="knurl"):
+        SceneLook(knurl_period_mm=2.0, knurl_contrast=1.5)
+
+
 def test_patterned_table_has_strong_contrast() -> None:
     rng = np.random.default_rng(0)
     from cellctl.sim.appearance import table_texture
