@@ -13,9 +13,10 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "other-lights", "knurled-top", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise", "soft-focus", "dim-exposure", "small-sole",
-"large-sole", "narrow-sole", "wide-sole", "waisted-sole", "dished-top", "domed-top" and "sprung-toe" are kept
-out so that the matrix sets keep their soles, and are judged like any entry.
+"light-table", "other-lights", "knurled-top", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise",
+"soft-focus", "dim-exposure", "small-sole", "large-sole", "narrow-sole", "wide-sole", "waisted-sole",
+"dished-top", "domed-top" and "sprung-toe" are kept out so that the matrix sets keep their soles, and are judged
+like any entry.
 """
 
 from __future__ import annotations
