@@ -116,6 +116,26 @@ def test_the_sole_the_outline_claims_hides_the_table_where_the_top_edge_has_no_d
                 assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT
 
 
+def test_a_short_spur_of_the_outline_beyond_the_edge_does_not_fit_the_right_image() -> None:
+    """A spur 2 mm beyond the edge over 4 mm of a 314 mm outline (specks of a shadow band kept by the left mask): far
+    too short for the 12 mm stretch test, yet a glue point near it would lie 2 mm off. The right image shows the
+    table 1.5 mm inside the spur's tip at four consecutive points; one or two such points are the masks' noise."""
+    outline, outward = ring(RADIUS, 314)  # about 1 mm apart, as the checks resample it
+    edge = np.full(len(outline), HEIGHT)
+    level = table_level_outside()
+
+    def check(spur_points: int, depth_mm: float) -> object:
+        out = np.zeros(len(outline))
+        out[100 : 100 + spur_points] = depth_mm
+        spurred = outline + out[:, None] * outward
+        return check_outline_right(spurred, outward, edge, silhouette(), project, CAMERA, top(), level)
+
+    assert check(0, 0.0) is None and check(4, 0.5) is None
+    problem = check(4, 2.0)
+    assert problem is not None and problem.kind is FailureKind.OUTLINE_INCONSISTENT and "consecutive" in problem.reason
+    assert check(2, 2.0) is None
+
+
 def test_a_sharp_top_edge_passes_the_edge_profile_and_a_rounded_one_is_refused() -> None:
     outline, outward = ring()
     noise = np.random.default_rng(2)
