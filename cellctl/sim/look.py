@@ -157,8 +157,12 @@ def _set(**values: object) -> Callable[[SceneLook, np.random.Generator], SceneLo
     return lambda look, rng: replace(look, **values)  # type: ignore[arg-type]
 
 
-def _draw(name: str, low: float, high: float) -> Callable[[SceneLook, np.random.Generator], SceneLook]:
-    return lambda look, rng: replace(look, **{name: float(rng.uniform(low, high))})  # type: ignore[arg-type]
+def _draw(**ranges: tuple[float, float]) -> Callable[[SceneLook, np.random.Generator], SceneLook]:
+    """Each named field drawn uniformly from its (low, high), in the order given (the seed's draws follow it)."""
+    return lambda look, rng: replace(
+        look,
+        **{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()},  # type: ignore[arg-type]
+    )
 
 
 # Low-texture soles under heavy noise or with highlights that differ between the views can lose so much of
@@ -202,7 +206,7 @@ VARIATIONS: dict[str, Variation] = {
             "rounded-edge",
             "top edge rounded, 3-5 mm radius",
             ("top_edge_radius_mm",),
-            _draw("top_edge_radius_mm", 3, 5),
+            _draw(top_edge_radius_mm=(3, 5)),
         ),
         # Outside the matrix so that its sets keep their soles: a shape no set drew before session 36, a cupsole whose
         # footbed is sunk inside its sidewall. The top rises towards the outline, so the glue line 2 mm inside runs
@@ -211,9 +215,7 @@ VARIATIONS: dict[str, Variation] = {
             "lipped-edge",
             "a cupsole's raised lip: the top rises 1.5-4 mm over the last 5-12 mm before the outline",
             ("top_lip_mm", "top_lip_width_mm"),
-            lambda look, rng: replace(
-                look, top_lip_mm=float(rng.uniform(1.5, 4.0)), top_lip_width_mm=float(rng.uniform(5.0, 12.0))
-            ),
+            _draw(top_lip_mm=(1.5, 4.0), top_lip_width_mm=(5.0, 12.0)),
             in_matrix=False,
         ),
         # Outside the matrix: a lip round the heel only (a heel cup), which the glue normals' check reads over 80 mm
@@ -222,12 +224,7 @@ VARIATIONS: dict[str, Variation] = {
             "heel-cup",
             "a heel cup: the top rises 1.5-4 mm over its last 5-12 mm round the rear 25-35 % of the sole",
             ("top_lip_mm", "top_lip_width_mm", "top_lip_heel_share"),
-            lambda look, rng: replace(
-                look,
-                top_lip_mm=float(rng.uniform(1.5, 4.0)),
-                top_lip_width_mm=float(rng.uniform(5.0, 12.0)),
-                top_lip_heel_share=float(rng.uniform(0.25, 0.35)),
-            ),
+            _draw(top_lip_mm=(1.5, 4.0), top_lip_width_mm=(5.0, 12.0), top_lip_heel_share=(0.25, 0.35)),
             in_matrix=False,
         ),
         Variation("flat", "flat sole, about 6 mm thick", ("height",), _set(height="flat")),
@@ -262,8 +259,8 @@ VARIATIONS: dict[str, Variation] = {
             ),
             in_matrix=False,
         ),
-        Variation("gain-low", "right camera 15-20 % darker", ("right_gain",), _draw("right_gain", 0.80, 0.85)),
-        Variation("gain-high", "right camera 15-20 % brighter", ("right_gain",), _draw("right_gain", 1.15, 1.20)),
+        Variation("gain-low", "right camera 15-20 % darker", ("right_gain",), _draw(right_gain=(0.80, 0.85))),
+        Variation("gain-high", "right camera 15-20 % brighter", ("right_gain",), _draw(right_gain=(1.15, 1.20))),
         Variation(
             "gamma",
             "right camera gamma 0.75-0.85 or 1.2-1.35",
@@ -282,7 +279,7 @@ VARIATIONS: dict[str, Variation] = {
             "moderate-noise",
             "a camera 1.5-3.5 times noisier than the normal sensor",
             ("noise", "noise_scale"),
-            _draw("noise_scale", 1.5, 3.5),
+            _draw(noise_scale=(1.5, 3.5)),
             _SURFACE_LOST,
             in_matrix=False,
         ),
@@ -293,11 +290,7 @@ VARIATIONS: dict[str, Variation] = {
             "soft-focus",
             "each camera defocused by its own 0.3-1.2 px (Gaussian sigma beyond the usual blur)",
             ("left_defocus_px", "right_defocus_px"),
-            lambda look, rng: replace(
-                look,
-                left_defocus_px=float(rng.uniform(0.3, 1.2)),
-                right_defocus_px=float(rng.uniform(0.3, 1.2)),
-            ),
+            _draw(left_defocus_px=(0.3, 1.2), right_defocus_px=(0.3, 1.2)),
             _SURFACE_LOST,
             in_matrix=False,
         ),
@@ -305,7 +298,7 @@ VARIATIONS: dict[str, Variation] = {
             "dim-exposure",
             "both cameras exposed at 0.4-0.8 of the usual level (darker images, coarser quantisation)",
             ("exposure_scale",),
-            _draw("exposure_scale", 0.4, 0.8),
+            _draw(exposure_scale=(0.4, 0.8)),
             _SURFACE_LOST,
             in_matrix=False,
         ),
@@ -327,7 +320,7 @@ VARIATIONS: dict[str, Variation] = {
             "faint-texture",
             "sole texture contrast 50-65 % of its material's (a smoother moulding, finer grain)",
             ("texture_contrast",),
-            _draw("texture_contrast", 0.50, 0.65),
+            _draw(texture_contrast=(0.50, 0.65)),
             _SURFACE_LOST,
             in_matrix=False,
         ),
@@ -338,12 +331,7 @@ VARIATIONS: dict[str, Variation] = {
             "knurled-top",
             "a knurled top: a grid of bumps every 1.5-4 mm at any angle, 6-15 % brightness contrast",
             ("knurl_period_mm", "knurl_angle_deg", "knurl_contrast"),
-            lambda look, rng: replace(
-                look,
-                knurl_period_mm=float(rng.uniform(1.5, 4.0)),
-                knurl_angle_deg=float(rng.uniform(0.0, 90.0)),
-                knurl_contrast=float(rng.uniform(0.06, 0.15)),
-            ),
+            _draw(knurl_period_mm=(1.5, 4.0), knurl_angle_deg=(0.0, 90.0), knurl_contrast=(0.06, 0.15)),
             _SURFACE_LOST,
             in_matrix=False,
         ),
@@ -382,7 +370,7 @@ VARIATIONS: dict[str, Variation] = {
             "tilted-rig",
             "the rig mounted 8-12 degrees off square to the table",
             ("rig_tilt_deg",),
-            _draw("rig_tilt_deg", 8.0, 12.0),
+            _draw(rig_tilt_deg=(8.0, 12.0)),
             _SURFACE_LOST,
             in_matrix=False,
         ),
@@ -426,7 +414,7 @@ VARIATIONS: dict[str, Variation] = {
             "domed-top",
             "a domed top: its middle 2-4 mm above its edge across the sole",
             ("cross_curvature_mm",),
-            _draw("cross_curvature_mm", 2.0, 4.0),
+            _draw(cross_curvature_mm=(2.0, 4.0)),
             in_matrix=False,
         ),
         # Outside the matrix so that its sets keep their soles: a running shoe's toe spring, the forefoot curving up
@@ -436,7 +424,7 @@ VARIATIONS: dict[str, Variation] = {
             "sprung-toe",
             "a running shoe's toe spring: the forefoot 10-16 mm off the table 10 % in from the toe tip",
             ("toe_spring_mm",),
-            _draw("toe_spring_mm", 10.0, 16.0),
+            _draw(toe_spring_mm=(10.0, 16.0)),
             in_matrix=False,
         ),
         Variation(
