@@ -369,11 +369,11 @@ def _disagreeing_run(bad: np.ndarray, evidence: str) -> CheckFailure | None:
     if np.all(bad):
         start, length = 0, len(bad)
     else:
-        turned = np.roll(bad, -int(np.argmin(bad)))  # start on an agreeing point: no run wraps round
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], turned.astype(np.int8), [0]])))
+        shift = int(np.argmin(bad))  # start on an agreeing point: no run wraps round
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], np.roll(bad, -shift).astype(np.int8), [0]])))
         starts, ends = edges[::2], edges[1::2]
         longest = int(np.argmax(ends - starts))
-        start, length = (int(starts[longest]) + int(np.argmin(bad))) % len(bad), int(ends[longest] - starts[longest])
+        start, length = (int(starts[longest]) + shift) % len(bad), int(ends[longest] - starts[longest])
     if length <= MAX_DISAGREEING_RUN:
         return None
     return CheckFailure(

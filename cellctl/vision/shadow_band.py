@@ -66,9 +66,12 @@ MAX_RING_SHARE = 0.25
 # it is still told from a dark part of the sole standing higher by that step's disparity (few ring pixels: the
 # sharp bands beside other-lights soles 0-11 %, the black rim round 39000 53-60 %) and, since a leaning black wall
 # seen from above meets the table at its foot just the same (46026: 0-4 %), by the taught table's texture showing
-# through it (correlation 0.33-0.38 in the deepest of those bands, 0.10-0.22 on that wall).
+# through it (correlation 0.33-0.38 in the deepest of those bands; 0.03-0.26 on the black walls of 39007, 46026 and
+# 39051, a vertical one seen at a pointed heel).
 MAX_SHARP_RING_SHARE = 0.15
 MIN_SHARP_TABLE_CORRELATION = 0.3
+# The strip the sole hides from the other camera is the band's where shadowed as the band beside it is: its factor
+# against the taught table within this share of the band's nearby (a darker or lighter part of the sole is not).
 HIDDEN_FACTOR_SHARE = 0.25
 RING_PX = 2.5  # the changed pixels on the table's side of a stretch: within a pixel or two of the table
 # The bands beside three shadowed matrix soles (39039, 39059, 39062): 1.5-2.6 px wide in the mean (area over its
