@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from cellctl.errors import UserError
@@ -65,6 +66,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --cache: only render the soles (and the empty tables with --taught) into the cache",
     )
     parser.add_argument(
+        "--lighting",
+        metavar="NAME",
+        help="with --matrix: light every sole so, in place of the lights its variations give (bars, shadowed-bars, "
+        "ring, overhead, side; the matrix's bars cast no shadow, shadowed-bars are the same bars casting theirs)",
+    )
+    parser.add_argument(
         "--declared-walls",
         action="store_true",
         help="with --matrix: measure each sole with its model's wall stated as a recipe would ([sole] wall: "
@@ -104,6 +111,13 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--combined needs --matrix --variations NAME,... (the variations every sole combines)")
     if args.declared_walls and not args.matrix:
         raise UserError("--declared-walls needs --matrix")
+    if args.lighting is not None:
+        from cellctl.sim.look import LIGHTINGS
+
+        if not args.matrix:
+            raise UserError("--lighting needs --matrix")
+        if args.lighting not in LIGHTINGS:
+            raise UserError(f"--lighting must be one of {', '.join(LIGHTINGS)}, got {args.lighting!r}")
     from cellctl.cameras.config import frames_option, retry_frames_option
 
     args.frames = frames_option(args.frames)
@@ -159,6 +173,8 @@ def _run_matrix(args: argparse.Namespace) -> int:
             soles = matrix_soles(args.soles, args.first_seed, entries)
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    if args.lighting is not None:
+        soles = [replace(sole, lighting=args.lighting) for sole in soles]
     if args.only:
         soles = _only(soles, args.only)
     calib = Calibration.load(args.calib) if args.calib else None
@@ -185,6 +201,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
         command = f"cellctl bench-sole --matrix --soles {args.soles} --first-seed {args.first_seed}"
         command += f" --variations {args.variations}" if args.variations else ""
         command += " --combined" if args.combined else ""
+        command += f" --lighting {args.lighting}" if args.lighting else ""
         command += f" --only {args.only}" if args.only else ""
         command += f" --calib {args.calib}" if args.calib else ""
         command += " --taught" if args.taught else ""

@@ -8,7 +8,7 @@ third one more variation of another kind, so that ends and variations are mixed,
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -27,6 +27,9 @@ class MatrixSole:
     seed: int
     color: str
     variations: tuple[str, ...]
+    # The scene's lights in place of those its variations give (look.LIGHTINGS; None: theirs): the same soles relit,
+    # e.g. with the bars' own shadows, which the matrix does not trace.
+    lighting: str | None = None
 
     @property
     def primary(self) -> str:
@@ -34,7 +37,8 @@ class MatrixSole:
 
     @property
     def look(self) -> SceneLook:
-        return look_for(self.variations, self.seed)
+        look = look_for(self.variations, self.seed)
+        return look if self.lighting is None else replace(look, lighting=self.lighting)
 
     @property
     def fair_refusals(self) -> frozenset[FailureKind]:

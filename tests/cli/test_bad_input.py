@@ -215,6 +215,12 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
     "bench-sole: --declared-walls without --matrix": lambda d, _: Case(
         ["bench-sole", "--declared-walls"], "--declared-walls needs --matrix"
     ),
+    "bench-sole: --lighting without --matrix": lambda d, _: Case(
+        ["bench-sole", "--lighting", "ring"], "--lighting needs --matrix"
+    ),
+    "bench-sole: unknown --lighting": lambda d, _: Case(
+        ["bench-sole", "--matrix", "--lighting", "sun"], "--lighting must be one of bars, shadowed-bars"
+    ),
     "bench-sole: --combined without --variations": lambda d, _: Case(
         ["bench-sole", "--matrix", "--combined"], "--combined needs --matrix --variations"
     ),

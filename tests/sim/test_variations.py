@@ -553,6 +553,17 @@ def test_other_lights_keep_the_tables_exposure_and_shade_the_walls_otherwise() -
         SceneLook(ambient_scale=0.0)
 
 
+def test_a_matrix_sole_relit_keeps_everything_but_its_lights() -> None:
+    """`cellctl bench-sole --matrix --lighting NAME`: the same soles, only their lights replaced (the matrix's bars
+    cast no shadow; shadowed-bars are the same bars casting theirs), also over a variation that sets the lights."""
+    for sole in matrix_soles(30, 500)[:30]:
+        relit = replace(sole, lighting="shadowed-bars")
+        assert relit.look == replace(sole.look, lighting="shadowed-bars") and relit.label == sole.label
+    lit = MatrixSole(7, "grey", ("other-lights",))
+    assert replace(lit, lighting="ring").look == replace(lit.look, lighting="ring")
+    assert MatrixSole(7, "grey", ("plain",)).look.lighting == "bars"
+
+
 def test_knurled_top_repeats_along_its_axes_out_of_the_matrix() -> None:
     """knurled-top multiplies the sole's texture by a grid of bumps: the same brightness one period along either
     axis of the grid, other brightness half a period along; out of the matrix, a lost surface is a fair refusal."""
