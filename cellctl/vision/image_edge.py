@@ -208,7 +208,7 @@ def _readings(
     edge_height: np.ndarray,
     camera: Camera,
     table_level: Footprint | None,
-) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray], np.ndarray]:
+) -> Readings:
     """One camera's mask edge read at the table (foot) and at the top edge's height (top), each (innermost,
     outermost), and where it sees the wall (its centre lies outward of the outline point)."""
     changed, to_pixel, centre = camera

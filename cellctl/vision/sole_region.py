@@ -174,8 +174,8 @@ def _shadow_bands(
     above = np.flatnonzero(points[:, 2] > WALL_FOOT_MM)
     hidden_px = 0.0
     if above.size:
-        x, y = cloud.pixels[above, 0], cloud.pixels[above, 1]
-        hidden_px = float(np.percentile(cloud.disparity[above] - (table.a * x + table.b * y + table.c), 99))
+        table_disparity = table.at(cloud.pixels[above, 0], cloud.pixels[above, 1])
+        hidden_px = float(np.percentile(cloud.disparity[above] - table_disparity, 99))
     # The right image's on the second core (numpy and OpenCV release the GIL): ~9 ms each.
     right_band = worker("shadow-band").submit(
         shadow_band,

@@ -85,11 +85,15 @@ class TableDisparity:
         scale = -baseline / o
         return cls(scale * n[0], scale * n[1], scale * (n[2] * f - n[0] * cx - n[1] * cy))
 
+    def at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The disparity (px) at rectified left pixels (x, y) (arrays that broadcast)."""
+        return (self.b * y + self.c) + self.a * x
+
     def values(self, box: tuple[slice, slice]) -> np.ndarray:
         """The disparity (px, float64) at every rectified left pixel of `box` (rows, columns)."""
         rows = np.arange(box[0].start or 0, box[0].stop, dtype=np.float64)
         columns = np.arange(box[1].start or 0, box[1].stop, dtype=np.float64)
-        return (self.b * rows + self.c)[:, None] + self.a * columns[None, :]
+        return self.at(columns[None, :], rows[:, None])
 
     def shift(self, box: tuple[slice, slice], right: bool) -> np.ndarray:
         """Per pixel of `box`, how far along x the other image shows the same table point: -d for a left pixel;
