@@ -64,7 +64,8 @@ MIN_SOFT_SHARE = 0.8
 MAX_RING_SHARE = 0.25
 # A shadow's band with a sharp outer edge (one small lamp, or each of a ring's) meets the table in a step, not softly;
 # it is still told from a dark part of the sole standing higher by that step's disparity (few ring pixels: the
-# sharp bands beside other-lights soles 0-11 %, the black rim round 39000 53-60 %) and, since a leaning black wall
+# sharp bands beside other-lights soles 0-11 %, the black rim round 39000 53-60 %, 50-55 % counting only the
+# pixels that touch the table, RING_PX) and, since a leaning black wall
 # seen from above meets the table at its foot just the same (46026: 0-4 %), by the taught table's texture showing
 # through it (correlation 0.33-0.38 in the deepest of those bands; 0.03-0.26 on the black walls of 39007, 46026 and
 # 39051, a vertical one seen at a pointed heel).
@@ -73,7 +74,12 @@ MIN_SHARP_TABLE_CORRELATION = 0.3
 # The strip the sole hides from the other camera is the band's where shadowed as the band beside it is: its factor
 # against the taught table within this share of the band's nearby (a darker or lighter part of the sole is not).
 HIDDEN_FACTOR_SHARE = 0.25
-RING_PX = 2.5  # the changed pixels on the table's side of a stretch: within a pixel or two of the table
+# The changed pixels on the table's side of a stretch: those touching the table (8-neighbours; distance transform
+# with the 3 x 3 mask: 1 and 1.37). Two and a half pixels took in, beside a band under a pixel or two wide (a
+# penumbra thinning out along the sole), the sole's own edge across the band: on 39023 relit with the bars'
+# shadows, a stretch 1 mm wide beside a black sole read 19 % of its pixels beside such an edge, past the sharp
+# rule's 15 %, and the outline followed it 3.3 mm out (docs/sole-benchmark.md, forty-third round); touching, 3 %.
+RING_PX = 1.5
 # The bands beside three shadowed matrix soles (39039, 39059, 39062): 1.5-2.6 px wide in the mean (area over its
 # pixels beside the table); the blend of a rounded black edge with the dark table (40026) 1.0-1.25 px. (The band's
 # texture against the taught table's was no help: 0.1-0.54 correlation for the bands, 0.1-0.36 for that blend.)

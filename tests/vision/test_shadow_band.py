@@ -42,11 +42,12 @@ def _scene(
     straight: float = 0.0,
     sharp: float = 0.0,
     mat: tuple[float, float] | None = None,
+    sharp_right: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(left, right, taught left, changed): `sole` = (brightness, texture spread); `rim` = (width px, brightness)
     of a dark band round its top edge; `shadow`: a penumbra on the table to the sole's right, 1.5-4 mm wide;
     `blur`: a lens out of focus (Gaussian sigma, px); `straight`: a stadium's half side along the rows; `sharp`: a
-    small lamp's shadow on the table, that wide (px) at 0.4 of the light, its edge a step, to the sole's left (where the sole hides the table beside it from the right camera); `mat` = (width px, brightness): something dark lying on the table round the sole, its own faint texture."""
+    small lamp's shadow on the table, that wide (px) at 0.4 of the light, its edge a step, to the sole's left (where the sole hides the table beside it from the right camera; `sharp_right`: to its right, where both cameras see it); `mat` = (width px, brightness): something dark lying on the table round the sole, its own faint texture."""
     table = table_level + _texture(1, 3.0)  # table coordinates: left x + 100 (room for the right view's shift)
     sole_texture = _texture(2, sole[1])
     rng = np.random.default_rng(3)
@@ -62,7 +63,8 @@ def _scene(
             lit = np.where(right_side & (beyond > -1.0), factor, 1.0)
         if sharp:
             beyond = _distance_from_sole(table_x, y)
-            lit = np.where((table_x < CENTRE[0]) & (beyond > -1.0) & (beyond < sharp), 0.4, lit)
+            side = table_x > CENTRE[0] if sharp_right else table_x < CENTRE[0]
+            lit = np.where(side & (beyond > -1.0) & (beyond < sharp), 0.4, lit)
         image = cv2.remap(table, table_x + 100.0, y, cv2.INTER_LINEAR) * lit
         if mat is not None:
             beyond = _distance_from_sole(table_x, y)
@@ -147,6 +149,19 @@ def test_a_sharp_shadow_beside_a_white_sole_is_the_table_up_to_the_sole() -> Non
     hidden = _distance_from_sole(x + SOLE_DISPARITY - TABLE_DISPARITY, y) <= 0.0  # the right camera sees the sole
     assert np.count_nonzero(seen & shadowed & hidden) < 0.5 * np.count_nonzero(shadowed & hidden)
     assert np.count_nonzero(whole & shadowed) >= 0.9 * np.count_nonzero(shadowed)
+
+
+def test_a_thin_sharp_shadow_is_the_table_though_the_soles_edge_lies_just_across_it() -> None:
+    """A small lamp's shadow only 2 px wide beyond the sole's edge, where both cameras see it: the sole's edge, seen at
+    the wrong disparity, lies a pixel or two across the band from the table, and is no edge of the band's own on the
+    table's side."""
+    left, right, reference, changed = _scene(40.0, (200.0, 15.0), None, shadow=False, sharp=2.0, sharp_right=True)
+    sole = _sole_mask()
+    shadowed = changed & ~sole
+    assert np.count_nonzero(shadowed) > 300
+    band = _band(left, right, reference, changed)
+    assert np.count_nonzero(band & sole) == 0
+    assert np.count_nonzero(band & shadowed) >= 0.9 * np.count_nonzero(shadowed)
 
 
 def test_something_dark_on_the_table_beside_the_sole_is_no_shadow() -> None:
