@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.vision.closed_path import outward_normals, running_median
+from cellctl.vision.closed_path import closed_runs, outward_normals, running_median
 from cellctl.vision.defaults import AVERAGED_FRAMES, GLUE_HEIGHT_TOLERANCE_MM, MORE_EXPOSURES
 from cellctl.vision.footprint import Footprint
 
@@ -364,16 +364,11 @@ def check_outline_right(
 def _disagreeing_run(bad: np.ndarray, evidence: str) -> CheckFailure | None:
     """The longest run of consecutive disagreeing outline points (closed): more than MAX_DISAGREEING_RUN is a spur or
     a notch too short for the stretch test and still deep enough to move a glue point by its tolerance."""
-    if not np.any(bad):
+    runs = closed_runs(bad)
+    if not runs:
         return None
-    if np.all(bad):
-        start, length = 0, len(bad)
-    else:
-        shift = int(np.argmin(bad))  # start on an agreeing point: no run wraps round
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], np.roll(bad, -shift).astype(np.int8), [0]])))
-        starts, ends = edges[::2], edges[1::2]
-        longest = int(np.argmax(ends - starts))
-        start, length = (int(starts[longest]) + shift) % len(bad), int(ends[longest] - starts[longest])
+    longest = max(runs, key=len)  # the first of the longest along the path, from its first agreeing point
+    start, length = int(longest[0]), len(longest)
     if length <= MAX_DISAGREEING_RUN:
         return None
     return CheckFailure(

@@ -65,10 +65,10 @@ MAX_RING_SHARE = 0.25
 # A shadow's band with a sharp outer edge (one small lamp, or each of a ring's) meets the table in a step, not softly;
 # it is still told from a dark part of the sole standing higher by that step's disparity (few ring pixels: the
 # sharp bands beside other-lights soles 0-11 %, the black rim round 39000 53-60 %, 50-55 % counting only the
-# pixels that touch the table, RING_PX) and, since a leaning black wall
-# seen from above meets the table at its foot just the same (46026: 0-4 %), by the taught table's texture showing
-# through it (correlation 0.33-0.38 in the deepest of those bands; 0.03-0.26 on the black walls of 39007, 46026 and
-# 39051, a vertical one seen at a pointed heel).
+# pixels that touch the table, RING_PX) and, since a leaning black wall seen from above meets the table at its
+# foot just the same (46026: 0-4 %), by the taught table's texture showing through it (correlation 0.33-0.38 in
+# the deepest of those bands; 0.03-0.26 on the black walls of 39007, 46026 and 39051, a vertical one seen at a
+# pointed heel).
 MAX_SHARP_RING_SHARE = 0.15
 MIN_SHARP_TABLE_CORRELATION = 0.3
 # The strip the sole hides from the other camera is the band's where shadowed as the band beside it is: its factor
