@@ -1,8 +1,8 @@
 """Self-checks of the sole's edge itself (docs/measurements.md, Validity): the measured surface across the
 outline (a rounded top edge falls away before it) and where each camera's change mask ends along the
 outline's normal (a dent or bulge of 1-2 mm that the depth-step and right-image tests of
-cellctl.vision.checks pass), and the outline's own shape (a notch sharper than a sole's edge bends). Each returns
-None or a `CheckFailure`.
+cellctl.vision.checks pass), and the outline's own shape (a notch sharper than a sole's edge bends, a spur no convex
+edge makes). Each returns None or a `CheckFailure`.
 """
 
 from __future__ import annotations
@@ -78,6 +78,20 @@ MAX_EDGE_OFFSET_MM = 0.8
 # 14 mm): not seen.
 MIN_CONCAVE_RADIUS_MM = 12.0
 NOTCH_MAX_HALF_CHORD_MM = 7
+# A spur out of the outline: the mirror of a notch, where a shadow or a dark strip of table beside the edge joined the
+# sole's region in both cameras' masks (docs/sole-benchmark.md, forty-fourth round: 1.4 mm out over ~4 mm, which the
+# notch rule, inward only, and the edge offsets, reading the same masks, do not see). A sole's edge bulges out
+# sharply only at an end's tip (pointed and cusped ends: tip radius 0-5 mm), and there its flanks turn round with
+# it. So per outline point and half-width h (1 mm steps up to SPUR_MAX_HALF_WIDTH_MM), the point may lie beyond
+# the chord between its neighbours h either side by at most what a convex edge turning as its flanks turn could
+# bulge: h sin(phi / 2), phi the turn from the incoming flank's direction (SPUR_FLANK_MM before the chord's start)
+# to the outgoing one's (phi: 0 on a straight side, ~140 degrees round a pointed tip, whose tip reaches that
+# bound; concave turns allow nothing), plus MAX_EDGE_OFFSET_MM as for a notch. The simulator's true outlines of
+# every end kind exceed the bound by at most 0.01 mm; the outlines the cell published right on the other-lights
+# sets 62000 and 64000 by 0.24-0.71 mm (their scatter and bulges of 0.5-0.6 mm); the spur of 62046 by 1.09 mm.
+# Wider spurs (h > 3) are not tested: at h = 4 the scatter of right outlines already reaches 0.85 mm.
+SPUR_MAX_HALF_WIDTH_MM = 3
+SPUR_FLANK_MM = 3
 
 # A wall too low to confirm the outline as the sole's foot. The outline is the top edge's silhouette (the camera
 # on a wall's inner side sees no more); a wall leaning out towards the table puts its foot h tan(lean) beyond
@@ -141,6 +155,41 @@ def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
             "sole's edge",
         )
     return None
+
+
+def check_outline_spur(outline: np.ndarray) -> CheckFailure | None:
+    """A spur out of the outline (N x 2, counter-clockwise, points 1 mm apart, closed) that no convex edge between
+    its flanks could make: a point lying beyond the chord between its neighbours h mm either side by more than
+    h sin(phi / 2), phi the turn between the flanks beyond them, plus MAX_EDGE_OFFSET_MM."""
+    n = len(outline)
+    worst, at, width_mm = 0.0, 0, 0
+    for h in range(1, min(SPUR_MAX_HALF_WIDTH_MM, (n - 1) // 2 - SPUR_FLANK_MM) + 1):
+        beyond, _ = chord_bulge(outline, h)
+        turn = _flank_turn(outline, h, SPUR_FLANK_MM)
+        excess = beyond - h * np.sin(0.5 * np.clip(turn, 0.0, np.pi))
+        k = int(np.argmax(excess))
+        if excess[k] > worst:
+            worst, at, width_mm = float(excess[k]), k, 2 * h
+    if worst > MAX_EDGE_OFFSET_MM:
+        x, y = outline[at]
+        return CheckFailure(
+            FailureKind.OUTLINE_INCONSISTENT,
+            f"the outline has a spur at outline point {at} ({x:.1f}, {y:.1f}) mm: {worst:.1f} mm further out over "
+            f"{width_mm} mm than a sole's edge turning as the outline turns either side of it can bulge (limit "
+            f"{MAX_EDGE_OFFSET_MM:g} mm): the outline there is not the sole's edge (a shadow or dark table beside "
+            "it taken for the sole)",
+        )
+    return None
+
+
+def _flank_turn(outline: np.ndarray, half: int, flank: int) -> np.ndarray:
+    """Per point: the signed turn (radians, counter-clockwise positive: convex on a counter-clockwise outline) from
+    the direction of the `flank` points before its neighbour `half` points back to that of the `flank` points
+    after its neighbour `half` points on."""
+    incoming = np.roll(outline, half, axis=0) - np.roll(outline, half + flank, axis=0)
+    outgoing = np.roll(outline, -(half + flank), axis=0) - np.roll(outline, -half, axis=0)
+    cross = incoming[:, 0] * outgoing[:, 1] - incoming[:, 1] * outgoing[:, 0]
+    return np.arctan2(cross, np.sum(incoming * outgoing, axis=1))
 
 
 def check_wall_height(edge_height: np.ndarray) -> CheckFailure | None:

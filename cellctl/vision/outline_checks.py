@@ -27,6 +27,7 @@ from cellctl.vision.edge_checks import (
     check_edge_offsets,
     check_edge_profile,
     check_outline_notch,
+    check_outline_spur,
     check_steep_wall,
     check_wall_height,
 )
@@ -93,8 +94,11 @@ def outline_problem(reconstruction: Reconstruction, placed: PlacedOutline, surfa
     problem = check_steep_wall(ring, outward, heights)
     if problem is not None:
         return problem
-    # Last: a short notch both cameras' masks share passes every check above; the outline's shape shows it.
-    return check_outline_notch(ring)
+    # Last: a short notch or spur both cameras' masks share passes every check above; the outline's shape shows it.
+    problem = check_outline_notch(ring)
+    if problem is not None:
+        return problem
+    return check_outline_spur(ring)
 
 
 def wall_problem(placed: PlacedOutline, surface: SoleSurface) -> CheckFailure | None:
