@@ -25,8 +25,11 @@ larger disparity). A changed pixel is taken for shadowed table (`shadow_band`) w
 
 Beside the sole's edge the sole hides a strip of the band from the other camera (up to the difference of the
 sole's and the table's disparities wide), where no stereo test can speak: a band found is grown over it, through
-changed pixels shadowed as the band is (`_hidden_strip`). The same for the right image against the left. Those
-pixels are no longer changed, and the depth points on them above the table are the sole's disparity carried over
+changed pixels shadowed as the band is (`_hidden_strip`). So is a shadow the change test itself left unchanged (its
+texture showed through at a shadow's factor), through pixels that are also darker than a lit sole beside them:
+where the change test kept only that strip, specks of it joined the sole's region and the outline ran out over
+them (what is left of such a strip can still make a spur: cellctl.vision.edge_checks.check_outline_spur). The same
+for the right image against the left. Those pixels are no longer changed, and the depth points on them above the table are the sole's disparity carried over
 the band (cellctl.vision.segmentation drops them from the footprint and the depth step alike).
 
 Not found: a band beside a sole as dark as it (a black sole on a grey table): there the band stays changed, the
@@ -74,6 +77,9 @@ MIN_SHARP_TABLE_CORRELATION = 0.3
 # The strip the sole hides from the other camera is the band's where shadowed as the band beside it is: its factor
 # against the taught table within this share of the band's nearby (a darker or lighter part of the sole is not).
 HIDDEN_FACTOR_SHARE = 0.25
+# A shadow the change test left unchanged is grown from as a band is: a stretch of that many pixels at least (a few
+# mm^2); single table pixels the noise put below the shadow's threshold, scattered over the table, are no shadow.
+MIN_SHADOW_PX = 50
 # The changed pixels on the table's side of a stretch: those touching the table (8-neighbours; distance transform
 # with the 3 x 3 mask: 1 and 1.37). Two and a half pixels took in, beside a band under a pixel or two wide (a
 # penumbra thinning out along the sole), the sole's own edge across the band: on 39023 relit with the bars'
@@ -249,16 +255,33 @@ def shadow_band(
     distance = cv2.distanceTransform((~outside).astype(np.uint8), cv2.DIST_L2, 3)
     candidate &= distance * pixel_mm <= BAND_MAX_MM
     candidate &= _below_brighter_sole(here, window_changed & ~candidate, candidate, reach)
-    if not np.any(candidate):
-        return band
-    band[box] = _faded_stretches(
-        candidate, here, outside, predicted, window_changed & ~consistent & (distance <= RING_PX), pixel_mm
-    )
-    if np.any(band[box]):
-        band[box] &= ~_raised(band[box], heights(box))
-    if np.any(band[box]) and hidden_px > 0.0:
-        band[box] = _hidden_strip(band[box], window_changed & dark, here / np.maximum(predicted, 1e-3), hidden_px)
+    found = np.zeros_like(window_changed)
+    if np.any(candidate):
+        ring = window_changed & ~consistent & (distance <= RING_PX)
+        found = _faded_stretches(candidate, here, outside, predicted, ring, pixel_mm)
+    if np.any(found):
+        found &= ~_raised(found, heights(box))
+    if hidden_px > 0.0:
+        factor = here / np.maximum(predicted, 1e-3)
+        if np.any(found):
+            found = _hidden_strip(found, window_changed & dark, factor, hidden_px)
+        # The shadow the change test itself left unchanged (its texture vote: the table at a shadow's factor) is a
+        # band just as well, whose hidden strip stays changed; grown over pixels darker than a lit sole beside them.
+        unchanged = _sizeable(outside & dark, MIN_SHADOW_PX)
+        if np.any(unchanged):
+            allowed = window_changed & dark & ~found
+            allowed = _below_brighter_sole(here, window_changed & ~allowed & ~found, allowed, reach)
+            found |= _hidden_strip(unchanged, allowed, factor, hidden_px) & window_changed
+    band[box] = found
     return band
+
+
+def _sizeable(mask: np.ndarray, least: int) -> np.ndarray:
+    """The 8-connected stretches of `mask` with at least `least` pixels."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] >= least
+    keep[0] = False
+    return keep[labels]
 
 
 def _hidden_strip(band: np.ndarray, allowed: np.ndarray, factor: np.ndarray, hidden_px: float) -> np.ndarray:

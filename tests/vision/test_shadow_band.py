@@ -164,6 +164,35 @@ def test_a_thin_sharp_shadow_is_the_table_though_the_soles_edge_lies_just_across
     assert np.count_nonzero(band & shadowed) >= 0.9 * np.count_nonzero(shadowed)
 
 
+def _hidden_strip_of_an_unchanged_shadow(sole: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(band found, the hidden strip the change test kept, the sole) for a small lamp's shadow to the sole's left that the
+    change test left unchanged (its texture vote) but for the strip beside the edge that the right camera cannot see."""
+    left, right, reference, changed = _scene(40.0, sole, None, shadow=False, sharp=12.0)
+    y, x = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
+    beyond = _distance_from_sole(x, y)
+    strip = (x < CENTRE[0]) & (beyond > 0.0) & (_distance_from_sole(x + SOLE_DISPARITY - TABLE_DISPARITY, y) <= 0.0)
+    sole_mask = _sole_mask()
+    kept = changed & (sole_mask | strip)
+    band = _band(left, right, reference, kept, hidden_px=SOLE_DISPARITY - TABLE_DISPARITY)
+    return band, kept & strip, sole_mask
+
+
+def test_the_hidden_strip_of_a_shadow_the_change_test_left_unchanged_is_the_table() -> None:
+    """Where the change test's texture vote took the shadow for the table, only the strip the sole hides from the
+    other camera stays changed, and no band is found to grow over it: the unchanged shadow itself is grown from."""
+    band, strip, sole = _hidden_strip_of_an_unchanged_shadow((200.0, 15.0))
+    assert np.count_nonzero(strip) > 100
+    assert np.count_nonzero(band & strip) >= 0.9 * np.count_nonzero(strip)
+    assert np.count_nonzero(band & sole) == 0
+
+
+def test_a_black_soles_edge_beside_an_unchanged_shadow_is_not_grown_over() -> None:
+    """A sole darker than the shadow beside it: no lit sole tells the strip's pixels for a shadow, and the sole's own
+    edge pixels, as dark, are not taken."""
+    band, strip, sole = _hidden_strip_of_an_unchanged_shadow((10.0, 2.0))
+    assert np.count_nonzero(band & sole) == 0
+
+
 def test_something_dark_on_the_table_beside_the_sole_is_no_shadow() -> None:
     """As dark as a shadow, its step onto the table at the table's disparity (a leaning wall's foot, a dark mat): its
     own texture, not the table's, tells it apart."""
