@@ -178,8 +178,8 @@ def check_outline_spur(outline: np.ndarray) -> CheckFailure | None:
             FailureKind.OUTLINE_INCONSISTENT,
             f"the outline has a spur at outline point {at} ({x:.1f}, {y:.1f}) mm: {worst:.1f} mm further out over "
             f"{width_mm} mm than a sole's edge turning as the outline turns either side of it can bulge (limit "
-            f"{MAX_EDGE_OFFSET_MM:g} mm): the outline there is not the sole's edge (a shadow or dark table beside "
-            "it taken for the sole)",
+            f"{MAX_EDGE_OFFSET_MM:g} mm): the outline there is not the sole's edge (something beside it was taken "
+            "for the sole, most often a shadow: light the table so that no shadow falls beside the sole)",
         )
     return None
 
