@@ -139,16 +139,15 @@ def check_outline_notch(outline: np.ndarray) -> CheckFailure | None:
     """A notch in the outline (N x 2, counter-clockwise, points 1 mm apart, closed) sharper than a sole's edge
     bends: a point lying inside the chord between its neighbours h mm either side by more than an arc of
     MIN_CONCAVE_RADIUS_MM would, plus MAX_EDGE_OFFSET_MM."""
-    n = len(outline)
-    worst, at, chord_mm = 0.0, 0, 0.0
-    for h in range(1, min(NOTCH_MAX_HALF_CHORD_MM, (n - 1) // 2) + 1):
+
+    def notch_excess(h: int) -> np.ndarray:
         beyond, half = chord_bulge(outline, h)
-        excess = -beyond - concave_sag(half)
-        k = int(np.argmax(excess))
-        if excess[k] > worst:
-            worst, at, chord_mm = float(excess[k]), k, float(2.0 * half[k])
+        return -beyond - concave_sag(half)
+
+    worst, at, h = _worst_excess(notch_excess, min(NOTCH_MAX_HALF_CHORD_MM, (len(outline) - 1) // 2))
     if worst > MAX_EDGE_OFFSET_MM:
         x, y = outline[at]
+        chord_mm = float(np.linalg.norm(outline[(at + h) % len(outline)] - outline[at - h]))
         return CheckFailure(
             FailureKind.OUTLINE_INCONSISTENT,
             f"the outline has a notch at outline point {at} ({x:.1f}, {y:.1f}) mm: {worst:.1f} mm deeper than a "
@@ -163,15 +162,13 @@ def check_outline_spur(outline: np.ndarray) -> CheckFailure | None:
     """A spur out of the outline (N x 2, counter-clockwise, points 1 mm apart, closed) that no convex edge between
     its flanks could make: a point lying beyond the chord between its neighbours h mm either side by more than
     h sin(phi / 2), phi the turn between the flanks beyond them, plus MAX_EDGE_OFFSET_MM."""
-    n = len(outline)
-    worst, at, width_mm = 0.0, 0, 0
-    for h in range(1, min(SPUR_MAX_HALF_WIDTH_MM, (n - 1) // 2 - SPUR_FLANK_MM) + 1):
+
+    def spur_excess(h: int) -> np.ndarray:
         beyond, _ = chord_bulge(outline, h)
-        turn = _flank_turn(outline, h, SPUR_FLANK_MM)
-        excess = beyond - h * np.sin(0.5 * np.clip(turn, 0.0, np.pi))
-        k = int(np.argmax(excess))
-        if excess[k] > worst:
-            worst, at, width_mm = float(excess[k]), k, 2 * h
+        return beyond - h * np.sin(0.5 * np.clip(_flank_turn(outline, h, SPUR_FLANK_MM), 0.0, np.pi))
+
+    worst, at, h = _worst_excess(spur_excess, min(SPUR_MAX_HALF_WIDTH_MM, (len(outline) - 1) // 2 - SPUR_FLANK_MM))
+    width_mm = 2 * h
     if worst > MAX_EDGE_OFFSET_MM:
         x, y = outline[at]
         return CheckFailure(
@@ -182,6 +179,18 @@ def check_outline_spur(outline: np.ndarray) -> CheckFailure | None:
             "for the sole, most often a shadow: light the table so that no shadow falls beside the sole)",
         )
     return None
+
+
+def _worst_excess(excess_at: Callable[[int], np.ndarray], most: int) -> tuple[float, int, int]:
+    """The largest of `excess_at(h)` (per outline point) over h = 1..most, with its point and h; (0, 0, 0) where none
+    exceeds 0."""
+    worst, at, half = 0.0, 0, 0
+    for h in range(1, most + 1):
+        excess = excess_at(h)
+        k = int(np.argmax(excess))
+        if excess[k] > worst:
+            worst, at, half = float(excess[k]), k, h
+    return worst, at, half
 
 
 def _flank_turn(outline: np.ndarray, half: int, flank: int) -> np.ndarray:
