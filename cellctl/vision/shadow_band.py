@@ -26,11 +26,12 @@ larger disparity). A changed pixel is taken for shadowed table (`shadow_band`) w
 Beside the sole's edge the sole hides a strip of the band from the other camera (up to the difference of the
 sole's and the table's disparities wide), where no stereo test can speak: a band found is grown over it, through
 changed pixels shadowed as the band is (`_hidden_strip`). So is a shadow the change test itself left unchanged (its
-texture showed through at a shadow's factor), through pixels that are also darker than a lit sole beside them:
-where the change test kept only that strip, specks of it joined the sole's region and the outline ran out over
-them (what is left of such a strip can still make a spur: cellctl.vision.edge_checks.check_outline_spur). The same
-for the right image against the left. Those pixels are no longer changed, and the depth points on them above the table are the sole's disparity carried over
-the band (cellctl.vision.segmentation drops them from the footprint and the depth step alike).
+texture showed through at a shadow's factor), through pixels that are also darker than a lit sole beside them: where
+the change test kept only that strip, specks of it joined the sole's region and the outline ran out over them (what
+is left of such a strip can still make a spur: cellctl.vision.edge_checks.check_outline_spur). The same for the
+right image against the left. Those pixels are no longer changed, and the depth points on them above the table are
+the sole's disparity carried over the band (cellctl.vision.segmentation drops them from the footprint and the depth
+step alike).
 
 Not found: a band beside a sole as dark as it (a black sole on a grey table): there the band stays changed, the
 outline bulges and the checks refuse it as before. Not told apart: a dark part of the sole (a rim, a black wall
@@ -45,6 +46,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from cellctl.stereo.kernels import label_areas
 from cellctl.vision.change import MAX_SHADOW_FACTOR, MIN_TEXTURE_GAIN, ChangeTest, enclosed_unchanged
 from cellctl.vision.table import TableDisparity
 
@@ -277,9 +279,10 @@ def shadow_band(
 
 
 def _sizeable(mask: np.ndarray, least: int) -> np.ndarray:
-    """The 8-connected stretches of `mask` with at least `least` pixels."""
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
-    keep = stats[:, cv2.CC_STAT_AREA] >= least
+    """The 8-connected stretches of `mask` with at least `least` pixels (areas counted in C, as
+    cellctl.vision.footprint.largest_component counts them: OpenCV's statistics cost several times the labelling)."""
+    count, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    keep = label_areas(labels, count) >= least
     keep[0] = False
     return keep[labels]
 

@@ -44,10 +44,13 @@ def _scene(
     mat: tuple[float, float] | None = None,
     sharp_right: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(left, right, taught left, changed): `sole` = (brightness, texture spread); `rim` = (width px, brightness)
-    of a dark band round its top edge; `shadow`: a penumbra on the table to the sole's right, 1.5-4 mm wide;
-    `blur`: a lens out of focus (Gaussian sigma, px); `straight`: a stadium's half side along the rows; `sharp`: a
-    small lamp's shadow on the table, that wide (px) at 0.4 of the light, its edge a step, to the sole's left (where the sole hides the table beside it from the right camera; `sharp_right`: to its right, where both cameras see it); `mat` = (width px, brightness): something dark lying on the table round the sole, its own faint texture."""
+    """(left, right, taught left, changed): `sole` = (brightness, texture spread); `rim` = (width px,
+    brightness) of a dark band round its top edge; `shadow`: a penumbra on the table to the sole's right, 1.5-4
+    mm wide; `blur`: a lens out of focus (Gaussian sigma, px); `straight`: a stadium's half side along the rows;
+    `sharp`: a small lamp's shadow on the table, that wide (px) at 0.4 of the light, its edge a step, to the
+    sole's left (where the sole hides the table beside it from the right camera; `sharp_right`: to its right,
+    where both cameras see it); `mat` = (width px, brightness): something dark lying on the table round the
+    sole, its own faint texture."""
     table = table_level + _texture(1, 3.0)  # table coordinates: left x + 100 (room for the right view's shift)
     sole_texture = _texture(2, sole[1])
     rng = np.random.default_rng(3)
@@ -165,8 +168,9 @@ def test_a_thin_sharp_shadow_is_the_table_though_the_soles_edge_lies_just_across
 
 
 def _hidden_strip_of_an_unchanged_shadow(sole: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(band found, the hidden strip the change test kept, the sole) for a small lamp's shadow to the sole's left that the
-    change test left unchanged (its texture vote) but for the strip beside the edge that the right camera cannot see."""
+    """(band found, the hidden strip the change test kept, the sole) for a small lamp's shadow to the sole's left that
+    the change test left unchanged (its texture vote) but for the strip beside the edge that the right camera cannot
+    see."""
     left, right, reference, changed = _scene(40.0, sole, None, shadow=False, sharp=12.0)
     y, x = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
     beyond = _distance_from_sole(x, y)
