@@ -72,6 +72,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "ring, overhead, side; the matrix's bars cast no shadow, shadowed-bars are the same bars casting theirs)",
     )
     parser.add_argument(
+        "--rig",
+        metavar="NAME",
+        help="with --matrix: shoot every sole through this simulated rig, in place of the one its variations give "
+        "(default, distorted, wide, narrow, coarse: 960 x 768 px, fine: 1600 x 1280 px)",
+    )
+    parser.add_argument(
         "--declared-walls",
         action="store_true",
         help="with --matrix: measure each sole with its model's wall stated as a recipe would ([sole] wall: "
@@ -118,6 +124,13 @@ def run(args: argparse.Namespace) -> int:
             raise UserError("--lighting needs --matrix")
         if args.lighting not in LIGHTINGS:
             raise UserError(f"--lighting must be one of {', '.join(LIGHTINGS)}, got {args.lighting!r}")
+    if args.rig is not None:
+        from cellctl.sim.look import RIGS
+
+        if not args.matrix:
+            raise UserError("--rig needs --matrix")
+        if args.rig not in RIGS:
+            raise UserError(f"--rig must be one of {', '.join(RIGS)}, got {args.rig!r}")
     from cellctl.cameras.config import frames_option, retry_frames_option
 
     args.frames = frames_option(args.frames)
@@ -175,6 +188,8 @@ def _run_matrix(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     if args.lighting is not None:
         soles = [replace(sole, lighting=args.lighting) for sole in soles]
+    if args.rig is not None:
+        soles = [replace(sole, rig=args.rig) for sole in soles]
     if args.only:
         soles = _only(soles, args.only)
     calib = Calibration.load(args.calib) if args.calib else None
@@ -202,6 +217,7 @@ def _run_matrix(args: argparse.Namespace) -> int:
         command += f" --variations {args.variations}" if args.variations else ""
         command += " --combined" if args.combined else ""
         command += f" --lighting {args.lighting}" if args.lighting else ""
+        command += f" --rig {args.rig}" if args.rig else ""
         command += f" --only {args.only}" if args.only else ""
         command += f" --calib {args.calib}" if args.calib else ""
         command += " --taught" if args.taught else ""

@@ -34,7 +34,7 @@ HEIGHT_CLASSES = ("normal", "flat", "tall")
 COLOUR_SCHEMES = ("plain", "rim", "logo", "patches")
 TABLE_LOOKS = ("dark", "grey", "patterned", "light")
 NOISE_LEVELS = ("normal", "heavy")
-RIGS = ("default", "distorted", "wide", "narrow")  # cellctl.sim.rig.rig_for
+RIGS = ("default", "distorted", "wide", "narrow", "coarse", "fine")  # cellctl.sim.rig.rig_for
 HEADINGS = ("along", "any")
 PLACEMENTS = ("in-view", "off-image")
 SIZES = ("normal", "small", "large")  # cellctl.sim.sole.SIZE_LENGTH_RANGES_MM
@@ -363,6 +363,24 @@ VARIATIONS: dict[str, Variation] = {
         Variation(
             "narrow-rig", "a rig with a 40 mm baseline", ("rig",), _set(rig="narrow"), _SURFACE_LOST, in_matrix=False
         ),
+        # Other cameras than the simulated ones, at the same place and field of view: fewer pixels (depth 1.33 x
+        # noisier, so refusing for the surface is right there) or more. Every size the measurement states in pixels
+        # then stands for another size on the table.
+        Variation(
+            "coarse-rig",
+            "cameras of 960 x 768 pixels (0.52 mm per pixel at the table; 1280 x 1024 by default)",
+            ("rig",),
+            _set(rig="coarse"),
+            _SURFACE_LOST,
+            in_matrix=False,
+        ),
+        Variation(
+            "fine-rig",
+            "cameras of 1600 x 1280 pixels (0.31 mm per pixel at the table)",
+            ("rig",),
+            _set(rig="fine"),
+            in_matrix=False,
+        ),
         # Outside the matrix for the same reason: a rig mounted well off square to the table. The glue heights'
         # precision limit is calibrated up to 7 degrees and tighter beyond (checks.CALIBRATED_OBLIQUENESS_DEG), so
         # dark soles may be refused for the surface, and refusing them for that is right.
@@ -454,6 +472,16 @@ def look_for(names: tuple[str, ...] | list[str], seed: int) -> SceneLook:
             taken[field_name] = name
         look = variation.apply(look, rng)
     return look
+
+
+def rig_refusals(rig: str) -> frozenset[FailureKind]:
+    """The refusal kinds that are a correct answer to a scene shot through `rig` (a RIGS name): those of the
+    variation that sets it (none for the default rig)."""
+    if rig not in RIGS:
+        raise ValueError(f"rig must be one of {', '.join(RIGS)}, got {rig!r}")
+    rng = np.random.default_rng(0)
+    setting = [v for v in VARIATIONS.values() if v.fields == ("rig",) and v.apply(SceneLook(), rng).rig == rig]
+    return setting[0].refusals if setting else frozenset()
 
 
 def fair_refusals(names: tuple[str, ...] | list[str]) -> frozenset[FailureKind]:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from cellctl.errors import FailureKind
-from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
+from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for, rig_refusals
 
 MATRIX_COLOURS = ("white", "black", "grey")
 MATRIX_ENTRIES = tuple(name for name, v in VARIATIONS.items() if v.in_matrix)
@@ -30,6 +30,9 @@ class MatrixSole:
     # The scene's lights in place of those its variations give (look.LIGHTINGS; None: theirs): the same soles relit,
     # e.g. with the bars' own shadows, which the matrix does not trace.
     lighting: str | None = None
+    # The rig that shoots it in place of its variations' (look.RIGS; None: theirs): the same soles through other
+    # cameras, e.g. with fewer or more pixels.
+    rig: str | None = None
 
     @property
     def primary(self) -> str:
@@ -38,11 +41,13 @@ class MatrixSole:
     @property
     def look(self) -> SceneLook:
         look = look_for(self.variations, self.seed)
-        return look if self.lighting is None else replace(look, lighting=self.lighting)
+        look = look if self.lighting is None else replace(look, lighting=self.lighting)
+        return look if self.rig is None else replace(look, rig=self.rig)
 
     @property
     def fair_refusals(self) -> frozenset[FailureKind]:
-        return fair_refusals(self.variations)
+        # A rig in place of the variations' own brings its own fair refusals (the coarse rig's surface).
+        return fair_refusals(self.variations) | (frozenset() if self.rig is None else rig_refusals(self.rig))
 
     @property
     def label(self) -> str:

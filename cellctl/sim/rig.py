@@ -17,13 +17,25 @@ IMAGE_SIZE: tuple[int, int] = (1280, 1024)  # (width, height) px
 BASELINE_MM: float = 60.0
 WIDE_BASELINE_MM: float = 100.0  # the `wide` rig (SceneLook.rig): the same cameras further apart
 NARROW_BASELINE_MM: float = 40.0  # the `narrow` rig: closer together
+# Other cameras at the same place and field of view: the `coarse` rig's sensors have 0.75 times the pixels along each
+# side (960 x 768, ~0.52 mm per pixel at the table), the `fine` rig's 1.25 times (1600 x 1280, ~0.31 mm): every
+# threshold the measurement states in pixels is then met at another size in millimetres.
+COARSE_SCALE: float = 0.75
+FINE_SCALE: float = 1.25
 
 
-def default_rig(baseline_mm: float = BASELINE_MM) -> Calibration:
+def default_rig(baseline_mm: float = BASELINE_MM, pixel_scale: float = 1.0) -> Calibration:
     """The true calibration of the simulated rig (what a perfect calibration would find), its cameras
-    `baseline_mm` apart."""
+    `baseline_mm` apart, their sensors `pixel_scale` times the default's pixels along each side (the same field of
+    view: focal lengths and principal points scale with the image)."""
     K1 = np.array([[1402.0, 0.0, 645.0], [0.0, 1399.0, 508.0], [0.0, 0.0, 1.0]])
     K2 = np.array([[1396.0, 0.0, 633.0], [0.0, 1395.0, 517.0], [0.0, 0.0, 1.0]])
+    # Pixel centres at (i + 0.5) / scale - 0.5: the principal point moves with the pixel grid, not just by the factor.
+    to_scaled = np.array(
+        [[pixel_scale, 0.0, 0.5 * (pixel_scale - 1.0)], [0.0, pixel_scale, 0.5 * (pixel_scale - 1.0)], [0.0, 0.0, 1.0]]
+    )
+    K1, K2 = to_scaled @ K1, to_scaled @ K2
+    size = (round(IMAGE_SIZE[0] * pixel_scale), round(IMAGE_SIZE[1] * pixel_scale))
     # k1, k2, p1, p2, k3: mild barrel distortion of a typical 8 mm machine-vision lens.
     D1 = np.array([[-0.085, 0.060, 0.0004, -0.0003, 0.0]])
     D2 = np.array([[-0.080, 0.052, -0.0002, 0.0005, 0.0]])
@@ -32,7 +44,7 @@ def default_rig(baseline_mm: float = BASELINE_MM) -> Calibration:
     # ...and sits baseline_mm to its right; T is the left-to-right transform's translation (x_r = R x_l + T).
     right_centre_in_left = np.array([BASELINE_MM, -0.4, 0.6]) * baseline_mm / np.linalg.norm([BASELINE_MM, -0.4, 0.6])
     T = -R @ right_centre_in_left.reshape(3, 1)
-    return Calibration.from_extrinsics(IMAGE_SIZE, K1, D1, K2, D2, R, T)
+    return Calibration.from_extrinsics(size, K1, D1, K2, D2, R, T)
 
 
 def distorted_rig() -> Calibration:
@@ -58,6 +70,8 @@ def rig_for(name: str) -> Calibration:
         "distorted": distorted_rig,
         "wide": lambda: default_rig(WIDE_BASELINE_MM),
         "narrow": lambda: default_rig(NARROW_BASELINE_MM),
+        "coarse": lambda: default_rig(pixel_scale=COARSE_SCALE),
+        "fine": lambda: default_rig(pixel_scale=FINE_SCALE),
     }
     if name not in rigs:
         raise ValueError(f"rig must be one of {', '.join(rigs)}, got {name!r}")

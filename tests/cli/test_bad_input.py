@@ -221,6 +221,10 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
     "bench-sole: unknown --lighting": lambda d, _: Case(
         ["bench-sole", "--matrix", "--lighting", "sun"], "--lighting must be one of bars, shadowed-bars"
     ),
+    "bench-sole: --rig without --matrix": lambda d, _: Case(["bench-sole", "--rig", "fine"], "--rig needs --matrix"),
+    "bench-sole: unknown --rig": lambda d, _: Case(
+        ["bench-sole", "--matrix", "--rig", "pinhole"], "--rig must be one of default, distorted"
+    ),
     "bench-sole: --combined without --variations": lambda d, _: Case(
         ["bench-sole", "--matrix", "--combined"], "--combined needs --matrix --variations"
     ),

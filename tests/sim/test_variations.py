@@ -24,7 +24,7 @@ from cellctl.eval.sole_bench import (
     wall_height_true,
 )
 from cellctl.eval.sole_matrix import TOLERANCES, acceptance, bench_matrix, judge
-from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for
+from cellctl.sim.look import VARIATIONS, SceneLook, fair_refusals, look_for, rig_refusals
 from cellctl.sim.matrix import (
     END_VARIATIONS,
     MATRIX_COLOURS,
@@ -496,6 +496,25 @@ def test_other_rigs_keep_the_cameras_and_change_the_baseline() -> None:
     assert fair_refusals(("narrow-rig",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
 
 
+def test_coarse_and_fine_rigs_see_the_same_field_through_fewer_or_more_pixels() -> None:
+    """The `coarse` and `fine` rigs are the default's cameras with 0.75 and 1.25 times the pixels along each side:
+    a table point lands on the same place of the field, its pixel position scaled about the pixel grid's corner."""
+    from cellctl.sim.render import project, rig_pose
+    from cellctl.sim.rig import COARSE_SCALE, FINE_SCALE, default_rig, rig_for
+
+    points = np.array([[0.0, 0.0, 0.0], [140.0, -90.0, 0.0], [-150.0, 60.0, 45.0]])
+    default = default_rig()
+    for name, scale, size in (("coarse", COARSE_SCALE, (960, 768)), ("fine", FINE_SCALE, (1600, 1280))):
+        rig = rig_for(name)
+        assert rig.image_size == size
+        for side in ("left", "right"):
+            expected = (project(default, rig_pose(default), side, points) + 0.5) * scale - 0.5
+            np.testing.assert_allclose(project(rig, rig_pose(rig), side, points), expected, atol=1e-6)
+    assert look_for(("coarse-rig",), 0).rig == "coarse" and look_for(("fine-rig",), 0).rig == "fine"
+    assert fair_refusals(("coarse-rig",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
+    assert not fair_refusals(("fine-rig",))
+
+
 def test_off_image_sole_is_cut_by_an_image_edge_and_refused_for_it() -> None:
     """An end of the sole crosses an image's edge (by at most OFF_IMAGE_PX): no valid length exists, and the only
     right answer is the border refusal, which the measurement gives."""
@@ -562,6 +581,23 @@ def test_a_matrix_sole_relit_keeps_everything_but_its_lights() -> None:
     lit = MatrixSole(7, "grey", ("other-lights",))
     assert replace(lit, lighting="ring").look == replace(lit.look, lighting="ring")
     assert MatrixSole(7, "grey", ("plain",)).look.lighting == "bars"
+
+
+def test_a_matrix_sole_through_another_rig_keeps_its_scene_and_gains_the_rigs_fair_refusals() -> None:
+    """`cellctl bench-sole --matrix --rig NAME`: the same soles shot through other cameras, also over a variation
+    that sets the rig; a coarse rig's surface refusals become fair, a fine rig's add none."""
+    for sole in matrix_soles(30, 500)[:30]:
+        coarse = replace(sole, rig="coarse")
+        assert coarse.look == replace(sole.look, rig="coarse") and coarse.label == sole.label
+        assert coarse.fair_refusals == sole.fair_refusals | {
+            FailureKind.TOO_FEW_POINTS,
+            FailureKind.SURFACE_NOT_MEASURED,
+        }
+        assert replace(sole, rig="fine").fair_refusals == sole.fair_refusals
+    distorted = MatrixSole(7, "grey", ("distorted-rig",))
+    assert replace(distorted, rig="fine").look == replace(distorted.look, rig="fine")
+    with pytest.raises(ValueError, match="rig must be one of"):
+        rig_refusals("pinhole")
 
 
 def test_knurled_top_repeats_along_its_axes_out_of_the_matrix() -> None:
