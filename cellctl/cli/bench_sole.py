@@ -75,7 +75,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--rig",
         metavar="NAME",
         help="with --matrix: shoot every sole through this simulated rig, in place of the one its variations give "
-        "(default, distorted, wide, narrow, coarse: 960 x 768 px, fine: 1600 x 1280 px)",
+        "(default, distorted, wide, narrow, coarse: 960 x 768 px, fine: 1600 x 1280 px, near: 420 mm up, far: 750 mm "
+        "up; each measured with the depth range a line would set for it)",
     )
     parser.add_argument(
         "--declared-walls",

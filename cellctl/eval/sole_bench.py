@@ -26,7 +26,7 @@ from cellctl.vision.defaults import GLUE_OFFSET_MM, MORE_EXPOSURES
 from cellctl.vision.edge_checks import LOW_WALL_QUANTILE, WALL_HEIGHT_INSET_MM
 from cellctl.vision.image_noise import exposure_noise_dn
 from cellctl.vision.measurement import MeasurementRefused, MeasurementResult, SoleMeasurement, measure_sole
-from cellctl.vision.reconstruction import SoleReconstructor
+from cellctl.vision.reconstruction import DEFAULT_DEPTH_RANGE_MM, SoleReconstructor
 from cellctl.vision.teach import NoisyTeachError, TeachError, average_exposures
 
 CRASHED = "measurement raised"  # reason and failure of a sole whose measurement raised an exception
@@ -135,7 +135,12 @@ def empty_table_pair(
     return left, average_exposures([s.right for s in pairs]), exposure_noise_dn(pairs[-1].left, left)
 
 
-def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCache | None = None) -> SoleReconstructor:
+def taught_reconstructor(
+    calib: Calibration,
+    scene: SoleScene,
+    cache: RenderCache | None = None,
+    depth_range_mm: tuple[float, float] = DEFAULT_DEPTH_RANGE_MM,
+) -> SoleReconstructor:
     """A reconstructor with the scene's empty table taught from its own exposures (new sensor noise): TEACH_SHOTS
     of them, NOISY_TEACH_SHOTS where the refusal says the images are too noisy to teach from fewer.
 
@@ -145,12 +150,13 @@ def taught_reconstructor(calib: Calibration, scene: SoleScene, cache: RenderCach
     for shots in (TEACH_SHOTS, NOISY_TEACH_SHOTS):
         left, right, noise = empty_table_pair(scene, cache, shots)
         try:
-            return SoleReconstructor(calib, taught=SoleReconstructor(calib).teach(left, right, noise))
+            taught = SoleReconstructor(calib, depth_range_mm).teach(left, right, noise)
+            return SoleReconstructor(calib, depth_range_mm, taught=taught)
         except NoisyTeachError:
             continue
         except TeachError:
             break
-    return SoleReconstructor(calib)
+    return SoleReconstructor(calib, depth_range_mm)
 
 
 def scene_exposures(

@@ -37,7 +37,7 @@ from cellctl.sim.appearance import DARK_ACCENT, LIGHT_ACCENT, SOLE_MATERIALS, TA
 from cellctl.sim.look import SceneLook
 from cellctl.sim.matrix import MatrixSole
 from cellctl.sim.render_cache import RenderCache
-from cellctl.sim.rig import rig_for
+from cellctl.sim.rig import depth_range_for, rig_for
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.checks import MAX_GLUE_UNCOVERED
@@ -166,11 +166,13 @@ def bench_matrix(
         look = sole.look
         key = "given" if calib is not None else look.rig
         if key not in reconstructors:
-            reconstructors[key] = SoleReconstructor(calib if calib is not None else rig_for(look.rig))
+            reconstructors[key] = SoleReconstructor(
+                calib if calib is not None else rig_for(look.rig), depth_range_for(look.rig)
+            )
         reconstructor = reconstructors[key]
         scene = SoleScene.random(sole.seed, sole.color, reconstructor.calib, look)
         if taught:
-            reconstructor = taught_reconstructor(reconstructor.calib, scene, cache)
+            reconstructor = taught_reconstructor(reconstructor.calib, scene, cache, depth_range_for(look.rig))
         label = sole.label + fallback_note(taught, reconstructor)
         row = measure_scene(reconstructor, scene, label, cache, declared_walls, frames, retry_frames)
         result = judge(sole, row)

@@ -34,7 +34,7 @@ HEIGHT_CLASSES = ("normal", "flat", "tall")
 COLOUR_SCHEMES = ("plain", "rim", "logo", "patches")
 TABLE_LOOKS = ("dark", "grey", "patterned", "light")
 NOISE_LEVELS = ("normal", "heavy")
-RIGS = ("default", "distorted", "wide", "narrow", "coarse", "fine")  # cellctl.sim.rig.rig_for
+RIGS = ("default", "distorted", "wide", "narrow", "coarse", "fine", "near", "far")  # cellctl.sim.rig.rig_for
 HEADINGS = ("along", "any")
 PLACEMENTS = ("in-view", "off-image")
 SIZES = ("normal", "small", "large")  # cellctl.sim.sole.SIZE_LENGTH_RANGES_MM
@@ -379,6 +379,25 @@ VARIATIONS: dict[str, Variation] = {
             "cameras of 1600 x 1280 pixels (0.31 mm per pixel at the table)",
             ("rig",),
             _set(rig="fine"),
+            in_matrix=False,
+        ),
+        # Mounted lower with a wider lens, or higher with a longer one, seeing the same table through the same pixels:
+        # the rays at the sole's edges lean further from the vertical (near) or less (far), and depth per disparity
+        # pixel is finer or 1.36 x coarser (refusing the far rig's surface is right there). Its depth range is what a
+        # line would configure (rig.depth_range_for).
+        Variation(
+            "near-rig",
+            "the rig mounted 420 mm above the table with a wider lens (550 mm by default): more oblique views",
+            ("rig",),
+            _set(rig="near"),
+            in_matrix=False,
+        ),
+        Variation(
+            "far-rig",
+            "the rig mounted 750 mm above the table with a longer lens: steeper views, coarser depth",
+            ("rig",),
+            _set(rig="far"),
+            _SURFACE_LOST,
             in_matrix=False,
         ),
         # Outside the matrix for the same reason: a rig mounted well off square to the table. The glue heights'

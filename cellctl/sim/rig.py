@@ -11,7 +11,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from cellctl.sim.render import RIG_HEIGHT_MM
 from cellctl.vision.calibration import Calibration
+from cellctl.vision.defaults import DEPTH_RANGE_MM
 
 IMAGE_SIZE: tuple[int, int] = (1280, 1024)  # (width, height) px
 BASELINE_MM: float = 60.0
@@ -22,14 +24,21 @@ NARROW_BASELINE_MM: float = 40.0  # the `narrow` rig: closer together
 # threshold the measurement states in pixels is then met at another size in millimetres.
 COARSE_SCALE: float = 0.75
 FINE_SCALE: float = 1.25
+# Mounted lower or higher, with a wider or a longer lens that sees the same table (focal lengths times the height
+# against RIG_HEIGHT_MM): the same pixels on the table, but the rays at the sole's edges lean 1.3 times as far from
+# the vertical on the `near` rig (up to ~25 degrees at a long sole's ends) and 0.7 times on the `far` one, and depth
+# per disparity pixel is 0.76 and 1.36 times the default's.
+NEAR_HEIGHT_MM: float = 420.0
+FAR_HEIGHT_MM: float = 750.0
 
 
-def default_rig(baseline_mm: float = BASELINE_MM, pixel_scale: float = 1.0) -> Calibration:
+def default_rig(baseline_mm: float = BASELINE_MM, pixel_scale: float = 1.0, focal_scale: float = 1.0) -> Calibration:
     """The true calibration of the simulated rig (what a perfect calibration would find), its cameras
     `baseline_mm` apart, their sensors `pixel_scale` times the default's pixels along each side (the same field of
-    view: focal lengths and principal points scale with the image)."""
-    K1 = np.array([[1402.0, 0.0, 645.0], [0.0, 1399.0, 508.0], [0.0, 0.0, 1.0]])
-    K2 = np.array([[1396.0, 0.0, 633.0], [0.0, 1395.0, 517.0], [0.0, 0.0, 1.0]])
+    view: focal lengths and principal points scale with the image), their lenses' focal lengths `focal_scale` times
+    the default's (a narrower field of view above 1)."""
+    K1 = np.array([[1402.0 * focal_scale, 0.0, 645.0], [0.0, 1399.0 * focal_scale, 508.0], [0.0, 0.0, 1.0]])
+    K2 = np.array([[1396.0 * focal_scale, 0.0, 633.0], [0.0, 1395.0 * focal_scale, 517.0], [0.0, 0.0, 1.0]])
     # Pixel centres at (i + 0.5) / scale - 0.5: the principal point moves with the pixel grid, not just by the factor.
     to_scaled = np.array(
         [[pixel_scale, 0.0, 0.5 * (pixel_scale - 1.0)], [0.0, pixel_scale, 0.5 * (pixel_scale - 1.0)], [0.0, 0.0, 1.0]]
@@ -72,7 +81,21 @@ def rig_for(name: str) -> Calibration:
         "narrow": lambda: default_rig(NARROW_BASELINE_MM),
         "coarse": lambda: default_rig(pixel_scale=COARSE_SCALE),
         "fine": lambda: default_rig(pixel_scale=FINE_SCALE),
+        "near": lambda: default_rig(focal_scale=NEAR_HEIGHT_MM / RIG_HEIGHT_MM),
+        "far": lambda: default_rig(focal_scale=FAR_HEIGHT_MM / RIG_HEIGHT_MM),
     }
     if name not in rigs:
         raise ValueError(f"rig must be one of {', '.join(rigs)}, got {name!r}")
     return rigs[name]()
+
+
+def rig_height_for(name: str) -> float:
+    """How high above the table the rig a SceneLook names is mounted (its baseline's mid-point), mm."""
+    return {"near": NEAR_HEIGHT_MM, "far": FAR_HEIGHT_MM}.get(name, RIG_HEIGHT_MM)
+
+
+def depth_range_for(name: str) -> tuple[float, float]:
+    """The depth range a line would configure for the rig a SceneLook names ([measure] depth_range_mm): the cell's
+    default range moved with the rig's height, so that it holds the table and the tallest sole above it."""
+    shift = rig_height_for(name) - RIG_HEIGHT_MM
+    return DEPTH_RANGE_MM[0] + shift, DEPTH_RANGE_MM[1] + shift

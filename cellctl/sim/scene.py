@@ -54,9 +54,9 @@ class SoleScene:
         if color not in SOLE_MATERIALS:
             raise ValueError(f"sole colour must be one of {', '.join(SOLE_MATERIALS)}, got {color!r}")
         look = look or SceneLook()
-        if calib is None:
-            from cellctl.sim.rig import rig_for
+        from cellctl.sim.rig import rig_for, rig_height_for
 
+        if calib is None:
             calib = rig_for(look.rig)
         rng = np.random.default_rng(seed)
         for _ in range(SHAPE_ATTEMPTS):  # a plain sole always passes at once: the plain scenes stay as they were
@@ -64,7 +64,7 @@ class SoleScene:
             upright = SoleModel(shape, SolePose(0.0, 0.0, 0.0, False))
             if upright.truth().half_area_difference >= MEASURABLE_HALF_AREA_DIFFERENCE:
                 break
-        camera_pose = rig_pose(calib, tilt_deg=mount_tilt(look.rig_tilt_deg))
+        camera_pose = rig_pose(calib, rig_height_for(look.rig), mount_tilt(look.rig_tilt_deg))
         half_turn = 180.0 if look.heading == "any" else 35.0
         off_image = look.placement == "off-image"
         for _ in range(PLACEMENT_ATTEMPTS):

@@ -515,6 +515,31 @@ def test_coarse_and_fine_rigs_see_the_same_field_through_fewer_or_more_pixels() 
     assert not fair_refusals(("fine-rig",))
 
 
+def test_near_and_far_rigs_see_the_same_table_from_another_height() -> None:
+    """The `near` and `far` rigs are mounted lower and higher with lenses that keep the table's field (within the
+    tilt's and the baseline's offsets), so what changes is how far a raised point moves in the image (the views'
+    obliqueness), and the depth range a line would set holds the table with room for the tallest sole."""
+    from cellctl.sim.render import project, rig_pose
+    from cellctl.sim.rig import depth_range_for, rig_for, rig_height_for
+
+    table = np.array([[0.0, 0.0, 0.0], [150.0, 100.0, 0.0], [-150.0, -100.0, 0.0]])
+    raised = table + [0.0, 0.0, 40.0]
+
+    def seen(name: str, points: np.ndarray) -> np.ndarray:
+        calib = rig_for(name)
+        return project(calib, rig_pose(calib, rig_height_for(name)), "left", points)
+
+    parallax = {}
+    for name in ("near", "default", "far"):
+        assert np.abs(seen(name, table) - seen("default", table)).max() < 25.0  # 2 % of the image
+        parallax[name] = float(np.linalg.norm(seen(name, raised)[1:] - seen(name, table)[1:], axis=1).mean())
+        low, high = depth_range_for(name)
+        assert low <= rig_height_for(name) - 60.0 and rig_height_for(name) + 20.0 <= high
+    assert parallax["near"] > 1.2 * parallax["default"] > 1.2**2 * parallax["far"]
+    assert look_for(("near-rig",), 0).rig == "near" and look_for(("far-rig",), 0).rig == "far"
+    assert fair_refusals(("far-rig",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
+
+
 def test_off_image_sole_is_cut_by_an_image_edge_and_refused_for_it() -> None:
     """An end of the sole crosses an image's edge (by at most OFF_IMAGE_PX): no valid length exists, and the only
     right answer is the border refusal, which the measurement gives."""
@@ -745,7 +770,11 @@ def test_a_sole_asked_taught_but_measured_untaught_says_so(monkeypatch: pytest.M
     import cellctl.eval.sole_matrix as sole_matrix
     from cellctl.vision.reconstruction import SoleReconstructor
 
-    monkeypatch.setattr(sole_matrix, "taught_reconstructor", lambda calib, scene, cache=None: SoleReconstructor(calib))
+    monkeypatch.setattr(
+        sole_matrix,
+        "taught_reconstructor",
+        lambda calib, scene, cache=None, depth_range_mm=None: SoleReconstructor(calib),
+    )
     results = bench_matrix([MatrixSole(21, "white", ("plain",))], half_size_rig(), taught=True)
     assert results[0].row.variations == "plain+untaught"
     assert "1 of them measured untaught, their empty table not taught: 21." in sole_matrix.matrix_markdown(results, "x")
