@@ -21,10 +21,10 @@ import numpy as np
 from cellctl.sim.appearance import SOLE_MATERIALS, TABLES, ColourScheme, Texture, lights, sole_material, table_texture
 from cellctl.sim.look import SceneLook
 from cellctl.sim.raycast import SOLE_GEOMETRY, TABLE_GEOMETRY, RayCaster
+from cellctl.sim.rig import RIG_HEIGHT_MM
 from cellctl.sim.sole import SoleModel
 from cellctl.vision.calibration import Calibration
 
-RIG_HEIGHT_MM = 550.0  # rig (baseline mid-point) above the table
 RIG_TILT_DEG = (2.0, -1.0)  # a rig is never mounted perfectly level: about its x and y axes
 
 PART_TOP, PART_WALL, PART_UNDERSIDE, PART_EDGE = 0, 1, 2, 3  # PART_EDGE: top surface within the edge profile

@@ -1,6 +1,6 @@
 """The simulated stereo rig: the "true" cameras behind every simulated image.
 
-Two 1280x1024 cameras 60 mm apart looking down at the table from about 550 mm (cellctl.sim.render.RIG_HEIGHT_MM),
+Two 1280x1024 cameras 60 mm apart looking down at the table from about 550 mm (RIG_HEIGHT_MM),
 with a focal length chosen so that a 300 mm sole covers about 60 % of the image width (300 mm * 1400 px / 550 mm = 764 px), and the
 small imperfections a real rig has: slightly different intrinsics, a tilt of under a degree between the
 cameras and mild barrel distortion. Calibrating simulated checkerboard pairs must recover these values.
@@ -11,11 +11,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from cellctl.sim.render import RIG_HEIGHT_MM
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.defaults import DEPTH_RANGE_MM
 
 IMAGE_SIZE: tuple[int, int] = (1280, 1024)  # (width, height) px
+# The rig's baseline mid-point above the table. Here rather than beside the renderer that poses the cameras
+# (cellctl.sim.render.rig_pose): the rigs' heights derive from it, and importing the renderer for one number cost
+# every user of the rigs (`cellctl simulate checkerboard`) about a second of start-up.
+RIG_HEIGHT_MM: float = 550.0
 BASELINE_MM: float = 60.0
 WIDE_BASELINE_MM: float = 100.0  # the `wide` rig (SceneLook.rig): the same cameras further apart
 NARROW_BASELINE_MM: float = 40.0  # the `narrow` rig: closer together
