@@ -164,15 +164,14 @@ def bench_matrix(
     rows = []
     for sole in soles:
         look = sole.look
-        key = "given" if calib is not None else look.rig
-        if key not in reconstructors:
-            reconstructors[key] = SoleReconstructor(
-                calib if calib is not None else rig_for(look.rig), depth_range_for(look.rig)
-            )
-        reconstructor = reconstructors[key]
+        # One per rig, given calibration or not: the rig's height sets the scene's camera pose and the depth range.
+        depth_range = depth_range_for(look.rig)
+        if look.rig not in reconstructors:
+            reconstructors[look.rig] = SoleReconstructor(calib if calib is not None else rig_for(look.rig), depth_range)
+        reconstructor = reconstructors[look.rig]
         scene = SoleScene.random(sole.seed, sole.color, reconstructor.calib, look)
         if taught:
-            reconstructor = taught_reconstructor(reconstructor.calib, scene, cache, depth_range_for(look.rig))
+            reconstructor = taught_reconstructor(reconstructor.calib, scene, cache, depth_range)
         label = sole.label + fallback_note(taught, reconstructor)
         row = measure_scene(reconstructor, scene, label, cache, declared_walls, frames, retry_frames)
         result = judge(sole, row)
