@@ -41,8 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import cv2
-
+    from cellctl.images import read_image
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.checks import CALIBRATED_OBLIQUENESS_DEG, too_oblique
     from cellctl.vision.defaults import DEPTH_RANGE_MM
@@ -55,10 +54,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"give the images as LEFT RIGHT pairs, got {len(args.images)} images")
     images = []
     for path in args.images:
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise UserError(f"cannot read image {path}: give the path of a PNG or JPEG of the empty table")
-        images.append(image)
+        try:
+            images.append(read_image(path, what="empty-table image"))
+        except ValueError as exc:
+            raise UserError(f"{exc}: give the path of a PNG or JPEG of the empty table") from None
     depth_range = tuple(args.depth_range) if args.depth_range else DEPTH_RANGE_MM
     try:
         left, right = average_exposures(images[0::2]), average_exposures(images[1::2])

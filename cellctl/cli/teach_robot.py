@@ -119,8 +119,7 @@ def read_points(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _locate(args: argparse.Namespace) -> int:
     """Find the markers, write the teach CSV with the cell's coordinates filled in."""
-    import cv2
-
+    from cellctl.images import read_image
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.reconstruction import SoleReconstructor
     from cellctl.vision.table import find_table
@@ -134,9 +133,10 @@ def _locate(args: argparse.Namespace) -> int:
     calib = Calibration.load(config.calibration.path)
     images = _grab(config, calib) if args.locate_live else []
     for side, path in zip(("LEFT", "RIGHT"), args.locate or []):
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise UserError(f"{side} image {path} does not exist or is not an image")
+        try:
+            image = read_image(path, what=f"{side} image")
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
         try:
             calib.check_image(image)
         except ValueError as exc:

@@ -166,6 +166,14 @@ CASES: dict[str, Callable[[Path, int], Case]] = {
         ["measure", "--calib", str(d / "calib.yaml"), str(d / "bomb.png"), str(d / "grey.png")],
         "larger than any camera image",
     ),
+    "teach: image bomb": lambda d, _: Case(
+        ["teach", "--calib", str(d / "calib.yaml"), str(d / "bomb.png"), str(d / "grey.png")],
+        "larger than any camera image",
+    ),
+    "teach: missing image": lambda d, _: Case(
+        ["teach", "--calib", str(d / "calib.yaml"), str(d / "grey.png"), str(d / "absent.png")],
+        "does not exist",
+    ),
     "measure: glue spacing 1e-6": lambda d, _: Case(
         [
             "measure",
