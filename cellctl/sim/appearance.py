@@ -98,6 +98,8 @@ def sole_material(color: str, look: SceneLook) -> Material:
         base = Material(base.albedo_bgr, octaves, base.specular, base.shininess)
     if look.gloss:
         return Material(base.albedo_bgr, base.octaves, *GLOSS)
+    if look.sheen_weight > 0.0:
+        return Material(base.albedo_bgr, base.octaves, look.sheen_weight, look.sheen_shininess)
     return base
 
 

@@ -71,6 +71,11 @@ class SceneLook:
     right_gain: float = DEFAULT_RIGHT_GAIN
     right_gamma: float = 1.0  # output = input ** gamma on the right camera only (1: linear)
     gloss: bool = False  # strong view-dependent highlights: they sit at different places in the two views
+    # A satin finish: a broad, weak specular lobe in place of the material's own (Blinn-Phong weight and exponent;
+    # weight 0: the material's). Where the lights' reflection falls differs between the views, as with gloss, but
+    # as a smooth sheen over much of the top, not as small saturated highlights.
+    sheen_weight: float = 0.0
+    sheen_shininess: float = 0.0
     noise: str = "normal"  # NOISE_LEVELS
     noise_scale: float = 1.0  # the sensor's noise (read and shot) times this: a camera noisier than the level's
     # Defocus beyond the lens's usual blur (render.LENS_BLUR_PX), as a Gaussian sigma in pixels added in quadrature,
@@ -127,6 +132,8 @@ class SceneLook:
             raise ValueError("right camera gain and gamma must be positive")
         if self.knurl_period_mm < 0.0 or not 0.0 <= self.knurl_contrast < 1.0:
             raise ValueError("a knurl's period must be >= 0 mm and its contrast in [0, 1)")
+        if not 0.0 <= self.sheen_weight < 1.0 or (self.sheen_weight > 0.0 and self.sheen_shininess <= 0.0):
+            raise ValueError("a sheen's weight must be in [0, 1), its exponent positive")
         if self.texture_contrast <= 0.0:
             raise ValueError("the sole's texture contrast must be positive")
         if self.noise_scale <= 0.0:
@@ -321,6 +328,18 @@ VARIATIONS: dict[str, Variation] = {
             "sole texture contrast 50-65 % of its material's (a smoother moulding, finer grain)",
             ("texture_contrast",),
             _draw(texture_contrast=(0.50, 0.65)),
+            _SURFACE_LOST,
+            in_matrix=False,
+        ),
+        # Outside the matrix for the same reason: a satin finish, the reflection of the lights spread over the top
+        # (rubber fresh from the mould, a sprayed or lacquered sole) rather than gloss's small saturated highlights.
+        # Its brightness differs between the views by up to a third of a black sole's diffuse light, smoothly: the
+        # census half of the cost is blind to it, the intensity half is not. Refusing the surface is fair.
+        Variation(
+            "satin",
+            "a satin finish: a broad sheen (Blinn-Phong weight 0.12-0.3, exponent 12-50) that differs between the views",
+            ("sheen_weight", "sheen_shininess"),
+            _draw(sheen_weight=(0.12, 0.30), sheen_shininess=(12.0, 50.0)),
             _SURFACE_LOST,
             in_matrix=False,
         ),

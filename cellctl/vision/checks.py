@@ -432,8 +432,9 @@ def check_glue_coverage(covered: np.ndarray) -> CheckFailure | None:
         return CheckFailure(
             FailureKind.SURFACE_NOT_MEASURED,
             f"{100 * uncovered:.0f} % of the glue path runs where no surface was measured within "
-            f"{GLUE_COVER_RADIUS_MM:g} mm (a steep or rounded edge the cameras do not see; need at most "
-            f"{100 * MAX_GLUE_UNCOVERED:.0f} %): its heights there would not be measurements",
+            f"{GLUE_COVER_RADIUS_MM:g} mm (a steep or rounded edge the cameras do not see, or a top too smooth or "
+            f"glary there to match; need at most {100 * MAX_GLUE_UNCOVERED:.0f} %): its heights there would not be "
+            "measurements",
         )
     return None
 

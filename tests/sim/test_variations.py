@@ -473,6 +473,46 @@ def test_faint_texture_is_the_same_pattern_fainter() -> None:
     assert plain is SOLE_MATERIALS["black"]  # the default look renders exactly as before the variation existed
 
 
+def test_satin_is_a_broad_sheen_that_differs_between_the_views() -> None:
+    """satin replaces the material's weak specular lobe by a broad one: under the cell's bars it lights most of a
+    flat top (gloss only a quarter of it, in small saturated spots), adds more than half a black sole's diffuse
+    light, and two eyes 60 mm apart see it differently, several times as much as the material's own lobe; albedo
+    and texture stay. Out of the matrix, its fair refusals are the lost surface's."""
+    from cellctl.sim.appearance import LIGHTS_MM, SOLE_MATERIALS, sole_material
+    from cellctl.sim.render import AMBIENT, _lighting
+
+    look = look_for(("satin",), 5)
+    assert 0.12 <= look.sheen_weight <= 0.30 and 12.0 <= look.sheen_shininess <= 50.0
+    assert "satin" not in MATRIX_ENTRIES
+    assert fair_refusals(("satin",)) == {FailureKind.TOO_FEW_POINTS, FailureKind.SURFACE_NOT_MEASURED}
+    x, y = np.meshgrid(np.linspace(-140.0, 140.0, 57), np.linspace(-60.0, 60.0, 25))
+    top = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 25.0)])
+    up = np.tile([0.0, 0.0, 1.0], (len(top), 1))
+
+    def radiance(look: SceneLook) -> tuple[np.ndarray, np.ndarray, float]:
+        """(left and right eyes' radiance, specular part seen from the left, diffuse mean) of a black top."""
+        material = sole_material("black", look)
+        seen = []
+        for eye in ([-30.0, 0.0, 550.0], [30.0, 0.0, 550.0]):
+            shininess = np.full(len(top), material.shininess, np.float32)
+            diffuse, highlight = _lighting(top, up, np.array(eye), shininess, LIGHTS_MM, np.ones(2))
+            seen.append((material.albedo_bgr[1] * (AMBIENT + diffuse), material.specular * highlight))
+        difference = np.abs(sum(seen[0]) - sum(seen[1]))
+        return difference, seen[0][1], float(seen[0][0].mean())
+
+    plain_difference, _, _ = radiance(SceneLook())
+    satin_difference, sheen, diffuse = radiance(look)
+    _, gloss, _ = radiance(SceneLook(gloss=True))
+    assert np.mean(sheen > sheen.max() / 2) > 0.9 and np.mean(gloss > gloss.max() / 2) < 0.5
+    assert sheen.max() > 0.5 * diffuse
+    assert satin_difference.mean() > 3.0 * plain_difference.mean()
+    satin = sole_material("black", look)
+    assert satin.albedo_bgr == SOLE_MATERIALS["black"].albedo_bgr and satin.octaves == SOLE_MATERIALS["black"].octaves
+    assert SceneLook().sheen_weight == 0.0  # the default look renders exactly as before the variation existed
+    with pytest.raises(ValueError, match="sheen"):
+        SceneLook(sheen_weight=0.2)
+
+
 def test_any_heading_turns_the_sole_across_the_image_rows() -> None:
     """The matrix's soles lie along the image rows (within 35 degrees, either way round); any-heading draws the
     whole circle, so some lie across them. Out of the matrix, judged like any entry."""
