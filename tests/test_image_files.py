@@ -1,4 +1,5 @@
-"""Image files: sizes read from headers, and bombs refused before they are decoded (issue 15, finding 9)."""
+"""Image files: sizes read from headers, bombs refused before they are decoded (issue 15, finding 9), lossy
+formats told by their magic bytes."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cellctl.images import image_size, read_image
+from cellctl.images import image_size, lossy_format, read_image
 
 
 @pytest.mark.parametrize("suffix", [".png", ".jpg", ".bmp"])
@@ -36,3 +37,13 @@ def test_unreadable_files_are_named(tmp_path: Path) -> None:
     (tmp_path / "text.png").write_text("not an image")
     with pytest.raises(ValueError, match="cannot be read as an image"):
         read_image(tmp_path / "text.png")
+
+
+@pytest.mark.parametrize(
+    ("suffix", "kind"), [(".png", None), (".bmp", None), (".tiff", None), (".jpg", "JPEG"), (".webp", "WebP")]
+)
+def test_lossy_formats_are_told_by_their_content(tmp_path: Path, suffix: str, kind: str | None) -> None:
+    path = tmp_path / f"image{suffix}"
+    assert cv2.imwrite(str(path), np.zeros((8, 8, 3), np.uint8))
+    renamed = path.rename(tmp_path / "image.png")  # the name says PNG; the bytes decide
+    assert lossy_format(renamed) == kind

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -95,6 +96,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import cv2
 
+    from cellctl.images import lossy_warning
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.defaults import GLUE_HEIGHT_TOLERANCE_MM, GLUE_OFFSET_MM, GLUE_SPACING_MM
     from cellctl.vision.measurement import check_glue_settings, measure_sole
@@ -122,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
     if mean is not None:
         named += [("MEAN_LEFT", args.mean[0], mean[0]), ("MEAN_RIGHT", args.mean[1], mean[1])]
     for name, path, image in named:
+        if warning := lossy_warning(path, f"{name} image"):
+            print(warning, file=sys.stderr)
         try:
             calib.check_image(image)
         except ValueError as exc:

@@ -7,6 +7,7 @@ use them from then on. Exit status: 0 taught, 2 bad input or the table could not
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from cellctl.errors import UserError
@@ -41,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cellctl.images import read_image
+    from cellctl.images import lossy_warning, read_image
     from cellctl.vision.calibration import Calibration
     from cellctl.vision.checks import CALIBRATED_OBLIQUENESS_DEG, too_oblique
     from cellctl.vision.defaults import DEPTH_RANGE_MM
@@ -58,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
             images.append(read_image(path, what="empty-table image"))
         except ValueError as exc:
             raise UserError(f"{exc}: give the path of a PNG or JPEG of the empty table") from None
+        if warning := lossy_warning(path, "empty-table image"):
+            print(warning, file=sys.stderr)
     depth_range = tuple(args.depth_range) if args.depth_range else DEPTH_RANGE_MM
     try:
         left, right = average_exposures(images[0::2]), average_exposures(images[1::2])

@@ -57,6 +57,7 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         cv2.imwrite(str(d / f"{name}.png"), np.full((height, width, 3), level, np.uint8))
     texture = np.random.default_rng(1).integers(0, 256, (height, width, 3), dtype=np.uint8)
     cv2.imwrite(str(d / "texture.png"), texture)  # a view unlike the grey one: not its mean
+    cv2.imwrite(str(d / "black.jpg"), np.zeros((height, width, 3), np.uint8))
     bomb = bytearray((d / "grey.png").read_bytes())
     bomb[16:24] = (20000).to_bytes(4, "big") * 2  # the IHDR says 20000 x 20000: 3.7 GB if decoded
     (d / "bomb.png").write_bytes(bytes(bomb))
@@ -272,6 +273,18 @@ def test_bad_input_gives_one_line_and_a_non_zero_exit(workdir: Path, taken_port:
         lines = [line for line in lines if " INFO " not in line]
     assert len(lines) == 1, text  # one line, nothing else on that stream
     assert case.says in stream, text
+
+
+def test_a_jpeg_pair_is_measured_with_a_warning_naming_its_lossy_compression(workdir: Path) -> None:
+    """Lossy images are measured, not refused for their format, but a refusal for the surface would otherwise
+    name only texture, noise and focus: one warning line per JPEG on stderr, the result's one line on stdout."""
+    jpeg, png = str(workdir / "black.jpg"), str(workdir / "black.png")
+    result = run(["measure", "--untaught", "--calib", str(workdir / "calib.yaml"), jpeg, png], workdir)
+    assert result.returncode == 1 and "Traceback" not in result.stderr, result.stderr
+    assert len(result.stdout.strip().splitlines()) == 1 and "too few measured points" in result.stdout
+    warnings = result.stderr.strip().splitlines()
+    assert len(warnings) == 1 and warnings[0].startswith(f"warning: LEFT image {jpeg} is a JPEG"), result.stderr
+    assert "losslessly" in warnings[0]
 
 
 def test_results_into_a_closed_pipe_ends_quietly(workdir: Path) -> None:
