@@ -13,7 +13,7 @@ the matrix's entries are meant to be measurable, so most list none: a refusal of
 measurement, and its reason is judged against the kinds listed. Entries outside the matrix (`in_matrix`
 False) run only when named: "camouflage" is unmeasurable by design (only a refusal with its kind is right);
 "off-image" (the sole runs off an image) is unmeasurable by design too; "faint-texture", "any-heading",
-"light-table", "other-lights", "knurled-top", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise",
+"light-table", "other-lights", "ambient-occlusion", "knurled-top", "wide-rig", "narrow-rig", "tilted-rig", "moderate-noise",
 "soft-focus", "dim-exposure", "small-sole", "large-sole", "narrow-sole", "wide-sole", "waisted-sole",
 "dished-top", "domed-top" and "sprung-toe" are kept out so that the matrix sets keep their soles, and are judged
 like any entry.
@@ -68,6 +68,9 @@ class SceneLook:
     lighting: str = "bars"
     light_azimuth_deg: float = 0.0  # where the overhead lamp's offset or the side bar points, about the table's z
     ambient_scale: float = 1.0  # the room's diffuse light against the simulator's usual (render.AMBIENT)
+    # The sole hides part of the room's diffuse light from the table at its foot (cellctl.sim.occlusion): the
+    # strength of that darkening, a factor on the share of the sky the sole blocks (0: none, as every render before).
+    ambient_occlusion: float = 0.0
     right_gain: float = DEFAULT_RIGHT_GAIN
     right_gamma: float = 1.0  # output = input ** gamma on the right camera only (1: linear)
     gloss: bool = False  # strong view-dependent highlights: they sit at different places in the two views
@@ -134,6 +137,8 @@ class SceneLook:
             raise ValueError("a knurl's period must be >= 0 mm and its contrast in [0, 1)")
         if not 0.0 <= self.sheen_weight < 1.0 or (self.sheen_weight > 0.0 and self.sheen_shininess <= 0.0):
             raise ValueError("a sheen's weight must be in [0, 1), its exponent positive")
+        if not 0.0 <= self.ambient_occlusion <= 1.0:
+            raise ValueError("the ambient occlusion's strength must be in [0, 1]")
         if self.texture_contrast <= 0.0:
             raise ValueError("the sole's texture contrast must be positive")
         if self.noise_scale <= 0.0:
@@ -264,6 +269,16 @@ VARIATIONS: dict[str, Variation] = {
                 light_azimuth_deg=float(rng.uniform(0.0, 360.0)),
                 ambient_scale=float(rng.uniform(0.5, 1.5)),
             ),
+            in_matrix=False,
+        ),
+        # Outside the matrix so that its sets keep their soles: the dark band a physically based renderer draws on
+        # the table at the foot of the sole (the sole hides part of the room's light), which the simulator's uniform
+        # ambient light never had. It lies on the table, in both views, in neither taught image; measurable.
+        Variation(
+            "ambient-occlusion",
+            "the table darkened at the sole's foot where the sole hides the room's light (strength 0.6-1.0)",
+            ("ambient_occlusion",),
+            _draw(ambient_occlusion=(0.6, 1.0)),
             in_matrix=False,
         ),
         Variation("gain-low", "right camera 15-20 % darker", ("right_gain",), _draw(right_gain=(0.80, 0.85))),

@@ -20,6 +20,7 @@ import numpy as np
 
 from cellctl.sim.appearance import SOLE_MATERIALS, TABLES, ColourScheme, Texture, lights, sole_material, table_texture
 from cellctl.sim.look import SceneLook
+from cellctl.sim.occlusion import sky_fraction
 from cellctl.sim.raycast import SOLE_GEOMETRY, TABLE_GEOMETRY, RayCaster
 from cellctl.sim.rig import RIG_HEIGHT_MM
 from cellctl.sim.sole import SoleModel
@@ -201,7 +202,10 @@ class SceneRenderer:
         diffuse, highlight = _lighting(
             points, normals, pose[:3, 3], shininess, self.lights, self.light_power, lit, ambient
         )
-        radiance = albedo * (texture * (ambient + diffuse))[:, None] + (specular * highlight)[:, None]
+        room = np.full(n, ambient, np.float32)  # the room's diffuse light, less what the sole hides from the table
+        if self.look.ambient_occlusion > 0.0 and self.sole is not None and np.any(table):
+            room[table] *= sky_fraction(self.sole, points[table, :2], self.look.ambient_occlusion)
+        radiance = albedo * (texture * (room + diffuse))[:, None] + (specular * highlight)[:, None]
         radiance[hits["geometry"] < 0] = 0.0
         return radiance * EXPOSURE_DN
 

@@ -473,6 +473,44 @@ def test_faint_texture_is_the_same_pattern_fainter() -> None:
     assert plain is SOLE_MATERIALS["black"]  # the default look renders exactly as before the variation existed
 
 
+def test_ambient_occlusion_darkens_the_table_at_the_foot_over_about_the_wall_height() -> None:
+    """ambient-occlusion: beside the sole the table gets the room's light less the share of the sky the sole hides,
+    about half at its foot, fading over about the wall's height (so further beside the tall heel than the thin
+    toe), none under the sole or far away; out of the matrix, measurable (no fair refusal)."""
+    from cellctl.sim.occlusion import sky_fraction
+    from cellctl.sim.rig import default_rig
+
+    look = look_for(("ambient-occlusion",), 3)
+    assert 0.6 <= look.ambient_occlusion <= 1.0 and "ambient-occlusion" not in MATRIX_ENTRIES
+    assert fair_refusals(("ambient-occlusion",)) == frozenset()
+    sole = SoleScene.random(5, "black", default_rig(), SceneLook()).sole
+    assert sole is not None
+    outline = sole.footprint_table()
+    centre = outline.mean(axis=0)
+    axis = np.linalg.svd(outline - centre, full_matrices=False)[2][0]
+    along = (outline - centre) @ axis
+    ends = {}
+    for name, index in (("heel", int(np.argmin(along))), ("toe", int(np.argmax(along)))):
+        out = outline[index] - centre
+        out /= np.linalg.norm(out)
+        steps = np.array([-10.0, 0.3, 2.0, 5.0, 10.0, 20.0, 40.0, 140.0])
+        ends[name] = sky_fraction(sole, outline[index] + steps[:, None] * out, 1.0)
+        heights = sole.top_height_at(outline[index] - 5.0 * out[None, :])
+        assert ends[name][0] == 1.0 and ends[name][-1] > 0.97  # under the sole; far away
+        assert 0.5 <= ends[name][1] < 0.6 and np.all(np.diff(ends[name][1:]) > 0)
+        ends[name] = (ends[name], float(heights[0]))
+        foot = outline[index : index + 1] + 0.3 * out
+        half = sky_fraction(sole, foot, 0.5)
+        np.testing.assert_allclose(1.0 - half, 0.5 * (1.0 - sky_fraction(sole, foot, 1.0)), rtol=1e-5)
+    (heel, heel_height), (toe, toe_height) = ends["heel"], ends["toe"]
+    if heel_height < toe_height:
+        heel, toe = toe, heel
+    assert np.all(heel[3:7] < toe[3:7])  # the taller end's band reaches further
+    assert SceneLook().ambient_occlusion == 0.0  # the default look renders exactly as before the variation existed
+    with pytest.raises(ValueError, match="ambient occlusion"):
+        SceneLook(ambient_occlusion=1.5)
+
+
 def test_satin_is_a_broad_sheen_that_differs_between_the_views() -> None:
     """satin replaces the material's weak specular lobe by a broad one: under the cell's bars it lights most of a
     flat top (gloss only a quarter of it, in small saturated spots), adds more than half a black sole's diffuse
