@@ -31,6 +31,7 @@ from cellctl.vision.edge_checks import (
     check_steep_wall,
     check_wall_height,
 )
+from cellctl.vision.edge_step import check_inner_step, inner_steps, step_profiles
 from cellctl.vision.footprint import Footprint
 from cellctl.vision.image_edge import (
     Camera,
@@ -117,7 +118,8 @@ def _check_outline_images(
     heights: Callable[[np.ndarray], np.ndarray],
     one_camera: np.ndarray,
 ) -> CheckFailure | None:
-    """The outline against both cameras' change masks (taught table only): the right image, then the edge.
+    """The outline against both cameras' change masks (taught table only): the right image, then the edge; then
+    against the raw images' own step at it (cellctl.vision.edge_step), which a band both masks share hides from them.
     one_camera: per ring point the camera whose reading alone counts for the edge offsets there (-1: both)."""
     changed_right = reconstruction.changed_right
     if changed_right is None or reconstruction.calibration is None:
@@ -145,7 +147,9 @@ def _check_outline_images(
     inner, outer = _offsets(ring, outward, edge_height, cameras, level, images)  # both readings from one sampling
     inner, outer = by_one_camera(inner, one_camera), by_one_camera(outer, one_camera)
     problem = _edge_offsets_problem(inner, outer, ring)
-    if problem is None or not SHADOW_CLEARED or images is None:
+    if problem is None:
+        return None if images is None else _inner_step_problem(ring, outward, edge_height, images[0], cameras)
+    if not SHADOW_CLEARED or images is None:
         return problem
     # Refused: a cast shadow's slivers beside the sole that one camera's mask shows and the other's does not
     # (cellctl.vision.shadow) are read again without them. Only here: an outline the masks as they are pass is
@@ -159,9 +163,27 @@ def _check_outline_images(
         by_one_camera(readings, one_camera)
         for readings in _offsets(ring, outward, edge_height, (cleared[0], cleared[1]), level, images)
     )
-    return _edge_offsets_problem(
+    problem = _edge_offsets_problem(
         one_camera_shadows(inner, inner_cleared), one_camera_shadows(outer, outer_cleared), ring
     )
+    return problem or _inner_step_problem(ring, outward, edge_height, images[0], cameras)
+
+
+def _inner_step_problem(
+    ring: np.ndarray,
+    outward: np.ndarray,
+    edge_height: np.ndarray,
+    current: tuple[np.ndarray, np.ndarray],
+    cameras: tuple[Camera, Camera],
+) -> CheckFailure | None:
+    """The sole's step in both raw images against the outline (cellctl.vision.edge_step), at the top edge's height
+    (each camera's silhouette where the sole hides its wall, as a dark band at the foot lies beyond)."""
+    level = np.maximum(edge_height, 0.0)
+    flags = [
+        inner_steps(step_profiles(ring, outward, level, image, pixel))
+        for image, (_, pixel, _) in zip(current, cameras, strict=True)
+    ]
+    return check_inner_step(flags[0], flags[1])
 
 
 def _offsets(
