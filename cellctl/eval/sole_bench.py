@@ -22,6 +22,7 @@ from cellctl.sim.render_cache import RenderCache, exposure_shots, render_exposur
 from cellctl.sim.scene import SoleScene
 from cellctl.vision.calibration import Calibration
 from cellctl.vision.checks import MIN_GLUE_NZ
+from cellctl.vision.closed_path import outward_normals
 from cellctl.vision.defaults import GLUE_OFFSET_MM, MORE_EXPOSURES
 from cellctl.vision.edge_checks import LOW_WALL_QUANTILE, WALL_HEIGHT_INSET_MM
 from cellctl.vision.image_noise import exposure_noise_dn
@@ -314,10 +315,7 @@ def true_inset_line(scene: SoleScene, offset_mm: float) -> np.ndarray:
     outline = scene.sole.footprint_table().astype(np.float64)
     step = np.linalg.norm(np.diff(outline, axis=0), axis=1).mean()
     outline = outline[:: max(1, int(round(GLUE_LINE_TRUTH_STEP_MM / step)))]
-    tangent = np.roll(outline, -1, axis=0) - np.roll(outline, 1, axis=0)
-    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
-    inward = np.column_stack([-tangent[:, 1], tangent[:, 0]])  # left of travel on a counter-clockwise outline
-    line = outline + offset_mm * inward
+    line = outline - offset_mm * outward_normals(outline)
     polygon = outline.astype(np.float32).reshape(-1, 1, 2)
     inset = np.array([cv2.pointPolygonTest(polygon, (float(x), float(y)), True) for x, y in line])
     return line[np.abs(inset - offset_mm) < 0.1 * offset_mm]

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from cellctl.sim.sole import SoleModel
+from cellctl.vision.closed_path import outward_normals
 
 CELL_MM = 0.25  # raster of the distance and height fields (the table's pixels are ~0.4 mm)
 MARGIN_MM = 150.0  # beyond this the blocked share is under 3 % of the sky for the tallest heels (50 mm)
@@ -58,9 +59,5 @@ def sky_fraction(sole: SoleModel, xy: np.ndarray, strength: float) -> np.ndarray
 
 
 def _wall_heights(sole: SoleModel, outline: np.ndarray) -> np.ndarray:
-    """The sole's top height HEIGHT_INSET_MM inside each outline sample (the outline counter-clockwise: inward is
-    to the left of its direction)."""
-    tangent = np.roll(outline, -1, axis=0) - np.roll(outline, 1, axis=0)
-    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
-    inward = np.column_stack([-tangent[:, 1], tangent[:, 0]])
-    return np.asarray(sole.top_height_at(outline + HEIGHT_INSET_MM * inward), np.float64)
+    """The sole's top height HEIGHT_INSET_MM inside each sample of its counter-clockwise outline."""
+    return np.asarray(sole.top_height_at(outline - HEIGHT_INSET_MM * outward_normals(outline)), np.float64)

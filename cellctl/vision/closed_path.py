@@ -71,6 +71,18 @@ def outward_normals(poly: np.ndarray) -> np.ndarray:
     return np.column_stack([tangent[:, 1], -tangent[:, 0]])
 
 
+def normal_samples(path: np.ndarray, outward: np.ndarray, offsets_mm: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Table points (N x K x 3) `offsets_mm` (K, +: outward) along each of the N path points' `outward` normals, at
+    the height `level` (N) of its point: the profiles across an outline that the edge checks sample images on."""
+    # Written per coordinate into one array: the same sums as path + offsets x outward, ~5 x faster than
+    # broadcasting the pairs and concatenating.
+    points = np.empty((len(path), len(offsets_mm), 3))
+    for c in (0, 1):
+        np.add(path[:, c, None], offsets_mm[None, :] * outward[:, c, None], out=points[:, :, c])
+    points[:, :, 2] = level[:, None]
+    return points
+
+
 def closed_runs(flags: np.ndarray) -> list[np.ndarray]:
     """The runs of consecutive flagged points of a closed path: per run its indices in order along the path (a run
     across the path's end wraps, ..., n - 1, 0, 1, ...); the whole path as one run if every point is flagged."""

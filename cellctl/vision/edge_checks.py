@@ -14,7 +14,7 @@ import numpy as np
 from cellctl.errors import FailureKind
 from cellctl.stereo.kernels import edge_profiles
 from cellctl.vision.checks import MIN_TESTABLE, CheckFailure
-from cellctl.vision.closed_path import run_lengths, running_median
+from cellctl.vision.closed_path import normal_samples, run_lengths, running_median
 from cellctl.vision.defaults import GLUE_OFFSET_MM
 from cellctl.vision.footprint import Footprint
 
@@ -328,12 +328,7 @@ def edge_offset_pair(
     """
     steps = np.arange(-EDGE_SEARCH_MM, EDGE_SEARCH_MM + 1e-9, EDGE_SEARCH_STEP_MM)
     n, k = len(outline), len(steps)
-    # The samples' table points (x y level), written per coordinate into one array: the same sums as outline +
-    # steps x outward, ~5 x faster than broadcasting the pairs and concatenating.
-    points = np.empty((n, k, 3))
-    for c in (0, 1):
-        np.add(outline[:, c, None], steps[None, :] * outward[:, c, None], out=points[:, :, c])
-    points[:, :, 2] = level[:, None]
+    points = normal_samples(outline, outward, steps, level)
     xy = points[:, :, :2]
     px = np.round(table_to_pixel(points.reshape(-1, 3))).astype(np.int64).reshape(n, k, 2)
     # A changed pixel on the measured table outside (steps > 0) is a shadow, no evidence: the cells are looked up

@@ -26,7 +26,7 @@ import numpy as np
 from cellctl.errors import FailureKind
 from cellctl.images import grey_f32
 from cellctl.vision.checks import CheckFailure
-from cellctl.vision.closed_path import closed_runs
+from cellctl.vision.closed_path import closed_runs, normal_samples
 
 STEP_SAMPLES_MM = np.arange(-4.0, 2.0 + 1e-9, 0.25)  # along the outward normal, from inside the outline
 STEP_SPAN = 2  # samples: a step is the brightness change over 0.5 mm
@@ -48,12 +48,8 @@ def step_profiles(
 ) -> np.ndarray:
     """Grey levels (float32, outline points x STEP_SAMPLES_MM) of `image` along each outline point's outward
     normal at the height `level` (per point; table points -> rectified pixels by `to_pixel`); NaN off the image."""
-    n, k = len(ring), len(STEP_SAMPLES_MM)
-    points = np.empty((n, k, 3))
-    for c in (0, 1):
-        np.add(ring[:, c, None], STEP_SAMPLES_MM[None, :] * outward[:, c, None], out=points[:, :, c])
-    points[:, :, 2] = level[:, None]
-    pixels = to_pixel(points.reshape(-1, 3)).astype(np.float32).reshape(n, k, 2)
+    points = normal_samples(ring, outward, STEP_SAMPLES_MM, level)
+    pixels = to_pixel(points.reshape(-1, 3)).astype(np.float32).reshape(*points.shape[:2], 2)
     grey = grey_f32(image)
     return cv2.remap(grey, pixels[:, :, 0], pixels[:, :, 1], cv2.INTER_LINEAR, borderValue=float("nan"))
 
